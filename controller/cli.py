@@ -1,0 +1,99 @@
+"""The ``fleet`` command line: ``main(argv) -> int``.
+
+Each subcommand lives in ``controller/commands/<name>.py`` with ``add_arguments(parser)`` and
+``run(args) -> int``; modules are imported only when their command runs, so ``fleet check``
+never loads pybullet or zenoh. Exit status: 0 done, 1 the job failed, 2 bad input or config.
+``--json`` prints one JSON object on stdout and nothing else there; progress goes to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import logging
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from controller.config import ConfigError
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+
+# (command words, module, help)
+COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
+    (("run",), "run", "the pybullet dry run of the whole job"),
+    (("daemon",), "daemon", "the controller on the lab network"),
+    (("driver",), "driver", "one robot's agent: its driver bound to the bus"),
+    (("status",), "remote", "query a running daemon's status"),
+    (("estop",), "remote", "engage the latched emergency stop"),
+    (("resume",), "remote", "release the emergency stop"),
+    (("plan", "capture"), "plan_capture", "plan the capture points (GA), offline"),
+    (("plan", "route"), "plan_route", "plan the object's route (A*), offline"),
+    (("replay",), "replay", "metrics, plots and playback of a run's MCAP log"),
+    (("check",), "check", "validate a config"),
+)
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # argparse exits 2 already; keep its message
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="fleet", description="Robot fleet controller: capture and transport.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    plan_sub = None
+    for words, module, help_ in COMMANDS:
+        if len(words) == 1:
+            p = sub.add_parser(words[0], help=help_)
+        else:
+            if plan_sub is None:
+                plan = sub.add_parser("plan", help="run a planner alone, offline")
+                plan_sub = plan.add_subparsers(dest="what", required=True, parser_class=_Parser)
+            p = plan_sub.add_parser(words[1], help=help_)
+        p.set_defaults(_module=module, _words=words)
+        mod = importlib.import_module(f"controller.commands.{module}")
+        mod.add_arguments(p, words[-1])
+    return parser
+
+
+def emit_json(obj: Any) -> None:
+    """Print one JSON object on stdout (the --json contract)."""
+    sys.stdout.write(json.dumps(obj, allow_nan=False, default=_json_default) + "\n")
+    sys.stdout.flush()
+
+
+def _json_default(o: Any) -> Any:
+    import numpy as np
+
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(f"not JSON serializable: {type(o).__name__}")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(list(argv) if argv is not None else None)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        stream=sys.stderr,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    mod = importlib.import_module(f"controller.commands.{args._module}")
+    try:
+        return int(mod.run(args))
+    except ConfigError as exc:
+        print(f"fleet: config error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("fleet: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

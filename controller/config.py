@@ -1,0 +1,490 @@
+"""fleet.toml: load once, validate strictly, return frozen dataclasses.
+
+Every section is a frozen dataclass whose fields carry their own rules in ``metadata``
+(``min``, ``max``, ``gt`` for a strict lower bound, ``choices``). The loader walks the TOML tables
+against those dataclasses, so an unknown key, a wrong type or an out-of-range value is reported
+with the file, the full key path, what was expected and, for unknown keys, a did-you-mean.
+Cross-field rules (polygons, unique ids, robot starts) run after the walk.
+
+Units are SI unless the key's name says otherwise (``_deg``, ``_hz``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import re
+import tomllib
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controller import geometry
+
+# Registries by name. Kept here (not in drivers/) so config validation needs no driver import.
+ROBOT_KINDS = ("omni", "diff")
+DRIVERS = ("sim", "mavlink")
+MAVLINK_PROFILES = ("ardurover", "px4")
+MOTION_KINDS = ("line", "sine", "evade", "static")
+CLOSURE_MODES = ("exact", "paper")
+HEURISTICS = ("euclid", "wavefront", "skeleton")
+TRANSPORT_STRATEGIES = ("sa", "serpentine")
+SIM_BACKENDS = ("pybullet", "ideal")
+FILTERS = ("ekf", "ukf")
+ZENOH_MODES = ("peer", "client", "router")
+
+Point = tuple[float, float]
+Pose = tuple[float, float, float]
+Polygon = tuple[Point, ...]
+
+
+class ConfigError(ValueError):
+    """A config that does not validate; ``path`` is the dotted key path of the culprit."""
+
+    def __init__(self, source: str, path: str, message: str):
+        self.source = source
+        self.path = path
+        self.message = message
+        where = f"{source}: " if source else ""
+        super().__init__(f"{where}{path or '<root>'}: {message}")
+
+
+def _rule(default: Any = dataclasses.MISSING, **meta: Any) -> Any:
+    if default is dataclasses.MISSING:
+        return field(metadata=meta)
+    if isinstance(default, list | dict):
+        raise TypeError("use tuples for defaults")
+    return field(default=default, metadata=meta)
+
+
+# --------------------------------------------------------------------------- sections
+
+
+@dataclass(frozen=True, kw_only=True)
+class FleetSection:
+    name: str = _rule(pattern=r"^[A-Za-z0-9_\-]+$")
+    rate_hz: float = _rule(20.0, gt=0, max=1000)
+    cmd_ttl: float = _rule(0.3, gt=0, max=10)
+    stale_after: float = _rule(0.3, gt=0, max=10)
+    liveliness_lease: float = _rule(1.0, gt=0, max=60)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ZenohSection:
+    mode: str = _rule("peer", choices=ZENOH_MODES)
+    listen: tuple[str, ...] = _rule(("tcp/127.0.0.1:7447",))
+    connect: tuple[str, ...] = _rule(())
+    multicast_scouting: bool = _rule(False)
+    gossip_scouting: bool = _rule(False)
+
+
+@dataclass(frozen=True, kw_only=True)
+class LogSection:
+    dir: str = _rule("runs")
+    flush_interval: float = _rule(0.5, gt=0, max=10)
+
+
+@dataclass(frozen=True, kw_only=True)
+class WorldSection:
+    bounds: tuple[Point, Point] = _rule(((0.0, 0.0), (12.8, 12.8)))
+    walls: bool = _rule(True)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Obstacle:
+    polygon: Polygon = _rule()
+    height: float = _rule(0.3, gt=0, max=10)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MotionSection:
+    kind: str = _rule("sine", choices=MOTION_KINDS)
+    speed: float = _rule(0.1, min=0, max=10)
+    amplitude: float = _rule(0.5, min=0, max=100)
+    wavelength: float = _rule(4.0, gt=0, max=1000)
+    heading: float = _rule(0.0, min=-10, max=10)
+    max_speed: float = _rule(0.2, min=0, max=10)
+    flee_radius: float = _rule(1.5, gt=0, max=100)
+    max_force: float = _rule(20.0, gt=0, max=1e4)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ObjectSection:
+    polygon: Polygon = _rule()
+    mass: float = _rule(4.0, gt=0, max=1e4)
+    floor_friction: float = _rule(0.2, min=0, max=2)
+    contact_friction: float = _rule(0.0, min=0, max=2)
+    height: float = _rule(0.2, gt=0, max=10)
+    start: Pose = _rule()
+    goal: Pose = _rule()
+    motion: MotionSection = _rule(MotionSection())
+
+
+@dataclass(frozen=True, kw_only=True)
+class CaptureSection:
+    spacing: float = _rule(0.1, gt=0, max=10)
+    clearance: float = _rule(0.02, min=0, max=1)
+    k: float = _rule(1.0, min=0, max=10)
+    epsilon: float = _rule(0.1, gt=0, max=100)
+    tau: float = _rule(1e-9, min=0, max=1)
+    population: int = _rule(60, min=2, max=100000)
+    crossover: float = _rule(0.8, min=0, max=1)
+    mutation: float = _rule(0.12, min=0, max=1)
+    generations: int = _rule(600, min=1, max=1000000)
+    seed: int = _rule(0, min=0)
+    closure: str = _rule("exact", choices=CLOSURE_MODES)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ApproachSection:
+    max_turn_deg: float = _rule(15.0, gt=0, max=180)
+    projection: float = _rule(2.5, gt=0, max=10)
+    alpha_deg: float = _rule(15.0, gt=0, max=180)
+    alpha_growth: float = _rule(1.25, gt=1, max=10)
+    alpha_max_deg: float = _rule(180.0, gt=0, max=180)
+    envelope_margin: float = _rule(0.25, min=0, max=10)
+    contact_tolerance: float = _rule(0.03, gt=0, max=1)
+    envelope_tolerance: float = _rule(0.08, gt=0, max=1)
+    prediction_horizon: float = _rule(0.5, min=0, max=10)
+    safety_margin: float = _rule(0.05, min=0, max=1)
+    max_accel: float = _rule(1.0, gt=0, max=100)
+    timeout: float = _rule(180.0, gt=0, max=1e5)
+
+
+@dataclass(frozen=True, kw_only=True)
+class RouteSection:
+    resolution: float = _rule(0.1, gt=0, max=10)
+    heading_bins: int = _rule(36, min=1, max=3600)
+    heuristic: str = _rule("skeleton", choices=HEURISTICS)
+    wg: float = _rule(1.0, choices=(0.0, 1.0))
+    wh: float = _rule(1.0, min=0, max=100)
+    speed: float = _rule(0.2, gt=0, max=10)
+    yaw_rate: float = _rule(0.3, gt=0, max=100)
+    manipulation_cost: float = _rule(2.0, min=0, max=1e4)
+    subgoal_spacing: float = _rule(1.0, gt=0, max=100)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TransportSection:
+    strategy: str = _rule("sa", choices=TRANSPORT_STRATEGIES)
+    tolerance: float = _rule(0.2, gt=0, max=10)
+    intervals: int = _rule(8, min=1, max=1000)
+    iterations: int = _rule(2000, min=1, max=10**7)
+    initial_temperature: float = _rule(1.0, gt=0, max=1e6)
+    cooling: float = _rule(0.995, gt=0, max=1)
+    seed: int = _rule(0, min=0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class EstimationSection:
+    filter: str = _rule("ekf", choices=FILTERS)
+    gate_probability: float = _rule(0.999, gt=0, max=1)
+    process_accel: float = _rule(1.0, gt=0, max=1e3)
+    process_yaw_accel: float = _rule(2.0, gt=0, max=1e3)
+    object_process_accel: float = _rule(0.2, gt=0, max=1e3)
+    meas_xy: float = _rule(0.01, gt=0, max=10)
+    meas_theta: float = _rule(0.0175, gt=0, max=10)
+
+
+@dataclass(frozen=True, kw_only=True)
+class PoseNoise:
+    xy: float = _rule(0.01, min=0, max=10)
+    theta: float = _rule(0.0175, min=0, max=10)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimSection:
+    backend: str = _rule("pybullet", choices=SIM_BACKENDS)
+    timestep: float = _rule(1.0 / 240.0, gt=0, max=1)
+    seed: int = _rule(0, min=0)
+    pose_noise: PoseNoise = _rule(PoseNoise())
+    pose_rate_hz: float = _rule(30.0, gt=0, max=1000)
+    object_pose_rate_hz: float = _rule(30.0, gt=0, max=1000)
+    dropout: float = _rule(0.0, min=0, max=1)
+    outlier_rate: float = _rule(0.0, min=0, max=1)
+    outlier_magnitude: float = _rule(0.5, min=0, max=100)
+    realtime: bool = _rule(False)
+    tick_timeout: float = _rule(2.0, gt=0, max=600)
+    max_time: float = _rule(300.0, gt=0, max=1e6)
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotConfig:
+    id: str = _rule(pattern=r"^[A-Za-z0-9_\-]+$")
+    kind: str = _rule(choices=ROBOT_KINDS)
+    radius: float = _rule(0.1, gt=0, max=5)
+    max_speed: float = _rule(0.5, gt=0, max=20)
+    max_yaw_rate: float = _rule(2.0, gt=0, max=50)
+    max_accel: float = _rule(1.0, gt=0, max=100)
+    max_force: float = _rule(20.0, gt=0, max=1e4)
+    mass: float = _rule(2.0, gt=0, max=1e4)
+    driver: str = _rule("sim", choices=DRIVERS)
+    start: Pose = _rule()
+    url: str = _rule("")
+    system_id: int = _rule(1, min=1, max=255)
+    profile: str = _rule("", choices=("",) + MAVLINK_PROFILES)
+    link_timeout: float = _rule(1.0, gt=0, max=60)
+    arm: bool = _rule(True)
+
+
+@dataclass(frozen=True, kw_only=True)
+class FleetConfig:
+    fleet: FleetSection
+    object: ObjectSection
+    robots: tuple[RobotConfig, ...]
+    zenoh: ZenohSection = ZenohSection()
+    log: LogSection = LogSection()
+    world: WorldSection = WorldSection()
+    obstacles: tuple[Obstacle, ...] = ()
+    capture: CaptureSection = CaptureSection()
+    approach: ApproachSection = ApproachSection()
+    route: RouteSection = RouteSection()
+    transport: TransportSection = TransportSection()
+    estimation: EstimationSection = EstimationSection()
+    sim: SimSection = SimSection()
+    source: str = ""
+
+    def robot(self, robot_id: str) -> RobotConfig:
+        for r in self.robots:
+            if r.id == robot_id:
+                return r
+        raise KeyError(f"no robot {robot_id!r} in {self.source or 'config'}; ids: {self.robot_ids}")
+
+    @property
+    def robot_ids(self) -> tuple[str, ...]:
+        return tuple(r.id for r in self.robots)
+
+    @property
+    def max_robot_radius(self) -> float:
+        return max(r.radius for r in self.robots)
+
+    def object_polygon(self) -> np.ndarray:
+        """Object polygon in the object frame, counter-clockwise, (n, 2)."""
+        return np.asarray(self.object.polygon, dtype=float)
+
+    def obstacle_polygons(self) -> list[np.ndarray]:
+        return [np.asarray(o.polygon, dtype=float) for o in self.obstacles]
+
+    def bounds_array(self) -> np.ndarray:
+        return np.asarray(self.world.bounds, dtype=float)
+
+
+# --------------------------------------------------------------------------- the walker
+
+
+def _type_name(tp: Any) -> str:
+    origin = typing.get_origin(tp)
+    if tp is float:
+        return "a number"
+    if tp is int:
+        return "an integer"
+    if tp is str:
+        return "a string"
+    if tp is bool:
+        return "true or false"
+    if dataclasses.is_dataclass(tp):
+        return "a table"
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return f"an array of {_type_name(args[0]).removeprefix('a ').removeprefix('an ')}s"
+        return f"an array of {len(args)} items"
+    return str(tp)
+
+
+def _convert(tp: Any, value: Any, path: str, src: str) -> Any:
+    origin = typing.get_origin(tp)
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(src, path, f"expected true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(src, path, f"expected an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(src, path, f"expected a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ConfigError(src, path, f"expected a finite number, got {value!r}")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(src, path, f"expected a string, got {value!r}")
+        return value
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise ConfigError(src, path, f"expected a table, got {value!r}")
+        return _build(tp, value, path, src)
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if not isinstance(value, list):
+            raise ConfigError(src, path, f"expected {_type_name(tp)}, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_convert(args[0], v, f"{path}[{i}]", src) for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ConfigError(src, path, f"expected {_type_name(tp)}, got {len(value)}: {value!r}")
+        return tuple(
+            _convert(a, v, f"{path}[{i}]", src) for i, (a, v) in enumerate(zip(args, value))
+        )
+    if isinstance(tp, types.UnionType):
+        raise TypeError(f"unsupported config type {tp}")
+    raise TypeError(f"unsupported config type {tp}")
+
+
+def _check_rules(meta: typing.Mapping[str, Any], value: Any, path: str, src: str) -> None:
+    if "choices" in meta and value not in meta["choices"]:
+        choices = ", ".join(repr(c) for c in meta["choices"])
+        raise ConfigError(src, path, f"expected one of {choices}, got {value!r}")
+    if "gt" in meta and not value > meta["gt"]:
+        raise ConfigError(src, path, f"expected a value > {meta['gt']}, got {value!r}")
+    if "min" in meta and not value >= meta["min"]:
+        raise ConfigError(src, path, f"expected a value >= {meta['min']}, got {value!r}")
+    if "max" in meta and not value <= meta["max"]:
+        raise ConfigError(src, path, f"expected a value <= {meta['max']}, got {value!r}")
+    if "pattern" in meta and not re.match(meta["pattern"], value):
+        raise ConfigError(
+            src, path, f"expected letters, digits, '_' or '-' (a bus key segment), got {value!r}"
+        )
+
+
+def _build(cls: type, table: dict[str, Any], path: str, src: str) -> Any:
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.name != "source"}
+    for key in table:
+        if key not in fields:
+            where = f"{path}.{key}" if path else key
+            close = difflib.get_close_matches(key, list(fields), n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            valid = ", ".join(fields)
+            raise ConfigError(src, where, f"unknown key{hint} (valid keys: {valid})")
+    kwargs: dict[str, Any] = {}
+    for name, f in fields.items():
+        where = f"{path}.{name}" if path else name
+        if name not in table:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise ConfigError(src, where, f"missing required key ({_type_name(hints[name])})")
+            continue
+        value = _convert(hints[name], table[name], where, src)
+        _check_rules(f.metadata, value, where, src)
+        kwargs[name] = value
+    return cls(**kwargs)
+
+
+# --------------------------------------------------------------------------- cross-field rules
+
+
+def _polygon(poly: Polygon, path: str, src: str) -> Polygon:
+    p = np.asarray(poly, dtype=float)
+    if len(p) < 3:
+        raise ConfigError(src, path, f"expected a polygon of at least 3 vertices, got {len(p)}")
+    bad = geometry.self_intersection(p)
+    if bad is not None:
+        i, j = bad
+        if i == j:
+            raise ConfigError(src, path, f"polygon has a zero-length edge at vertex {i}")
+        raise ConfigError(
+            src, path, f"polygon is not simple: edge {i} crosses edge {j} (self-intersection)"
+        )
+    area = geometry.signed_area(p)
+    if abs(area) < 1e-9:
+        raise ConfigError(src, path, "polygon has zero area")
+    q = geometry.ensure_ccw(p)
+    return tuple((float(x), float(y)) for x, y in q)
+
+
+def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
+    (x0, y0), (x1, y1) = cfg.world.bounds
+    if not (x1 > x0 and y1 > y0):
+        raise ConfigError(
+            src, "world.bounds", "expected [[xmin, ymin], [xmax, ymax]] with max > min"
+        )
+    obstacles = tuple(
+        dataclasses.replace(o, polygon=_polygon(o.polygon, f"obstacles[{i}].polygon", src))
+        for i, o in enumerate(cfg.obstacles)
+    )
+    obj = dataclasses.replace(
+        cfg.object, polygon=_polygon(cfg.object.polygon, "object.polygon", src)
+    )
+    if not cfg.robots:
+        raise ConfigError(src, "robots", "expected at least one [[robots]] entry")
+    seen: dict[str, int] = {}
+    for i, r in enumerate(cfg.robots):
+        path = f"robots[{i}]"
+        if r.id in seen:
+            raise ConfigError(
+                src, f"{path}.id", f"duplicate robot id {r.id!r} (also robots[{seen[r.id]}])"
+            )
+        seen[r.id] = i
+        x, y, _ = r.start
+        if not (x0 + r.radius <= x <= x1 - r.radius and y0 + r.radius <= y <= y1 - r.radius):
+            raise ConfigError(
+                src, f"{path}.start", f"robot {r.id!r} at ({x}, {y}) is not inside world.bounds"
+            )
+        for j, o in enumerate(obstacles):
+            if geometry.discs_hit_polygon([[x, y]], r.radius, o.polygon)[0]:
+                raise ConfigError(
+                    src, f"{path}.start", f"robot {r.id!r} at ({x}, {y}) overlaps obstacles[{j}]"
+                )
+        if r.driver == "mavlink":
+            if not r.url:
+                raise ConfigError(src, f"{path}.url", "a mavlink robot needs a url")
+            if not r.profile:
+                raise ConfigError(
+                    src, f"{path}.profile", f"a mavlink robot needs one of {MAVLINK_PROFILES}"
+                )
+            if r.profile == "ardurover" and r.kind != "diff":
+                raise ConfigError(
+                    src,
+                    f"{path}.kind",
+                    'an ardurover robot never moves sideways in GUIDED: set kind = "diff"',
+                )
+    for key in ("start", "goal"):
+        pose = getattr(obj, key)
+        world_poly = geometry.transform(np.asarray(obj.polygon), pose)
+        if (
+            world_poly[:, 0].min() < x0
+            or world_poly[:, 0].max() > x1
+            or world_poly[:, 1].min() < y0
+            or world_poly[:, 1].max() > y1
+        ):
+            raise ConfigError(src, f"object.{key}", "the object placed there leaves world.bounds")
+    return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src)
+
+
+def parse_config(data: dict[str, Any], source: str = "") -> FleetConfig:
+    """Validate a parsed TOML document into a FleetConfig (raises ConfigError)."""
+    cfg = _build(FleetConfig, data, "", source)
+    return _validate(cfg, source)
+
+
+def load_config(path: str | Path) -> FleetConfig:
+    """Read and validate a fleet.toml (raises ConfigError naming the file and key path)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(str(p), "", f"cannot read: {exc.strerror or exc}") from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(str(p), "", f"not valid TOML: {exc}") from exc
+    return parse_config(data, str(p))
+
+
+def config_to_dict(cfg: FleetConfig) -> dict[str, Any]:
+    """The config as plain data (for logs and --json); tuples become lists."""
+
+    def conv(v: Any) -> Any:
+        if dataclasses.is_dataclass(v):
+            return {f.name: conv(getattr(v, f.name)) for f in dataclasses.fields(v)}
+        if isinstance(v, tuple | list):
+            return [conv(x) for x in v]
+        return v
+
+    return conv(cfg)

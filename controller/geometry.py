@@ -1,0 +1,208 @@
+"""Planar geometry on numpy arrays: polygons, poses, angles.
+
+Pure functions, SI units (metres, radians). A polygon is an (n, 2) float array of vertices; a
+pose is (x, y, theta) with theta counter-clockwise from the world x axis. Polygons used by the
+planners are stored counter-clockwise (positive signed area), so the outward normal of the edge
+from p[i] to p[i+1] is the edge direction turned clockwise by 90 degrees.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+def wrap_angle(a: ArrayLike) -> FloatArray | float:
+    """Wrap angle(s) in radians to [-pi, pi)."""
+    out = (np.asarray(a, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+    return float(out) if out.ndim == 0 else out
+
+
+def rot(theta: float) -> FloatArray:
+    """2x2 rotation matrix for an angle in radians."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def transform(points: ArrayLike, pose: ArrayLike) -> FloatArray:
+    """Map points (n, 2) from a body frame into the world frame given the body pose (x, y, theta)."""
+    p = np.asarray(points, dtype=float)
+    x, y, th = (float(v) for v in np.asarray(pose, dtype=float)[:3])
+    return p @ rot(th).T + np.array([x, y])
+
+
+def inverse_transform(points: ArrayLike, pose: ArrayLike) -> FloatArray:
+    """Map world points (n, 2) into the body frame of the pose (x, y, theta)."""
+    p = np.asarray(points, dtype=float)
+    x, y, th = (float(v) for v in np.asarray(pose, dtype=float)[:3])
+    return (p - np.array([x, y])) @ rot(th)
+
+
+def signed_area(poly: ArrayLike) -> float:
+    """Signed area in m^2 (positive for counter-clockwise vertex order)."""
+    p = np.asarray(poly, dtype=float)
+    q = np.roll(p, -1, axis=0)
+    return 0.5 * float(np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]))
+
+
+def ensure_ccw(poly: ArrayLike) -> FloatArray:
+    """Return the polygon with counter-clockwise vertex order."""
+    p = np.asarray(poly, dtype=float)
+    return p[::-1].copy() if signed_area(p) < 0 else p.copy()
+
+
+def centroid(poly: ArrayLike) -> FloatArray:
+    """Area centroid (m) of a simple polygon."""
+    p = np.asarray(poly, dtype=float)
+    q = np.roll(p, -1, axis=0)
+    cross = p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]
+    a = 0.5 * np.sum(cross)
+    cx = np.sum((p[:, 0] + q[:, 0]) * cross) / (6.0 * a)
+    cy = np.sum((p[:, 1] + q[:, 1]) * cross) / (6.0 * a)
+    return np.array([cx, cy])
+
+
+def polar_moment_per_mass(poly: ArrayLike) -> float:
+    """Planar moment of inertia about the area centroid divided by mass (m^2), uniform density."""
+    p = np.asarray(poly, dtype=float) - centroid(poly)
+    q = np.roll(p, -1, axis=0)
+    cross = p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]
+    a = 0.5 * np.sum(cross)
+    ixx = np.sum(cross * (p[:, 1] ** 2 + p[:, 1] * q[:, 1] + q[:, 1] ** 2)) / 12.0
+    iyy = np.sum(cross * (p[:, 0] ** 2 + p[:, 0] * q[:, 0] + q[:, 0] ** 2)) / 12.0
+    return float((ixx + iyy) / a)
+
+
+def edges(poly: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Edge start points (n, 2) and edge vectors (n, 2); edge i runs from p[i] to p[i+1]."""
+    p = np.asarray(poly, dtype=float)
+    return p, np.roll(p, -1, axis=0) - p
+
+
+def outward_normals(poly: ArrayLike) -> FloatArray:
+    """Unit outward normals (n, 2) of the edges of a counter-clockwise polygon."""
+    _, e = edges(poly)
+    n = np.stack([e[:, 1], -e[:, 0]], axis=1)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _orient(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+    return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
+        c[..., 0] - a[..., 0]
+    )
+
+
+def segments_intersect(p1: FloatArray, p2: FloatArray, q1: FloatArray, q2: FloatArray) -> NDArray:
+    """Whether segments p1-p2 and q1-q2 intersect (broadcasting, touching counts)."""
+    d1 = _orient(q1, q2, p1)
+    d2 = _orient(q1, q2, p2)
+    d3 = _orient(p1, p2, q1)
+    d4 = _orient(p1, p2, q2)
+    proper = (d1 * d2 < 0) & (d3 * d4 < 0)
+
+    def on_seg(a, b, c, d):
+        return (
+            (np.abs(d) <= 1e-12)
+            & (np.minimum(a[..., 0], b[..., 0]) - 1e-12 <= c[..., 0])
+            & (c[..., 0] <= np.maximum(a[..., 0], b[..., 0]) + 1e-12)
+            & (np.minimum(a[..., 1], b[..., 1]) - 1e-12 <= c[..., 1])
+            & (c[..., 1] <= np.maximum(a[..., 1], b[..., 1]) + 1e-12)
+        )
+
+    touch = on_seg(q1, q2, p1, d1) | on_seg(q1, q2, p2, d2) | on_seg(p1, p2, q1, d3)
+    touch = touch | on_seg(p1, p2, q2, d4)
+    return proper | touch
+
+
+def self_intersection(poly: ArrayLike) -> tuple[int, int] | None:
+    """The first pair of non-adjacent edges (i, j) that intersect, or None if the polygon is simple.
+
+    Zero-length edges count as a self-intersection of the edge with itself.
+    """
+    p = np.asarray(poly, dtype=float)
+    n = len(p)
+    a, e = edges(p)
+    b = a + e
+    lengths = np.linalg.norm(e, axis=1)
+    if np.any(lengths <= 1e-12):
+        i = int(np.argmax(lengths <= 1e-12))
+        return (i, i)
+    i, j = np.triu_indices(n, k=2)
+    keep = ~((i == 0) & (j == n - 1))
+    i, j = i[keep], j[keep]
+    hit = segments_intersect(a[i], b[i], a[j], b[j])
+    if np.any(hit):
+        k = int(np.argmax(hit))
+        return (int(i[k]), int(j[k]))
+    return None
+
+
+def points_in_polygon(points: ArrayLike, poly: ArrayLike) -> NDArray[np.bool_]:
+    """Even-odd test for points (m, 2) against a polygon; boundary points may go either way."""
+    pts = np.atleast_2d(np.asarray(points, dtype=float))
+    p = np.asarray(poly, dtype=float)
+    q = np.roll(p, -1, axis=0)
+    x = pts[:, 0:1]
+    y = pts[:, 1:2]
+    yi, yj = p[None, :, 1], q[None, :, 1]
+    xi, xj = p[None, :, 0], q[None, :, 0]
+    cond = (yi > y) != (yj > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xint = xi + (y - yi) * (xj - xi) / (yj - yi)
+    cross = cond & (x < xint)
+    return (np.count_nonzero(cross, axis=1) % 2) == 1
+
+
+def point_segment_distance(
+    points: ArrayLike, a: ArrayLike, b: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """Distances (m, s) from points (m, 2) to segments a-b (s, 2), and the closest points (m, s, 2)."""
+    pts = np.atleast_2d(np.asarray(points, dtype=float))[:, None, :]
+    a = np.asarray(a, dtype=float)[None, :, :]
+    b = np.asarray(b, dtype=float)[None, :, :]
+    ab = b - a
+    denom = np.maximum(np.sum(ab * ab, axis=-1), 1e-300)
+    t = np.clip(np.sum((pts - a) * ab, axis=-1) / denom, 0.0, 1.0)
+    closest = a + t[..., None] * ab
+    return np.linalg.norm(pts - closest, axis=-1), closest
+
+
+def polygon_boundary_distance(points: ArrayLike, poly: ArrayLike) -> FloatArray:
+    """Distance (m) from each point (m, 2) to the polygon boundary."""
+    p = np.asarray(poly, dtype=float)
+    d, _ = point_segment_distance(points, p, np.roll(p, -1, axis=0))
+    return d.min(axis=1)
+
+
+def polygon_signed_distance(points: ArrayLike, poly: ArrayLike) -> FloatArray:
+    """Signed distance (m) to a polygon: negative inside, positive outside."""
+    d = polygon_boundary_distance(points, poly)
+    inside = points_in_polygon(points, poly)
+    return np.where(inside, -d, d)
+
+
+def discs_hit_polygon(centers: ArrayLike, radius: ArrayLike, poly: ArrayLike) -> NDArray[np.bool_]:
+    """Whether discs (centres (m, 2), radii scalar or (m,)) overlap a polygon (interior or edge)."""
+    return polygon_signed_distance(centers, poly) < np.asarray(radius, dtype=float)
+
+
+def convex_hull(points: ArrayLike) -> FloatArray:
+    """Counter-clockwise convex hull (monotone chain) of points (m, 2)."""
+    pts = np.unique(np.asarray(points, dtype=float), axis=0)
+    if len(pts) < 3:
+        return pts
+    pts = pts[np.lexsort((pts[:, 1], pts[:, 0]))]
+
+    def half(seq):
+        out: list[np.ndarray] = []
+        for p in seq:
+            while len(out) >= 2 and _orient(out[-2], out[-1], p) <= 0:
+                out.pop()
+            out.append(p)
+        return out
+
+    lower = half(pts)
+    upper = half(pts[::-1])
+    return np.array(lower[:-1] + upper[:-1])

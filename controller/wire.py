@@ -1,0 +1,391 @@
+"""The wire contract: bus keys, message types and their JSON codec. Both sides import this.
+
+This module is the only place a bus key is spelled. ``TOPICS`` is the registry: each entry names
+a key template, the message type on it, its expected rate and whether the recorder logs it.
+Messages are frozen dataclasses; ``encode`` writes compact JSON, ``decode`` checks types, finite
+values and magnitudes and raises ``WireError`` (a ``ValueError``) on anything else. Every message
+carries ``t`` (s, the sender's clock; sim time in the dry run) and ``seq``.
+
+Frames: world ENU (x east, y north, theta CCW from x, rad); commands are body frame like ROS
+``cmd_vel`` (vx forward, vy left, wz CCW).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import typing
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+# Magnitude bounds: a value beyond these is not a plausible lab quantity.
+MAX_ABS_POSITION = 1.0e4  # m
+MAX_ABS_SPEED = 1.0e2  # m/s or rad/s
+MAX_ABS_TIME = 1.0e10  # s (wall-clock epoch seconds fit)
+MAX_SEQ = 2**63 - 1
+MAX_STRING = 4096
+
+
+class WireError(ValueError):
+    """A payload that does not decode into the expected message type."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Message:
+    """Base of every bus message: sender time ``t`` (s) and sequence number ``seq``."""
+
+    t: float = field(metadata={"limit": MAX_ABS_TIME})
+    seq: int = 0
+
+    TYPE: ClassVar[str] = "Message"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Twist2D(Message):
+    """Velocity command in the robot's body frame: vx forward, vy left (m/s), wz CCW (rad/s).
+
+    ``ttl`` (s) is how long the command stays valid; an agent stops the robot after it.
+    """
+
+    vx: float = field(default=0.0, metadata={"limit": MAX_ABS_SPEED})
+    vy: float = field(default=0.0, metadata={"limit": MAX_ABS_SPEED})
+    wz: float = field(default=0.0, metadata={"limit": MAX_ABS_SPEED})
+    ttl: float = field(default=0.3, metadata={"limit": 3600.0, "min": 0.0})
+
+    TYPE: ClassVar[str] = "fleet.Twist2D"
+
+
+@dataclass(frozen=True, kw_only=True)
+class PoseMeasurement(Message):
+    """A measured pose in the world frame (m, m, rad) with its standard deviations."""
+
+    x: float = field(metadata={"limit": MAX_ABS_POSITION})
+    y: float = field(metadata={"limit": MAX_ABS_POSITION})
+    theta: float = field(metadata={"limit": 100.0})
+    sigma_xy: float = field(default=0.01, metadata={"limit": 100.0, "min": 0.0})
+    sigma_theta: float = field(default=0.0175, metadata={"limit": 100.0, "min": 0.0})
+    source: str = ""
+
+    TYPE: ClassVar[str] = "fleet.PoseMeasurement"
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotState(Message):
+    """The controller's filtered estimate of one robot (world frame, velocities in world frame)."""
+
+    id: str
+    x: float = field(metadata={"limit": MAX_ABS_POSITION})
+    y: float = field(metadata={"limit": MAX_ABS_POSITION})
+    theta: float = field(metadata={"limit": 100.0})
+    vx: float = field(default=0.0, metadata={"limit": MAX_ABS_SPEED})
+    vy: float = field(default=0.0, metadata={"limit": MAX_ABS_SPEED})
+    wz: float = field(default=0.0, metadata={"limit": MAX_ABS_SPEED})
+    sigma_xy: float = field(default=0.0, metadata={"limit": 1e3, "min": 0.0})
+    sigma_theta: float = field(default=0.0, metadata={"limit": 1e3, "min": 0.0})
+    stale: bool = False
+    rejected: int = field(default=0, metadata={"min": 0})
+
+    TYPE: ClassVar[str] = "fleet.RobotState"
+
+
+@dataclass(frozen=True, kw_only=True)
+class ObjectState(Message):
+    """The controller's filtered estimate of the object (pose of its frame, world velocities)."""
+
+    x: float = field(metadata={"limit": MAX_ABS_POSITION})
+    y: float = field(metadata={"limit": MAX_ABS_POSITION})
+    theta: float = field(metadata={"limit": 100.0})
+    vx: float = field(default=0.0, metadata={"limit": MAX_ABS_SPEED})
+    vy: float = field(default=0.0, metadata={"limit": MAX_ABS_SPEED})
+    wz: float = field(default=0.0, metadata={"limit": MAX_ABS_SPEED})
+    sigma_xy: float = field(default=0.0, metadata={"limit": 1e3, "min": 0.0})
+    stale: bool = False
+    arrested: bool = False
+
+    TYPE: ClassVar[str] = "fleet.ObjectState"
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlanEvent(Message):
+    """A planner decision or phase event: ``kind`` names it, ``data`` holds its JSON fields."""
+
+    kind: str
+    phase: str = ""
+    data: dict[str, Any] = field(default_factory=dict)
+
+    TYPE: ClassVar[str] = "fleet.PlanEvent"
+
+
+@dataclass(frozen=True, kw_only=True)
+class EStop(Message):
+    """Latched emergency stop (``engaged`` true) or its explicit release (``engaged`` false)."""
+
+    engaged: bool
+    source: str = ""
+    reason: str = ""
+
+    TYPE: ClassVar[str] = "fleet.EStop"
+
+
+@dataclass(frozen=True, kw_only=True)
+class FleetStatus(Message):
+    """What a running controller reports when queried: phase, robots and counters."""
+
+    fleet: str
+    phase: str
+    estop: bool = False
+    robots: list[dict[str, Any]] = field(default_factory=list)
+    counters: dict[str, Any] = field(default_factory=dict)
+
+    TYPE: ClassVar[str] = "fleet.FleetStatus"
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimTick(Message):
+    """Lockstep clock: the sim announces tick ``step`` at sim time ``t``."""
+
+    step: int = field(default=0, metadata={"min": 0})
+    dt: float = field(default=0.05, metadata={"limit": 10.0, "min": 0.0})
+
+    TYPE: ClassVar[str] = "fleet.SimTick"
+
+
+@dataclass(frozen=True, kw_only=True)
+class TickDone(Message):
+    """Lockstep answer: the controller has published every command for tick ``step``."""
+
+    step: int = field(default=0, metadata={"min": 0})
+
+    TYPE: ClassVar[str] = "fleet.TickDone"
+
+
+MESSAGE_TYPES: dict[str, type[Message]] = {
+    cls.TYPE: cls
+    for cls in (
+        Twist2D,
+        PoseMeasurement,
+        RobotState,
+        ObjectState,
+        PlanEvent,
+        EStop,
+        FleetStatus,
+        SimTick,
+        TickDone,
+    )
+}
+
+# --------------------------------------------------------------------------- codec
+
+
+def to_dict(msg: Message) -> dict[str, Any]:
+    """The message as plain JSON-ready data."""
+    return {f.name: getattr(msg, f.name) for f in dataclasses.fields(msg)}
+
+
+def encode(msg: Message) -> bytes:
+    """Compact JSON bytes of a message (NaN/inf are refused)."""
+    try:
+        return json.dumps(to_dict(msg), separators=(",", ":"), allow_nan=False).encode()
+    except ValueError as exc:
+        raise WireError(f"{type(msg).__name__}: not encodable: {exc}") from exc
+
+
+def _check_number(cls_name: str, name: str, value: Any, meta: typing.Mapping[str, Any]) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise WireError(f"{cls_name}.{name}: expected a number, got {type(value).__name__}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise WireError(f"{cls_name}.{name}: not finite ({value!r})")
+    limit = meta.get("limit", MAX_ABS_POSITION)
+    if abs(v) > limit:
+        raise WireError(f"{cls_name}.{name}: |{v}| exceeds {limit}")
+    if "min" in meta and v < meta["min"]:
+        raise WireError(f"{cls_name}.{name}: {v} is below {meta['min']}")
+    return v
+
+
+def _check_json(cls_name: str, name: str, value: Any, depth: int = 0) -> None:
+    if depth > 8:
+        raise WireError(f"{cls_name}.{name}: nested too deep")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise WireError(f"{cls_name}.{name}: not finite")
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_json(cls_name, f"{name}.{k}", v, depth + 1)
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _check_json(cls_name, f"{name}[{i}]", v, depth + 1)
+
+
+_HINTS: dict[type, dict[str, Any]] = {}
+
+
+def _hints(cls: type) -> dict[str, Any]:
+    if cls not in _HINTS:
+        _HINTS[cls] = typing.get_type_hints(cls)
+    return _HINTS[cls]
+
+
+def from_dict(cls: type[Message], obj: Any) -> Message:
+    """Validate plain data into a message of type ``cls`` (raises WireError)."""
+    name = cls.__name__
+    if not isinstance(obj, dict):
+        raise WireError(f"{name}: expected a JSON object, got {type(obj).__name__}")
+    hints = _hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = set(obj) - set(fields)
+    if unknown:
+        raise WireError(f"{name}: unknown field(s) {sorted(unknown)}")
+    kwargs: dict[str, Any] = {}
+    for fname, f in fields.items():
+        if fname not in obj:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise WireError(f"{name}.{fname}: missing")
+            continue
+        value = obj[fname]
+        tp = hints[fname]
+        origin = typing.get_origin(tp) or tp
+        if tp is float:
+            value = _check_number(name, fname, value, f.metadata)
+        elif tp is int:
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise WireError(f"{name}.{fname}: expected an integer")
+            if not (-MAX_SEQ <= value <= MAX_SEQ) or value < f.metadata.get("min", -MAX_SEQ):
+                raise WireError(f"{name}.{fname}: integer out of range")
+        elif tp is bool:
+            if not isinstance(value, bool):
+                raise WireError(f"{name}.{fname}: expected true or false")
+        elif tp is str:
+            if not isinstance(value, str) or len(value) > MAX_STRING:
+                raise WireError(f"{name}.{fname}: expected a string of at most {MAX_STRING}")
+        elif origin is dict:
+            if not isinstance(value, dict):
+                raise WireError(f"{name}.{fname}: expected an object")
+            _check_json(name, fname, value)
+        elif origin is list:
+            if not isinstance(value, list):
+                raise WireError(f"{name}.{fname}: expected an array")
+            _check_json(name, fname, value)
+        else:  # pragma: no cover - a new field type without a rule
+            raise WireError(f"{name}.{fname}: unsupported type {tp}")
+        kwargs[fname] = value
+    return cls(**kwargs)
+
+
+def decode(cls: type[Message], payload: bytes | bytearray | memoryview | str) -> Message:
+    """Decode JSON bytes into a message of type ``cls`` (raises WireError on anything wrong)."""
+    try:
+        raw = bytes(payload) if not isinstance(payload, str) else payload.encode()
+        obj = json.loads(raw, parse_constant=_refuse_constant)
+    except WireError:
+        raise
+    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
+        raise WireError(f"{cls.__name__}: not JSON: {exc}") from exc
+    return from_dict(cls, obj)
+
+
+def _refuse_constant(name: str) -> Any:
+    raise WireError(f"non-finite constant {name} in payload")
+
+
+def json_schema(cls: type[Message]) -> dict[str, Any]:
+    """JSON Schema (draft 2020-12) of a message type; every field is required, as Foxglove likes."""
+    hints = _hints(cls)
+    props: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        tp = hints[f.name]
+        origin = typing.get_origin(tp) or tp
+        if tp is float:
+            lim = f.metadata.get("limit", MAX_ABS_POSITION)
+            props[f.name] = {
+                "type": "number",
+                "minimum": f.metadata.get("min", -lim),
+                "maximum": lim,
+            }
+        elif tp is int:
+            props[f.name] = {"type": "integer", "minimum": f.metadata.get("min", -MAX_SEQ)}
+        elif tp is bool:
+            props[f.name] = {"type": "boolean"}
+        elif tp is str:
+            props[f.name] = {"type": "string", "maxLength": MAX_STRING}
+        elif origin is dict:
+            props[f.name] = {"type": "object"}
+        elif origin is list:
+            props[f.name] = {"type": "array"}
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": cls.TYPE,
+        "description": (cls.__doc__ or "").strip().splitlines()[0],
+        "type": "object",
+        "properties": props,
+        "required": list(props),
+        "additionalProperties": False,
+    }
+
+
+# --------------------------------------------------------------------------- topic registry
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One bus key: its template (``{fleet}``, ``{id}``, ``{what}`` placeholders), message type,
+    expected rate (Hz, 0 for events) and whether the recorder logs it."""
+
+    name: str
+    template: str
+    msg: type[Message]
+    rate_hz: float
+    logged: bool = True
+
+    def key(self, fleet: str, **parts: str) -> str:
+        return self.template.format(fleet=fleet, **parts)
+
+    def wildcard(self, fleet: str) -> str:
+        """The key expression matching every instance of this topic in a fleet."""
+        parts = {p: "*" for p in ("id", "what") if "{" + p + "}" in self.template}
+        return self.template.format(fleet=fleet, **parts)
+
+
+TOPICS: dict[str, Topic] = {
+    t.name: t
+    for t in (
+        Topic("robot_cmd", "fleet/{fleet}/robot/{id}/cmd", Twist2D, 20.0),
+        Topic("robot_pose", "fleet/{fleet}/robot/{id}/pose", PoseMeasurement, 30.0),
+        Topic("robot_state", "fleet/{fleet}/robot/{id}/state", RobotState, 20.0),
+        Topic("object_pose", "fleet/{fleet}/object/pose", PoseMeasurement, 30.0),
+        Topic("object_state", "fleet/{fleet}/object/state", ObjectState, 20.0),
+        Topic("plan", "fleet/{fleet}/plan/{what}", PlanEvent, 0.0),
+        Topic("estop", "fleet/{fleet}/estop", EStop, 0.0),
+        Topic("status", "fleet/{fleet}/status", FleetStatus, 0.0, logged=False),
+        Topic("sim_clock", "fleet/{fleet}/sim/clock", SimTick, 20.0),
+        Topic("sim_done", "fleet/{fleet}/sim/done", TickDone, 20.0),
+        Topic("truth_robot", "fleet/{fleet}/sim/truth/robot/{id}", PoseMeasurement, 20.0),
+        Topic("truth_object", "fleet/{fleet}/sim/truth/object", PoseMeasurement, 20.0),
+        Topic("alive", "fleet/{fleet}/alive/{role}/{id}", Message, 0.0, logged=False),
+    )
+}
+
+
+def key(topic: str, fleet: str, **parts: str) -> str:
+    """The concrete key of a registered topic, e.g. ``key("robot_cmd", "lab", id="r1")``."""
+    return TOPICS[topic].key(fleet, **parts)
+
+
+def alive_key(fleet: str, role: str, ident: str) -> str:
+    """Liveliness token key for a robot agent or the controller."""
+    return TOPICS["alive"].template.format(fleet=fleet, role=role, id=ident)
+
+
+def fleet_prefix(fleet: str) -> str:
+    return f"fleet/{fleet}/**"
+
+
+def topic_for_key(fleet: str, k: str) -> Topic | None:
+    """The registered topic a concrete key belongs to (None if it is not ours)."""
+    parts = k.split("/")
+    for t in TOPICS.values():
+        tparts = t.template.format(fleet=fleet, id="\0", what="\0", role="\0").split("/")
+        if len(tparts) == len(parts) and all(a == "\0" or a == b for a, b in zip(tparts, parts)):
+            return t
+    return None
