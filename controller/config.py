@@ -330,7 +330,8 @@ def _convert(tp: Any, value: Any, path: str, src: str) -> Any:
         if len(value) != len(args):
             raise ConfigError(src, path, f"expected {_type_name(tp)}, got {len(value)}: {value!r}")
         return tuple(
-            _convert(a, v, f"{path}[{i}]", src) for i, (a, v) in enumerate(zip(args, value))
+            _convert(a, v, f"{path}[{i}]", src)
+            for i, (a, v) in enumerate(zip(args, value, strict=True))
         )
     if isinstance(tp, types.UnionType):
         raise TypeError(f"unsupported config type {tp}")

@@ -27,7 +27,7 @@ def rot(theta: float) -> FloatArray:
 
 
 def transform(points: ArrayLike, pose: ArrayLike) -> FloatArray:
-    """Map points (n, 2) from a body frame into the world frame given the body pose (x, y, theta)."""
+    """Map body-frame points (n, 2) into the world frame, given the body pose (x, y, theta)."""
     p = np.asarray(points, dtype=float)
     x, y, th = (float(v) for v in np.asarray(pose, dtype=float)[:3])
     return p @ rot(th).T + np.array([x, y])
@@ -158,7 +158,7 @@ def points_in_polygon(points: ArrayLike, poly: ArrayLike) -> NDArray[np.bool_]:
 def point_segment_distance(
     points: ArrayLike, a: ArrayLike, b: ArrayLike
 ) -> tuple[FloatArray, FloatArray]:
-    """Distances (m, s) from points (m, 2) to segments a-b (s, 2), and the closest points (m, s, 2)."""
+    """Distances (m, s) from points (m, 2) to segments a-b (s, 2), and closest points (m, s, 2)."""
     pts = np.atleast_2d(np.asarray(points, dtype=float))[:, None, :]
     a = np.asarray(a, dtype=float)[None, :, :]
     b = np.asarray(b, dtype=float)[None, :, :]

@@ -386,6 +386,8 @@ def topic_for_key(fleet: str, k: str) -> Topic | None:
     parts = k.split("/")
     for t in TOPICS.values():
         tparts = t.template.format(fleet=fleet, id="\0", what="\0", role="\0").split("/")
-        if len(tparts) == len(parts) and all(a == "\0" or a == b for a, b in zip(tparts, parts)):
+        if len(tparts) != len(parts):
+            continue
+        if all(a == "\0" or a == b for a, b in zip(tparts, parts, strict=True)):
             return t
     return None
