@@ -31,6 +31,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("plan", "capture"), "plan_capture", "plan the capture points (GA), offline"),
     (("plan", "route"), "plan_route", "plan the object's route (A*), offline"),
     (("replay",), "replay", "metrics, plots and playback of a run's MCAP log"),
+    (("record",), "record", "record a running fleet's bus to MCAP"),
     (("check",), "check", "validate a config"),
 )
 

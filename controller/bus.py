@@ -1,0 +1,310 @@
+"""The bus: one zenoh session per process role, built from the ``[zenoh]`` config section.
+
+I/O edge only (the planning core never imports this). Publishers encode with ``controller.wire``;
+subscriber callbacks run on zenoh's thread and only decode and enqueue into an ``Inbox`` (a bad
+payload is counted and logged once per burst, never raised). Liveliness tokens mark presence;
+a queryable serves the fleet status.
+
+Zenoh facts this relies on (NOTES.md): a session that is not closed hangs the process at exit,
+so ``Bus`` is a context manager and every test closes it; a channel subscriber you keep no
+reference to is silently undeclared, so the bus keeps every handle it creates.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import zenoh
+
+from controller import wire
+from controller.config import ZenohSection
+
+log = logging.getLogger(__name__)
+
+
+def zenoh_config(
+    section: ZenohSection,
+    *,
+    mode: str | None = None,
+    listen: Sequence[str] | None = None,
+    connect: Sequence[str] | None = None,
+    lease_s: float | None = None,
+) -> zenoh.Config:
+    """A zenoh Config from the ``[zenoh]`` section, with per-role overrides.
+
+    Multicast and gossip scouting follow the section (off by default): endpoints are explicit.
+    """
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode or section.mode))
+    conf.insert_json5(
+        "listen/endpoints", json.dumps(list(section.listen if listen is None else listen))
+    )
+    conf.insert_json5(
+        "connect/endpoints", json.dumps(list(section.connect if connect is None else connect))
+    )
+    conf.insert_json5("scouting/multicast/enabled", json.dumps(section.multicast_scouting))
+    conf.insert_json5("scouting/gossip/enabled", json.dumps(section.gossip_scouting))
+    if lease_s is not None:
+        conf.insert_json5("transport/link/tx/lease", json.dumps(int(lease_s * 1000)))
+        conf.insert_json5("transport/link/tx/keep_alive", json.dumps(4))
+    return conf
+
+
+@dataclass(frozen=True)
+class Received:
+    """One decoded sample: receive time (s, ``time.time()``), key and message."""
+
+    recv_time: float
+    key: str
+    msg: wire.Message
+
+
+class DecodeStats:
+    """Counts payloads that did not decode, per key; logs the first of each burst."""
+
+    def __init__(self, quiet_after: float = 5.0) -> None:
+        self._lock = threading.Lock()
+        self.counts: dict[str, int] = {}
+        self._last_logged: dict[str, float] = {}
+        self._quiet_after = quiet_after
+
+    def bad(self, key: str, err: Exception) -> None:
+        now = time.monotonic()
+        with self._lock:
+            self.counts[key] = self.counts.get(key, 0) + 1
+            last = self._last_logged.get(key)
+            if last is None or now - last > self._quiet_after:
+                self._last_logged[key] = now
+                n = self.counts[key]
+                log.warning("dropped a bad payload on %s (%d so far): %s", key, n, err)
+
+    @property
+    def total(self) -> int:
+        with self._lock:
+            return sum(self.counts.values())
+
+
+class Inbox:
+    """A thread-safe queue of ``Received`` samples, filled by zenoh callbacks."""
+
+    def __init__(self, maxsize: int = 0) -> None:
+        self._q: queue.Queue[Received] = queue.Queue(maxsize)
+        self.overflow = 0
+
+    def put(self, item: Received) -> None:
+        try:
+            self._q.put_nowait(item)
+        except queue.Full:
+            self.overflow += 1
+
+    def drain(self) -> list[Received]:
+        """Everything queued so far, oldest first; never blocks."""
+        out: list[Received] = []
+        while True:
+            try:
+                out.append(self._q.get_nowait())
+            except queue.Empty:
+                return out
+
+    def get(self, timeout: float) -> Received | None:
+        """The next sample, waiting at most ``timeout`` seconds."""
+        try:
+            return self._q.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def __iter__(self) -> Iterator[Received]:
+        return iter(self.drain())
+
+
+class Publisher:
+    """Publishes messages of one type on one key."""
+
+    def __init__(self, pub: Any, key: str) -> None:
+        self._pub = pub
+        self.key = key
+        self.sent = 0
+
+    def put(self, msg: wire.Message) -> None:
+        self._pub.put(wire.encode(msg))
+        self.sent += 1
+
+
+class Bus:
+    """A zenoh session for one fleet, with the fleet's key registry. Use as a context manager."""
+
+    def __init__(
+        self,
+        section: ZenohSection,
+        fleet: str,
+        *,
+        mode: str | None = None,
+        listen: Sequence[str] | None = None,
+        connect: Sequence[str] | None = None,
+        lease_s: float | None = None,
+    ) -> None:
+        self.fleet = fleet
+        self.stats = DecodeStats()
+        self._handles: list[Any] = []
+        conf = zenoh_config(section, mode=mode, listen=listen, connect=connect, lease_s=lease_s)
+        self.session = zenoh.open(conf)
+        self._closed = False
+
+    # -- lifecycle
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for h in reversed(self._handles):
+            try:
+                h.undeclare()
+            except Exception:  # noqa: BLE001 - best effort on shutdown
+                pass
+        self._handles.clear()
+        self.session.close()
+
+    def __enter__(self) -> Bus:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- keys
+    def key(self, topic: str, **parts: str) -> str:
+        return wire.key(topic, self.fleet, **parts)
+
+    # -- publishing
+    def publisher(self, topic: str, *, command: bool = False, **parts: str) -> Publisher:
+        """A publisher on a registered topic. ``command=True``: express delivery, real-time
+        priority and drop on congestion (a late command is worthless); otherwise reliable, block."""
+        k = self.key(topic, **parts)
+        if command:
+            pub = self.session.declare_publisher(
+                k,
+                congestion_control=zenoh.CongestionControl.DROP,
+                priority=zenoh.Priority.REAL_TIME,
+                express=True,
+            )
+        else:
+            pub = self.session.declare_publisher(
+                k, congestion_control=zenoh.CongestionControl.BLOCK
+            )
+        self._handles.append(pub)
+        return Publisher(pub, k)
+
+    def put(self, topic: str, msg: wire.Message, **parts: str) -> None:
+        """One-off publication (events: plan, estop)."""
+        self.session.put(self.key(topic, **parts), wire.encode(msg))
+
+    # -- subscribing
+    def subscribe(
+        self,
+        key_expr: str,
+        msg_type: type[wire.Message] | None,
+        inbox: Inbox | None = None,
+        on_message: Callable[[Received], None] | None = None,
+    ) -> Inbox:
+        """Decode samples on ``key_expr`` into ``inbox`` (created if not given).
+
+        ``msg_type`` None decodes by the key's registered topic. ``on_message``, if given, runs
+        after enqueueing on zenoh's thread: keep it short.
+        """
+        box = inbox if inbox is not None else Inbox()
+        fleet = self.fleet
+        stats = self.stats
+
+        def callback(sample: zenoh.Sample) -> None:
+            k = str(sample.key_expr)
+            try:
+                tp = msg_type
+                if tp is None:
+                    topic = wire.topic_for_key(fleet, k)
+                    if topic is None or topic.msg is wire.Message:
+                        raise wire.WireError(f"no message type registered for {k}")
+                    tp = topic.msg
+                msg = wire.decode(tp, sample.payload.to_bytes())
+            except Exception as exc:  # noqa: BLE001 - a callback must never raise
+                stats.bad(k, exc)
+                return
+            item = Received(time.time(), k, msg)
+            box.put(item)
+            if on_message is not None:
+                try:
+                    on_message(item)
+                except Exception:  # noqa: BLE001
+                    log.exception("message handler failed on %s", k)
+
+        sub = self.session.declare_subscriber(key_expr, callback)
+        self._handles.append(sub)
+        return box
+
+    def subscribe_topic(self, topic: str, inbox: Inbox | None = None, **parts: str) -> Inbox:
+        t = wire.TOPICS[topic]
+        k = t.key(self.fleet, **parts) if parts else t.wildcard(self.fleet)
+        return self.subscribe(k, t.msg, inbox)
+
+    def subscribe_raw(self, key_expr: str, callback: Callable[[str, bytes, float], None]) -> None:
+        """Raw bytes (key, payload, receive time) for the recorder; the callback must not raise."""
+
+        def cb(sample: zenoh.Sample) -> None:
+            try:
+                callback(str(sample.key_expr), sample.payload.to_bytes(), time.time())
+            except Exception:  # noqa: BLE001
+                log.exception("raw subscriber failed on %s", sample.key_expr)
+
+        self._handles.append(self.session.declare_subscriber(key_expr, cb))
+
+    # -- liveliness
+    def declare_alive(self, role: str, ident: str) -> Any:
+        token = self.session.liveliness().declare_token(wire.alive_key(self.fleet, role, ident))
+        self._handles.append(token)
+        return token
+
+    def watch_alive(self, role: str, callback: Callable[[str, bool], None]) -> None:
+        """``callback(ident, alive)`` when a ``role`` token appears or goes (with history)."""
+        prefix = wire.alive_key(self.fleet, role, "")
+
+        def cb(sample: zenoh.Sample) -> None:
+            ident = str(sample.key_expr)[len(prefix) :]
+            try:
+                callback(ident, sample.kind == zenoh.SampleKind.PUT)
+            except Exception:  # noqa: BLE001
+                log.exception("liveliness handler failed for %s", ident)
+
+        sub = self.session.liveliness().declare_subscriber(
+            wire.alive_key(self.fleet, role, "*"), cb, history=True
+        )
+        self._handles.append(sub)
+
+    # -- queries
+    def serve(self, topic: str, responder: Callable[[], wire.Message]) -> None:
+        """Answer queries on a topic's key with ``responder()`` (e.g. the fleet status)."""
+        k = self.key(topic)
+
+        def cb(query: zenoh.Query) -> None:
+            try:
+                query.reply(k, wire.encode(responder()))
+            except Exception:  # noqa: BLE001
+                log.exception("queryable %s failed", k)
+
+        self._handles.append(self.session.declare_queryable(k, cb))
+
+    def query(self, topic: str, msg_type: type[wire.Message], timeout: float) -> list[wire.Message]:
+        """Ask every replier on a topic's key; bad replies are counted and dropped."""
+        k = self.key(topic)
+        out: list[wire.Message] = []
+        for reply in self.session.get(k, target=zenoh.QueryTarget.ALL, timeout=timeout):
+            if reply.ok is None:
+                continue
+            try:
+                out.append(wire.decode(msg_type, reply.ok.payload.to_bytes()))
+            except wire.WireError as exc:
+                self.stats.bad(k, exc)
+        return out

@@ -1,0 +1,57 @@
+"""``fleet record [--config F] [--out F.mcap] [--duration S]``: record the fleet's bus to MCAP.
+
+Attaches to a running fleet (connects to the config's zenoh endpoints), writes every sample
+under ``fleet/<name>/**`` until SIGINT/SIGTERM (or ``--duration``), then finishes the file.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+from controller.commands import add_config_argument
+
+
+def add_arguments(parser, word: str) -> None:
+    add_config_argument(parser)
+    parser.add_argument("--out", help="MCAP file (default: <log.dir>/<fleet>-<time>.mcap)")
+    parser.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
+    parser.add_argument(
+        "--connect", action="append", help="zenoh endpoint to connect to (default: config listen)"
+    )
+
+
+def default_log_path(log_dir: str, fleet: str, kind: str = "run") -> Path:
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    return Path(log_dir) / f"{fleet}-{kind}-{stamp}.mcap"
+
+
+def run(args) -> int:
+    from controller import wire
+    from controller.bus import Bus
+    from controller.config import load_config
+    from controller.recorder import McapRecorder
+
+    cfg = load_config(args.config)
+    out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name, "record")
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    connect = args.connect or list(cfg.zenoh.listen)
+    recorder = McapRecorder(out, cfg.fleet.name, cfg.log.flush_interval)
+    try:
+        with Bus(cfg.zenoh, cfg.fleet.name, mode="peer", listen=[], connect=connect) as bus:
+            bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
+            print(f"fleet record: recording fleet {cfg.fleet.name!r} to {out}", file=sys.stderr)
+            deadline = time.monotonic() + args.duration if args.duration > 0 else None
+            while not stop.is_set():
+                if deadline is not None and time.monotonic() >= deadline:
+                    break
+                stop.wait(0.1)
+    finally:
+        recorder.close()
+    print(f"fleet record: {recorder.written} messages in {out}", file=sys.stderr)
+    return 0

@@ -1,0 +1,106 @@
+"""The zenoh bus between two processes on loopback, and its resilience to garbage payloads."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+
+from controller import wire
+from controller.bus import Bus
+from controller.config import ZenohSection
+from tests.conftest import ROOT
+
+
+def wait_for(cond, timeout: float, what: str) -> None:
+    """Poll a condition (a handshake), failing after ``timeout`` seconds."""
+    ev = threading.Event()
+    waited = 0.0
+    while not cond():
+        if waited >= timeout:
+            raise AssertionError(f"timed out waiting for {what}")
+        ev.wait(0.02)
+        waited += 0.02
+
+
+def test_two_processes_exchange_commands_and_poses(port):
+    ep = f"tcp/127.0.0.1:{port}"
+    n = 50
+    with Bus(ZenohSection(), "t2", listen=[ep], connect=[]) as bus:
+        present: set[str] = set()
+        bus.watch_alive("robot", lambda rid, alive: present.add(rid) if alive else None)
+        poses = bus.subscribe_topic("robot_pose", id="r9")
+        cmd = bus.publisher("robot_cmd", command=True, id="r9")
+        env = dict(os.environ, PYTHONPATH=str(ROOT))
+        child = subprocess.Popen(
+            [sys.executable, str(ROOT / "tests" / "peer_echo.py"), ep, "t2", "r9", str(n)],
+            env=env,
+        )
+        try:
+            # handshake: the robot's liveliness token proves its subscriber is declared
+            wait_for(lambda: "r9" in present, 20.0, "the peer's liveliness token")
+            got: dict[int, wire.PoseMeasurement] = {}
+            for i in range(n):
+                cmd.put(wire.Twist2D(t=float(i), seq=i, vx=0.01 * i))
+                item = poses.get(timeout=5.0)
+                assert item is not None, f"no pose for command {i}"
+                got[item.msg.seq] = item.msg
+            assert sorted(got) == list(range(n))
+            assert all(abs(got[i].x - 0.01 * i) < 1e-12 for i in range(n))
+            assert child.wait(timeout=20) == 0
+        finally:
+            if child.poll() is None:
+                child.kill()
+                child.wait()
+
+
+def test_garbage_payloads_are_counted_and_dropped(port):
+    ep = f"tcp/127.0.0.1:{port}"
+    with (
+        Bus(ZenohSection(), "g", listen=[ep], connect=[]) as a,
+        Bus(ZenohSection(), "g", listen=[], connect=[ep]) as b,
+    ):
+        inbox = b.subscribe_topic("robot_cmd")  # wildcard over robots
+        key = a.key("robot_cmd", id="r1")
+        pub = a.session.declare_publisher(key)
+        wait_for(lambda: pub.matching_status.matching, 10.0, "the subscriber to match")
+        garbage = [
+            b"",
+            b"\x00\xff" * 100,
+            b"not json",
+            b'{"t": NaN, "seq": 0}',
+            b'{"t": 1.0, "vx": "fast"}',
+            b'{"t": 1.0, "vx": 1e300}',
+            b"[" * 10000,
+            b'{"t": 1.0, "seq": 0, "vx": 0.1, "extra": 1}',
+        ]
+        for _ in range(5):
+            for g in garbage:
+                pub.put(g)
+        good = wire.Twist2D(t=2.0, seq=7, vx=0.2)
+        pub.put(wire.encode(good))
+        item = inbox.get(timeout=5.0)
+        assert item is not None and item.msg == good
+        assert inbox.drain() == []  # nothing of the garbage got through
+        wait_for(lambda: b.stats.total == 5 * len(garbage), 5.0, "all garbage counted")
+        assert b.stats.counts == {key: 5 * len(garbage)}
+        # still working afterwards
+        pub.put(wire.encode(wire.Twist2D(t=3.0, seq=8)))
+        item = inbox.get(timeout=5.0)
+        assert item is not None and item.msg.seq == 8
+
+
+def test_status_queryable_answers(port):
+    ep = f"tcp/127.0.0.1:{port}"
+    with (
+        Bus(ZenohSection(), "q", listen=[ep], connect=[]) as a,
+        Bus(ZenohSection(), "q", listen=[], connect=[ep]) as b,
+    ):
+        a.serve("status", lambda: wire.FleetStatus(t=1.0, fleet="q", phase="approach"))
+        present = threading.Event()
+        a.declare_alive("controller", "main")
+        b.watch_alive("controller", lambda i, al: present.set())
+        assert present.wait(10.0)
+        replies = b.query("status", wire.FleetStatus, timeout=5.0)
+        assert [r.phase for r in replies] == ["approach"]
