@@ -113,6 +113,10 @@ class Inbox:
             except queue.Empty:
                 return out
 
+    def qsize(self) -> int:
+        """Samples waiting (approximate while producers run)."""
+        return self._q.qsize()
+
     def get(self, timeout: float) -> Received | None:
         """The next sample, waiting at most ``timeout`` seconds."""
         try:

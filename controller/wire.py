@@ -355,6 +355,7 @@ TOPICS: dict[str, Topic] = {
         Topic("robot_state", "fleet/{fleet}/robot/{id}/state", RobotState, 20.0),
         Topic("object_pose", "fleet/{fleet}/object/pose", PoseMeasurement, 30.0),
         Topic("object_state", "fleet/{fleet}/object/state", ObjectState, 20.0),
+        Topic("robot_event", "fleet/{fleet}/robot/{id}/event", PlanEvent, 0.0),
         Topic("plan", "fleet/{fleet}/plan/{what}", PlanEvent, 0.0),
         Topic("estop", "fleet/{fleet}/estop", EStop, 0.0),
         Topic("status", "fleet/{fleet}/status", FleetStatus, 0.0, logged=False),

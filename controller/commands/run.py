@@ -1,17 +1,73 @@
-"""`fleet run`: not built yet (see the issues)."""
+"""``fleet run [--config F] [--out F.mcap] [--json] [--gui]``: the dry run of the whole job.
+
+A stand-in world (pybullet by default, ``sim.backend``), the same agents, bus and controller
+loop as the lab, in lockstep with the sim clock. Prints a summary (``--json``: one object) and
+exits 0 when the job is done with a clean verdict, 1 when it failed, 2 on bad config.
+"""
 
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from controller.commands import add_config_argument
 
 
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)
+    parser.add_argument("--out", help="MCAP log (default: <log.dir>/<fleet>-run-<time>.mcap)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--gui", action="store_true", help="show the pybullet GUI")
+    parser.add_argument(
+        "--max-time", type=float, default=None, help="sim seconds (default: sim.max_time)"
+    )
+    parser.add_argument(
+        "--backend", choices=("pybullet", "ideal"), help="override sim.backend for this run"
+    )
 
 
 def run(args) -> int:
-    print("fleet: this command is not built yet", file=sys.stderr)
-    return 1
+    import dataclasses
+
+    from controller.cli import emit_json
+    from controller.commands.record import default_log_path
+    from controller.config import load_config
+    from controller.missions import build_mission
+    from controller.runtime import DryRun
+
+    cfg = load_config(args.config)
+    if args.backend:
+        cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, backend=args.backend))
+    out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name)
+    mission = build_mission(cfg)
+    print(f"fleet run: {cfg.source}, backend {cfg.sim.backend}, log {out}", file=sys.stderr)
+    summary = DryRun(cfg, mission, out, gui=args.gui, max_time=args.max_time).run()
+    ok = summary["done"] and not summary["failed"] and verdict_ok(summary)
+    summary["status"] = "ok" if ok else "failed"
+    if args.json:
+        emit_json(summary)
+    else:
+        for k in (
+            "status",
+            "phase",
+            "arrested",
+            "arrest_time_s",
+            "sim_time_s",
+            "wall_time_s",
+            "min_clearance_m",
+            "max_object_penetration_m",
+            "obstacle_contacts",
+            "log",
+        ):
+            print(f"{k:>26}: {summary.get(k)}")
+    return 0 if ok else 1
+
+
+def verdict_ok(summary: dict) -> bool:
+    """The hardware contract: no collisions, no obstacle contact, no deep penetration."""
+    clear = summary.get("min_clearance_m")
+    return (
+        (clear is None or clear >= 0.0)
+        and summary["max_object_penetration_m"] <= 0.01
+        and not summary["obstacle_contacts"]
+    )

@@ -1,0 +1,102 @@
+"""Missions: the pure per-tick decision of what every robot does.
+
+A mission takes a ``FleetView`` (estimates as arrays, time passed in) and returns body-frame
+commands for every robot. ``GotoMission`` drives robots to fixed poses (staging, tests);
+the capture-and-transport mission lives in ``controller.capture_mission``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller import geometry
+from controller.node import FleetView, MissionOutput
+
+
+@dataclass(frozen=True)
+class RobotLimits:
+    """Per-robot limits as arrays (N,): holonomic flags, m/s, rad/s, m/s^2."""
+
+    holonomic: np.ndarray
+    max_speed: np.ndarray
+    max_yaw_rate: np.ndarray
+    max_accel: np.ndarray
+
+    @classmethod
+    def from_config(cls, robots) -> RobotLimits:
+        return cls(
+            holonomic=np.array([r.kind == "omni" for r in robots]),
+            max_speed=np.array([r.max_speed for r in robots]),
+            max_yaw_rate=np.array([r.max_yaw_rate for r in robots]),
+            max_accel=np.array([r.max_accel for r in robots]),
+        )
+
+
+def world_to_body(theta: np.ndarray, v_world: np.ndarray) -> np.ndarray:
+    """Rotate world-frame velocities (N, 2) into each robot's body frame."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack(
+        [c * v_world[:, 0] + s * v_world[:, 1], -s * v_world[:, 0] + c * v_world[:, 1]], 1
+    )
+
+
+def track_velocity(
+    poses: np.ndarray,
+    v_world: np.ndarray,
+    limits: RobotLimits,
+    heading_gain: float = 3.0,
+    desired_heading: np.ndarray | None = None,
+) -> np.ndarray:
+    """Body-frame commands (N, 3) that realise desired world velocities (N, 2).
+
+    Omni robots translate directly (and turn toward ``desired_heading`` if given). Differential
+    robots turn toward the velocity's direction and drive forward with the component of the
+    desired velocity along their heading (never backwards through a turn), under their limits.
+    """
+    n = len(poses)
+    th = poses[:, 2]
+    body = world_to_body(th, v_world)
+    cmds = np.zeros((n, 3))
+    speed = np.linalg.norm(v_world, axis=1)
+    omni = limits.holonomic
+    cmds[omni, 0:2] = body[omni]
+    if desired_heading is not None:
+        err = geometry.wrap_angle(desired_heading - th)
+        cmds[omni, 2] = heading_gain * err[omni]
+    diff = ~omni
+    if np.any(diff):
+        heading = np.arctan2(v_world[:, 1], v_world[:, 0])
+        err = geometry.wrap_angle(heading - th)
+        moving = speed > 1e-6
+        wz = np.where(moving, heading_gain * err, 0.0)
+        fwd = np.where(moving, np.maximum(body[:, 0], 0.0) * np.clip(np.cos(err), 0.0, 1.0), 0.0)
+        cmds[diff, 0] = fwd[diff]
+        cmds[diff, 2] = wz[diff]
+    # limits
+    lin = np.linalg.norm(cmds[:, :2], axis=1)
+    k = np.where(lin > limits.max_speed, limits.max_speed / np.maximum(lin, 1e-12), 1.0)
+    cmds[:, :2] *= k[:, None]
+    cmds[:, 2] = np.clip(cmds[:, 2], -limits.max_yaw_rate, limits.max_yaw_rate)
+    return cmds
+
+
+@dataclass
+class GotoMission:
+    """Drive each robot to a fixed (x, y) target with a proportional law; done when all arrive."""
+
+    targets: np.ndarray  # (N, 2)
+    limits: RobotLimits
+    gain: float = 1.0
+    tolerance: float = 0.05
+
+    def step(self, view: FleetView) -> MissionOutput:
+        err = self.targets - view.poses[:, :2]
+        dist = np.linalg.norm(err, axis=1)
+        v = self.gain * err
+        cmds = track_velocity(view.poses, v, self.limits)
+        cmds[dist < self.tolerance] = 0.0
+        cmds[view.stale | ~view.present] = 0.0
+        done = bool(np.all(dist < self.tolerance))
+        return MissionOutput(commands=cmds, phase="goto" if not done else "done", done=done)

@@ -1,0 +1,265 @@
+"""The controller node: the central side's I/O shell around the pure mission step.
+
+Fixed, named pipeline per tick: sample (drain the inboxes) → estimate (filters, predicted to the
+tick time) → plan (the mission step, pure) → publish (one command per robot, filter states,
+events). The tick source is injected: the wall-clock rate keeper of the lab daemon or the sim's
+lockstep clock. Nothing here reads the wall clock for control decisions; ``now`` is passed in.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from controller import wire
+from controller.config import FleetConfig
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FleetView:
+    """What the mission sees each tick: estimates as N×k arrays in config robot order (SI units)."""
+
+    t: float
+    ids: tuple[str, ...]
+    poses: np.ndarray  # (N, 3) x, y, theta
+    velocities: np.ndarray  # (N, 3) world vx, vy, wz
+    stale: np.ndarray  # (N,) bool
+    present: np.ndarray  # (N,) bool: liveliness token held and link ok
+    object_pose: np.ndarray | None  # (3,)
+    object_velocity: np.ndarray | None  # (3,)
+    object_prediction: np.ndarray | None  # (3,) pose a short horizon ahead
+    estop: bool
+
+
+@dataclass
+class MissionOutput:
+    """Body-frame commands (N, 3) for every robot, the phase, and events to publish."""
+
+    commands: np.ndarray
+    phase: str
+    events: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
+    done: bool = False
+    failed: bool = False
+    arrest: bool = False
+
+
+class Mission(Protocol):
+    def step(self, view: FleetView) -> MissionOutput: ...
+
+
+class Estimator(Protocol):
+    def command(self, robot_id: str, t: float, vx: float, vy: float, wz: float) -> None: ...
+    def measure_robot(self, robot_id: str, t: float, x: float, y: float, theta: float) -> str: ...
+    def measure_object(self, t: float, x: float, y: float, theta: float) -> str: ...
+    def robot_arrays(self, now: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+    def robot_estimate(self, robot_id: str, now: float) -> Any: ...
+    def object_estimate(self, now: float) -> Any: ...
+    def predict_object(self, now: float, horizon: float) -> Any: ...
+    def set_object_arrested(self, arrested: bool) -> None: ...
+
+
+@dataclass
+class NodeCounters:
+    ticks: int = 0
+    poses: int = 0
+    object_poses: int = 0
+    rejected: int = 0
+    out_of_order: int = 0
+    commands: int = 0
+    link_events: int = 0
+
+
+class ControllerNode:
+    """Subscribes to poses and e-stops, runs the mission per tick, publishes commands."""
+
+    def __init__(self, cfg: FleetConfig, bus, mission: Mission, estimator: Estimator) -> None:
+        self.cfg = cfg
+        self.bus = bus
+        self.mission = mission
+        self.est = estimator
+        self.ids = cfg.robot_ids
+        self.index = {rid: i for i, rid in enumerate(self.ids)}
+        self.counters = NodeCounters()
+        self.phase = "init"
+        self.estop = False
+        self.present = np.zeros(len(self.ids), dtype=bool)
+        self.link_lost = np.zeros(len(self.ids), dtype=bool)
+        self.arrested = False
+        self.last_output: MissionOutput | None = None
+        self.last_tick = 0.0
+        self._seq = 0
+        self._poses = bus.subscribe_topic("robot_pose")
+        self._object = bus.subscribe_topic("object_pose")
+        self._estops = bus.subscribe_topic("estop")
+        self._robot_events = bus.subscribe_topic("robot_event")
+        self._cmd_pub = {r: bus.publisher("robot_cmd", command=True, id=r) for r in self.ids}
+        self._state_pub = {r: bus.publisher("robot_state", id=r) for r in self.ids}
+        self._object_pub = bus.publisher("object_state")
+        self._done_pub = bus.publisher("sim_done", command=True)
+        bus.watch_alive("robot", self._on_alive)
+        bus.serve("status", self.status)
+        bus.declare_alive("controller", "main")
+
+    # -- inputs
+    def _on_alive(self, rid: str, alive: bool) -> None:
+        i = self.index.get(rid)
+        if i is None:
+            return
+        if self.present[i] != alive:
+            log.log(
+                logging.INFO if alive else logging.WARNING,
+                "robot %s %s",
+                rid,
+                "present" if alive else "gone",
+            )
+        self.present[i] = alive
+
+    def sample(self) -> None:
+        """Drain the inboxes into the filters and the latched e-stop."""
+        for item in self._estops.drain():
+            if self.estop != item.msg.engaged:
+                log.warning(
+                    "e-stop %s by %s",
+                    "engaged" if item.msg.engaged else "released",
+                    item.msg.source,
+                )
+            self.estop = item.msg.engaged
+        for item in self._robot_events.drain():
+            rid = item.key.split("/")[-2]
+            if item.msg.kind == "link_lost" and rid in self.index:
+                self.link_lost[self.index[rid]] = True
+                self.counters.link_events += 1
+                log.error("robot %s reports a lost link: %s", rid, item.msg.data.get("detail"))
+        for item in self._poses.drain():
+            rid = item.key.split("/")[-2]
+            if rid not in self.index:
+                continue
+            m = item.msg
+            res = self.est.measure_robot(rid, m.t, m.x, m.y, m.theta)
+            self.counters.poses += 1
+            self.counters.rejected += res == "rejected"
+            self.counters.out_of_order += res == "out_of_order"
+        for item in self._object.drain():
+            m = item.msg
+            self.est.measure_object(m.t, m.x, m.y, m.theta)
+            self.counters.object_poses += 1
+
+    def pending_measurements(self) -> int:
+        """Pose measurements received but not yet taken in."""
+        return self._poses.qsize() + self._object.qsize()
+
+    @property
+    def received(self) -> int:
+        """Pose measurements (robots and object) taken in so far."""
+        return self.counters.poses + self.counters.object_poses
+
+    # -- the tick
+    def view(self, now: float) -> FleetView:
+        poses, vels, stale = self.est.robot_arrays(now)
+        obj = self.est.object_estimate(now)
+        pred = self.est.predict_object(now, self.cfg.approach.prediction_horizon)
+        return FleetView(
+            t=now,
+            ids=self.ids,
+            poses=poses,
+            velocities=vels,
+            stale=stale,
+            present=self.present & ~self.link_lost,
+            object_pose=None if obj is None else np.array([obj.x, obj.y, obj.theta]),
+            object_velocity=None if obj is None else np.array([obj.vx, obj.vy, obj.wz]),
+            object_prediction=None if pred is None else np.array([pred.x, pred.y, pred.theta]),
+            estop=self.estop,
+        )
+
+    def tick(self, now: float, step: int | None = None) -> MissionOutput:
+        """sample → estimate → plan → publish, at time ``now``."""
+        self.sample()
+        self.last_tick = now
+        view = self.view(now)
+        out = self.mission.step(view)
+        cmds = np.zeros_like(out.commands) if self.estop else out.commands
+        if out.arrest and not self.arrested:
+            self.arrested = True
+            self.est.set_object_arrested(True)
+        self.phase = out.phase
+        self.counters.ticks += 1
+        ttl = self.cfg.fleet.cmd_ttl
+        for i, rid in enumerate(self.ids):
+            vx, vy, wz = (float(v) for v in cmds[i])
+            self._seq += 1
+            self._cmd_pub[rid].put(wire.Twist2D(t=now, seq=self._seq, vx=vx, vy=vy, wz=wz, ttl=ttl))
+            self.est.command(rid, now, vx, vy, wz)
+            self.counters.commands += 1
+        for kind, data in out.events:
+            self._seq += 1
+            self.bus.put(
+                "plan",
+                wire.PlanEvent(t=now, seq=self._seq, kind=kind, phase=out.phase, data=data),
+                what=kind,
+            )
+        self._publish_states(now, view)
+        if step is not None:
+            self._done_pub.put(wire.TickDone(t=now, seq=step, step=step))
+        self.last_output = out
+        return out
+
+    def _publish_states(self, now: float, view: FleetView) -> None:
+        for i, rid in enumerate(self.ids):
+            e = self.est.robot_estimate(rid, now)
+            if e is None or not getattr(e, "initialized", True):
+                continue
+            self._state_pub[rid].put(
+                wire.RobotState(
+                    t=now,
+                    seq=self.counters.ticks,
+                    id=rid,
+                    x=e.x,
+                    y=e.y,
+                    theta=e.theta,
+                    vx=e.vx,
+                    vy=e.vy,
+                    wz=e.wz,
+                    sigma_xy=e.sigma_xy,
+                    sigma_theta=e.sigma_theta,
+                    stale=bool(view.stale[i]),
+                    rejected=int(e.rejected),
+                )
+            )
+        o = self.est.object_estimate(now)
+        if o is not None:
+            self._object_pub.put(
+                wire.ObjectState(
+                    t=now,
+                    seq=self.counters.ticks,
+                    x=o.x,
+                    y=o.y,
+                    theta=o.theta,
+                    vx=o.vx,
+                    vy=o.vy,
+                    wz=o.wz,
+                    sigma_xy=o.sigma_xy,
+                    stale=bool(o.stale),
+                    arrested=self.arrested,
+                )
+            )
+
+    # -- status
+    def status(self) -> wire.FleetStatus:
+        robots = [
+            {"id": rid, "present": bool(self.present[i]), "link_lost": bool(self.link_lost[i])}
+            for i, rid in enumerate(self.ids)
+        ]
+        return wire.FleetStatus(
+            t=0.0,
+            seq=self.counters.ticks,
+            fleet=self.cfg.fleet.name,
+            phase=self.phase,
+            estop=self.estop,
+            robots=robots,
+            counters=dict(vars(self.counters)),
+        )

@@ -1,0 +1,258 @@
+"""The composition root: the one place that wires controller/, drivers/ and sim_backend/.
+
+``DryRun`` is ``fleet run``: a stand-in world behind sim drivers, one agent per robot on the
+robot-side zenoh session, the controller node on its own session, the lockstep clock between
+them, and the MCAP recorder on the controller's session. Everything crosses the bus.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controller import wire
+from controller.bus import Bus
+from controller.config import FleetConfig
+from controller.node import ControllerNode, Mission
+from controller.recorder import McapRecorder
+from drivers.agent import Agent, AgentParams
+from drivers.base import Capabilities
+from drivers.lockstep import LockstepCoordinator
+from drivers.sim import SimDriver
+from sim_backend.hub import PerfectSensor, SimHub
+
+log = logging.getLogger(__name__)
+
+
+def capabilities(robot) -> Capabilities:
+    return Capabilities(
+        kind=robot.kind,
+        holonomic=robot.kind == "omni",
+        max_speed=robot.max_speed,
+        max_yaw_rate=robot.max_yaw_rate,
+        radius=robot.radius,
+    )
+
+
+def make_world(cfg: FleetConfig, gui: bool = False):
+    """The stand-in world named by ``sim.backend``."""
+    try:
+        from sim_backend.factory import make_world as factory
+    except ImportError:  # pragma: no cover - before the pybullet world landed
+        from sim_backend.ideal import IdealWorld
+
+        return IdealWorld(cfg)
+    return factory(cfg, gui=gui)
+
+
+def make_sensors(cfg: FleetConfig):
+    """One pose sensor per robot and one for the object, seeded from ``sim.seed``."""
+    try:
+        from sim_backend.sensors import sensors_from_config
+    except ImportError:  # pragma: no cover
+        return (
+            {r.id: PerfectSensor(cfg.sim.pose_rate_hz) for r in cfg.robots},
+            PerfectSensor(cfg.sim.object_pose_rate_hz),
+        )
+    return sensors_from_config(cfg)
+
+
+def make_estimator(cfg: FleetConfig):
+    try:
+        from controller.estimation import FleetEstimator
+    except ImportError:  # pragma: no cover
+        from controller.raw_estimator import RawEstimator
+
+        return RawEstimator(list(cfg.robot_ids), cfg.fleet.stale_after)
+    return FleetEstimator(
+        [(r.id, r.kind) for r in cfg.robots], cfg.estimation, cfg.fleet.stale_after
+    )
+
+
+@dataclass
+class Verdict:
+    """What the dry run measured against the hardware contract (Robotarium-style)."""
+
+    min_clearance_m: float = math.inf
+    max_object_penetration_m: float = 0.0
+    obstacle_contacts: set[str] = field(default_factory=set)
+    missed_ticks: int = 0
+    watchdog_stops: int = 0
+    clamped_commands: int = 0
+    vy_dropped: int = 0
+
+    def update(self, check) -> None:
+        self.min_clearance_m = min(self.min_clearance_m, check.min_clearance)
+        self.max_object_penetration_m = max(self.max_object_penetration_m, check.object_penetration)
+        self.obstacle_contacts.update(check.obstacle_contacts)
+
+
+class ControllerLockstep:
+    """The controller side of the lockstep: answers each SimTick with one node tick."""
+
+    def __init__(self, node: ControllerNode, bus: Bus, wait_inputs: float) -> None:
+        self.node = node
+        self.ticks = bus.subscribe_topic("sim_clock")
+        self.wait_inputs = wait_inputs
+        self.stop = threading.Event()
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, name="controller", daemon=True)
+        self.lag_waits = 0
+
+    def _run(self) -> None:
+        try:
+            while not self.stop.is_set():
+                item = self.ticks.get(timeout=0.1)
+                if item is None:
+                    continue
+                tick: wire.SimTick = item.msg
+                # handshake: every measurement published before the tick has been taken in
+                deadline = time.monotonic() + self.wait_inputs
+                while self.node.received + self._pending() < tick.seq:
+                    if time.monotonic() > deadline:
+                        self.lag_waits += 1
+                        break
+                    time.sleep(0.0005)
+                self.node.tick(tick.t, step=tick.step)
+        except BaseException as exc:  # noqa: BLE001 - surfaced by the runner
+            self.error = exc
+            log.exception("controller loop failed")
+
+    def _pending(self) -> int:
+        return self.node.pending_measurements()
+
+
+class DryRun:
+    """The pybullet (or ideal) dry run of a config, end to end over zenoh."""
+
+    def __init__(
+        self,
+        cfg: FleetConfig,
+        mission: Mission,
+        out: Path,
+        gui: bool = False,
+        max_time: float | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.mission = mission
+        self.out = out
+        self.gui = gui
+        self.max_time = cfg.sim.max_time if max_time is None else max_time
+        self.verdict = Verdict()
+
+    def run(self) -> dict[str, Any]:
+        cfg = self.cfg
+        wall0 = time.monotonic()
+        control_dt = 1.0 / cfg.fleet.rate_hz
+        world = make_world(cfg, self.gui)
+        robot_sensors, object_sensor = make_sensors(cfg)
+        hub = SimHub(world, robot_sensors, object_sensor, cfg.sim.timestep)
+        recorder = McapRecorder(self.out, cfg.fleet.name, cfg.log.flush_interval)
+        arrested_at: list[float] = []
+        result: dict[str, Any] = {}
+        try:
+            with (
+                Bus(cfg.zenoh, cfg.fleet.name) as ctl_bus,
+                Bus(
+                    cfg.zenoh,
+                    cfg.fleet.name,
+                    listen=[],
+                    connect=list(cfg.zenoh.listen),
+                    lease_s=cfg.fleet.liveliness_lease,
+                ) as robot_bus,
+            ):
+                ctl_bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
+                node = ControllerNode(cfg, ctl_bus, self.mission, make_estimator(cfg))
+                agents = []
+                for r in cfg.robots:
+                    drv = SimDriver(
+                        hub, r.id, capabilities(r), cfg.sim.pose_noise.xy, cfg.sim.pose_noise.theta
+                    )
+                    drv.connect(timeout=1.0)
+                    agents.append(
+                        Agent(robot_bus, drv, AgentParams(r.id, cfg.fleet.name, cfg.fleet.cmd_ttl))
+                    )
+                arrest_box = robot_bus.subscribe(
+                    wire.key("plan", cfg.fleet.name, what="arrest"), wire.PlanEvent
+                )
+                coord = LockstepCoordinator(
+                    robot_bus, hub, agents, control_dt, cfg.sim.tick_timeout
+                )
+                ctl = ControllerLockstep(node, ctl_bus, wait_inputs=cfg.sim.tick_timeout)
+                self._handshake(node, len(agents))
+                ctl.thread.start()
+                try:
+                    while coord.t <= self.max_time:
+                        coord.tick()
+                        if arrest_box.drain() and not world.arrested:
+                            world.arrest()
+                            arrested_at.append(world.t)
+                        self.verdict.update(world.check())
+                        if ctl.error is not None:
+                            raise RuntimeError("controller loop failed") from ctl.error
+                        out = node.last_output
+                        if out is not None and (out.done or out.failed):
+                            break
+                        if cfg.sim.realtime:
+                            lag = coord.t - (time.monotonic() - wall0)
+                            if lag > 0:
+                                time.sleep(lag)
+                finally:
+                    ctl.stop.set()
+                    ctl.thread.join(timeout=10)
+                for a in agents:
+                    self.verdict.watchdog_stops += a.counters.watchdog_stops
+                    self.verdict.clamped_commands += a.counters.clamped
+                    self.verdict.vy_dropped += a.counters.vy_dropped
+                    a.close()
+                self.verdict.missed_ticks = coord.counters.missed
+                out = node.last_output
+                result = {
+                    "phase": node.phase,
+                    "done": bool(out.done) if out else False,
+                    "failed": bool(out.failed) if out else False,
+                    "arrested": world.arrested,
+                    "arrest_time_s": arrested_at[0] if arrested_at else None,
+                    "sim_time_s": round(coord.t, 4),
+                    "ticks": coord.counters.ticks,
+                    "node": dict(vars(node.counters)),
+                    "bad_payloads": ctl_bus.stats.total + robot_bus.stats.total,
+                    "final_object_pose": [float(v) for v in world.object_pose()],
+                    "mission": getattr(self.mission, "summary", dict)(),
+                }
+        finally:
+            world.close()
+            recorder.close()
+        v = self.verdict
+        result.update(
+            {
+                "min_clearance_m": None if math.isinf(v.min_clearance_m) else v.min_clearance_m,
+                "max_object_penetration_m": v.max_object_penetration_m,
+                "obstacle_contacts": sorted(v.obstacle_contacts),
+                "missed_ticks": v.missed_ticks,
+                "watchdog_stops": v.watchdog_stops,
+                "clamped_commands": v.clamped_commands,
+                "vy_dropped": v.vy_dropped,
+                "wall_time_s": round(time.monotonic() - wall0, 3),
+                "log": str(self.out),
+                "messages_logged": recorder.written,
+            }
+        )
+        return result
+
+    def _handshake(self, node: ControllerNode, n_robots: int, timeout: float = 20.0) -> None:
+        """Wait until the controller sees every robot's liveliness token."""
+        deadline = time.monotonic() + timeout
+        while int(np.count_nonzero(node.present)) < n_robots:
+            if time.monotonic() > deadline:
+                raise RuntimeError(
+                    f"only {int(np.count_nonzero(node.present))} of {n_robots} robots came up"
+                )
+            time.sleep(0.01)

@@ -1,0 +1,148 @@
+"""The lockstep sim clock: the robot side of the dry run.
+
+The sim is the clock. Each control tick k at sim time t_k:
+
+1. every agent forwards its robot's pose measurements (stamped with their own sim times) and the
+   object's measurements and ground truth go out on their keys;
+2. the coordinator publishes ``SimTick(step=k, t=t_k, seq=<measurements published so far>)``;
+3. it waits (at most ``tick_timeout`` s of wall time) for the controller's ``TickDone(step=k)``,
+   which the controller sends after publishing every command for tick k;
+4. every agent applies the commands it received (watchdog and e-stop at sim time t_k);
+5. the world steps to t_{k+1}.
+
+Every command and pose crosses the bus exactly as in the lab: only the adapter behind the agents
+and the source of time differ. Same seed, same truth trajectory.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+from controller import wire
+from drivers.agent import Agent
+from sim_backend.hub import SimHub
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class LockstepCounters:
+    ticks: int = 0
+    missed: int = 0  # ticks the controller did not answer in time
+    measurements: int = 0
+
+
+class LockstepCoordinator:
+    """Drives a SimHub and its agents tick by tick, in lockstep with the controller."""
+
+    def __init__(
+        self,
+        bus,
+        hub: SimHub,
+        agents: list[Agent],
+        control_dt: float,
+        tick_timeout: float,
+    ) -> None:
+        self.bus = bus
+        self.hub = hub
+        self.agents = agents
+        self.dt = control_dt
+        self.tick_timeout = tick_timeout
+        self.counters = LockstepCounters()
+        self.step_index = 0
+        self._clock = bus.publisher("sim_clock")
+        self._done = bus.subscribe_topic("sim_done")
+        self._object_pub = bus.publisher("object_pose")
+        self._truth_obj = bus.publisher("truth_object")
+        self._truth_robot = {
+            a.params.robot_id: bus.publisher("truth_robot", id=a.params.robot_id) for a in agents
+        }
+        self._seq = 0
+        self._answered = -1
+
+    @property
+    def t(self) -> float:
+        return self.step_index * self.dt
+
+    def publish_measurements(self) -> int:
+        n = 0
+        for agent in self.agents:
+            n += agent.publish_poses()
+        for t, x, y, th in self.hub.take_object():
+            self._seq += 1
+            self._object_pub.put(
+                wire.PoseMeasurement(t=t, seq=self._seq, x=x, y=y, theta=th, source="sim")
+            )
+            n += 1
+        self.counters.measurements += n
+        return n
+
+    def publish_truth(self, now: float) -> None:
+        w = self.hub.world
+        for rid, pub in self._truth_robot.items():
+            x, y, th = (float(v) for v in w.robot_pose(rid))
+            pub.put(
+                wire.PoseMeasurement(
+                    t=now,
+                    seq=self.step_index,
+                    x=x,
+                    y=y,
+                    theta=th,
+                    sigma_xy=0.0,
+                    sigma_theta=0.0,
+                    source="truth",
+                )
+            )
+        x, y, th = (float(v) for v in w.object_pose())
+        self._truth_obj.put(
+            wire.PoseMeasurement(
+                t=now,
+                seq=self.step_index,
+                x=x,
+                y=y,
+                theta=th,
+                sigma_xy=0.0,
+                sigma_theta=0.0,
+                source="truth",
+            )
+        )
+
+    def wait_done(self, step: int) -> bool:
+        """Wait for the controller's TickDone for ``step`` (wall-clock timeout)."""
+        if self._answered >= step:
+            return True
+        remaining = self.tick_timeout
+        import time as _time  # the only wall-clock use: the handshake timeout
+
+        deadline = _time.monotonic() + remaining
+        while True:
+            left = deadline - _time.monotonic()
+            if left <= 0:
+                return False
+            item = self._done.get(timeout=left)
+            if item is None:
+                return False
+            self._answered = max(self._answered, item.msg.step)
+            if self._answered >= step:
+                return True
+
+    def tick(self) -> bool:
+        """One lockstep tick; returns whether the controller answered in time."""
+        now = self.t
+        self.publish_measurements()
+        self.publish_truth(now)
+        self._clock.put(
+            wire.SimTick(t=now, seq=self.counters.measurements, step=self.step_index, dt=self.dt)
+        )
+        ok = self.wait_done(self.step_index)
+        if not ok:
+            self.counters.missed += 1
+            log.warning("controller missed tick %d (t=%.2f s)", self.step_index, now)
+        for agent in self.agents:
+            agent.handle_inputs(now)
+            agent.enforce(now)
+        self.step_index += 1
+        self.counters.ticks += 1
+        self.hub.advance_to(self.t)
+        return ok
