@@ -204,7 +204,9 @@ class ControllerNode:
             )
         self._publish_states(now, view)
         if step is not None:
-            self._done_pub.put(wire.TickDone(t=now, seq=step, step=step))
+            self._done_pub.put(
+                wire.TickDone(t=now, seq=step, step=step, commands=self.counters.commands)
+            )
         self.last_output = out
         return out
 

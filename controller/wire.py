@@ -153,9 +153,11 @@ class SimTick(Message):
 
 @dataclass(frozen=True, kw_only=True)
 class TickDone(Message):
-    """Lockstep answer: the controller has published every command for tick ``step``."""
+    """Lockstep answer: the controller has published every command for tick ``step``;
+    ``commands`` is how many commands it has published in all so far."""
 
     step: int = field(default=0, metadata={"min": 0})
+    commands: int = field(default=0, metadata={"min": 0})
 
     TYPE: ClassVar[str] = "fleet.TickDone"
 

@@ -126,6 +126,11 @@ class Agent:
     def counters(self) -> AgentCounters:
         return self.core.counters
 
+    def commands_seen(self) -> int:
+        """Commands received so far, taken in or still queued (the lockstep handshake)."""
+        c = self.core.counters
+        return c.commands + c.estop_rejected + self._cmds.qsize()
+
     def _event(self, now: float, kind: str, **data) -> None:
         self._seq += 1
         self._event_pub.put(wire.PlanEvent(t=now, seq=self._seq, kind=kind, data=data))

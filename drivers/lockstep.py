@@ -17,6 +17,7 @@ and the source of time differ. Same seed, same truth trajectory.
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass
 
 from controller import wire
@@ -60,6 +61,7 @@ class LockstepCoordinator:
         }
         self._seq = 0
         self._answered = -1
+        self._commands_due = 0
 
     @property
     def t(self) -> float:
@@ -112,20 +114,27 @@ class LockstepCoordinator:
         """Wait for the controller's TickDone for ``step`` (wall-clock timeout)."""
         if self._answered >= step:
             return True
-        remaining = self.tick_timeout
-        import time as _time  # the only wall-clock use: the handshake timeout
-
-        deadline = _time.monotonic() + remaining
+        # the only wall-clock use: the handshake timeout
+        deadline = time.monotonic() + self.tick_timeout
         while True:
-            left = deadline - _time.monotonic()
+            left = deadline - time.monotonic()
             if left <= 0:
                 return False
             item = self._done.get(timeout=left)
             if item is None:
                 return False
             self._answered = max(self._answered, item.msg.step)
+            self._commands_due = max(self._commands_due, item.msg.commands)
             if self._answered >= step:
-                return True
+                return self._wait_commands(deadline)
+
+    def _wait_commands(self, deadline: float) -> bool:
+        """Wait until the agents hold every command the controller says it published."""
+        while sum(a.commands_seen() for a in self.agents) < self._commands_due:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.0002)
+        return True
 
     def tick(self) -> bool:
         """One lockstep tick; returns whether the controller answered in time."""

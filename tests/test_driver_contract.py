@@ -1,0 +1,149 @@
+"""One contract suite for every driver adapter (drivers.base.RobotDriver).
+
+Each adapter joins through a factory in ``ADAPTERS`` that returns a ``Rig``: a connected driver
+for an omni or a differential robot, an ``advance(seconds)`` that moves time on the robot's side,
+and a ``close``. Everything here is what the agent relies on.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from controller.wire import Twist2D
+from drivers.base import Capabilities, ConnectTimeout, LinkHealth, RobotDriver
+from drivers.sim import SimDriver
+from sim_backend.hub import PerfectSensor, SimHub
+from tests.conftest import make_config
+
+
+@dataclass
+class Rig:
+    driver: RobotDriver
+    advance: Callable[[float], None]
+    close: Callable[[], None]
+    unreachable: Callable[[], RobotDriver]  # a driver whose robot does not answer
+
+
+def _sim_rig(backend: str, kind: str) -> Rig:
+    cfg = make_config(
+        {
+            "object": {"motion": {"kind": "static"}, "start": [8.0, 8.0, 0.0]},
+            "sim": {"backend": backend},
+        }
+    )
+    from controller.runtime import make_world
+
+    world = make_world(cfg)
+    hub = SimHub(
+        world, {r.id: PerfectSensor(50) for r in cfg.robots}, PerfectSensor(50), cfg.sim.timestep
+    )
+    rid = "r1" if kind == "omni" else "r3"
+    r = cfg.robot(rid)
+    caps = Capabilities(r.kind, r.kind == "omni", r.max_speed, r.max_yaw_rate, r.radius)
+    drv = SimDriver(hub, rid, caps)
+    drv.connect(timeout=1.0)
+
+    def advance(dt: float) -> None:
+        hub.advance_to(hub.t + dt)
+
+    return Rig(drv, advance, world.close, lambda: SimDriver(hub, "nobody", caps))
+
+
+ADAPTERS: dict[str, Callable[[str], Rig]] = {
+    "ideal": lambda kind: _sim_rig("ideal", kind),
+    "pybullet": lambda kind: _sim_rig("pybullet", kind),
+}
+
+
+@pytest.fixture(
+    params=[(a, k) for a in ADAPTERS for k in ("omni", "diff")], ids=lambda p: f"{p[0]}-{p[1]}"
+)
+def rig(request):
+    adapter, kind = request.param
+    r = ADAPTERS[adapter](kind)
+    yield r
+    r.close()
+
+
+def latest(driver: RobotDriver, rig: Rig, dt: float = 0.1):
+    rig.advance(dt)
+    ms = driver.poll()
+    assert ms, "no pose measurement arrived"
+    return ms
+
+
+def test_satisfies_protocol(rig):
+    assert isinstance(rig.driver, RobotDriver)
+    caps = rig.driver.capabilities
+    assert isinstance(caps, Capabilities)
+    assert caps.max_speed > 0 and caps.max_yaw_rate > 0 and caps.radius > 0
+    assert caps.holonomic == (caps.kind == "omni")
+
+
+def test_connect_to_missing_robot_times_out(rig):
+    with pytest.raises(ConnectTimeout):
+        rig.unreachable().connect(timeout=0.5)
+
+
+def test_poll_never_blocks_and_stamps_increase(rig):
+    d = rig.driver
+    ms = latest(d, rig, 0.2)
+    ts = [m.t for m in ms]
+    assert ts == sorted(ts)
+    assert d.poll() == [] or all(m.t >= ts[-1] for m in d.poll())
+
+
+def test_forward_command_moves_along_heading(rig):
+    d = rig.driver
+    p0 = latest(d, rig)[-1]
+    d.send(Twist2D(t=0.0, vx=0.2))
+    p1 = latest(d, rig, 1.0)[-1]
+    dx, dy = p1.x - p0.x, p1.y - p0.y
+    heading = np.array([math.cos(p0.theta), math.sin(p0.theta)])
+    along = dx * heading[0] + dy * heading[1]
+    assert 0.12 < along < 0.25, f"moved {along:.3f} m along the heading in 1 s at 0.2 m/s"
+    assert abs(-dx * heading[1] + dy * heading[0]) < 0.03
+
+
+def test_turn_command_rotates_ccw(rig):
+    d = rig.driver
+    p0 = latest(d, rig)[-1]
+    d.send(Twist2D(t=0.0, wz=0.5))
+    p1 = latest(d, rig, 1.0)[-1]
+    dth = math.remainder(p1.theta - p0.theta, 2 * math.pi)
+    assert 0.3 < dth < 0.6
+
+
+def test_lateral_command_only_moves_holonomic_robots(rig):
+    d = rig.driver
+    p0 = latest(d, rig)[-1]
+    d.send(Twist2D(t=0.0, vy=0.2))
+    p1 = latest(d, rig, 1.0)[-1]
+    moved = math.hypot(p1.x - p0.x, p1.y - p0.y)
+    if d.capabilities.holonomic:
+        assert moved > 0.12
+    else:
+        assert moved < 0.02
+
+
+def test_stop_halts_motion(rig):
+    d = rig.driver
+    d.send(Twist2D(t=0.0, vx=0.2))
+    rig.advance(0.5)
+    d.stop()
+    p0 = latest(d, rig, 0.3)[-1]
+    p1 = latest(d, rig, 1.0)[-1]
+    assert math.hypot(p1.x - p0.x, p1.y - p0.y) < 0.01
+
+
+def test_health_and_idempotent_close(rig):
+    d = rig.driver
+    h = d.health()
+    assert isinstance(h, LinkHealth) and h.ok
+    d.close()
+    d.close()
