@@ -140,6 +140,10 @@ class Publisher:
         self._pub.put(wire.encode(msg))
         self.sent += 1
 
+    def matching(self) -> bool:
+        """Whether some subscriber on the bus matches this key (the declaration has arrived)."""
+        return bool(self._pub.matching_status.matching)
+
 
 class Bus:
     """A zenoh session for one fleet, with the fleet's key registry. Use as a context manager."""
@@ -185,14 +189,20 @@ class Bus:
         return wire.key(topic, self.fleet, **parts)
 
     # -- publishing
-    def publisher(self, topic: str, *, command: bool = False, **parts: str) -> Publisher:
+    def publisher(
+        self, topic: str, *, command: bool = False, lossless: bool = False, **parts: str
+    ) -> Publisher:
         """A publisher on a registered topic. ``command=True``: express delivery, real-time
-        priority and drop on congestion (a late command is worthless); otherwise reliable, block."""
+        priority and drop on congestion (in the lab a late command is worthless), unless
+        ``lossless`` (the lockstep dry run, where every command must arrive): then block.
+        Otherwise reliable with blocking congestion control."""
         k = self.key(topic, **parts)
         if command:
             pub = self.session.declare_publisher(
                 k,
-                congestion_control=zenoh.CongestionControl.DROP,
+                congestion_control=zenoh.CongestionControl.BLOCK
+                if lossless
+                else zenoh.CongestionControl.DROP,
                 priority=zenoh.Priority.REAL_TIME,
                 express=True,
             )

@@ -77,7 +77,14 @@ class NodeCounters:
 class ControllerNode:
     """Subscribes to poses and e-stops, runs the mission per tick, publishes commands."""
 
-    def __init__(self, cfg: FleetConfig, bus, mission: Mission, estimator: Estimator) -> None:
+    def __init__(
+        self,
+        cfg: FleetConfig,
+        bus,
+        mission: Mission,
+        estimator: Estimator,
+        lossless_commands: bool = False,
+    ) -> None:
         self.cfg = cfg
         self.bus = bus
         self.mission = mission
@@ -97,10 +104,13 @@ class ControllerNode:
         self._object = bus.subscribe_topic("object_pose")
         self._estops = bus.subscribe_topic("estop")
         self._robot_events = bus.subscribe_topic("robot_event")
-        self._cmd_pub = {r: bus.publisher("robot_cmd", command=True, id=r) for r in self.ids}
+        lossless = lossless_commands
+        self._cmd_pub = {
+            r: bus.publisher("robot_cmd", command=True, lossless=lossless, id=r) for r in self.ids
+        }
         self._state_pub = {r: bus.publisher("robot_state", id=r) for r in self.ids}
         self._object_pub = bus.publisher("object_state")
-        self._done_pub = bus.publisher("sim_done", command=True)
+        self._done_pub = bus.publisher("sim_done", command=True, lossless=True)
         bus.watch_alive("robot", self._on_alive)
         bus.serve("status", self.status)
         bus.declare_alive("controller", "main")
@@ -148,6 +158,10 @@ class ControllerNode:
             m = item.msg
             self.est.measure_object(m.t, m.x, m.y, m.theta)
             self.counters.object_poses += 1
+
+    def publishers_for_handshake(self) -> list:
+        """Publishers whose subscribers must be matched before the first tick."""
+        return [*self._cmd_pub.values(), self._done_pub]
 
     def pending_measurements(self) -> int:
         """Pose measurements received but not yet taken in."""

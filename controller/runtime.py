@@ -105,6 +105,7 @@ class ControllerLockstep:
         self.error: BaseException | None = None
         self.thread = threading.Thread(target=self._run, name="controller", daemon=True)
         self.lag_waits = 0
+        self._deficit = 0  # measurements announced but never received (lost before matching)
 
     def _run(self) -> None:
         try:
@@ -115,9 +116,14 @@ class ControllerLockstep:
                 tick: wire.SimTick = item.msg
                 # handshake: every measurement published before the tick has been taken in
                 deadline = time.monotonic() + self.wait_inputs
-                while self.node.received + self._pending() < tick.seq:
+                while self.node.received + self._pending() + self._deficit < tick.seq:
                     if time.monotonic() > deadline:
                         self.lag_waits += 1
+                        have = self.node.received + self._pending() + self._deficit
+                        self._deficit += tick.seq - have
+                        log.warning(
+                            "tick %d: %d measurements never arrived", tick.step, tick.seq - have
+                        )
                         break
                     time.sleep(0.0005)
                 self.node.tick(tick.t, step=tick.step)
@@ -169,7 +175,9 @@ class DryRun:
                 ) as robot_bus,
             ):
                 ctl_bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
-                node = ControllerNode(cfg, ctl_bus, self.mission, make_estimator(cfg))
+                node = ControllerNode(
+                    cfg, ctl_bus, self.mission, make_estimator(cfg), lossless_commands=True
+                )
                 agents = []
                 for r in cfg.robots:
                     drv = SimDriver(
@@ -186,7 +194,7 @@ class DryRun:
                     robot_bus, hub, agents, control_dt, cfg.sim.tick_timeout
                 )
                 ctl = ControllerLockstep(node, ctl_bus, wait_inputs=cfg.sim.tick_timeout)
-                self._handshake(node, len(agents))
+                self._handshake(node, agents, coord)
                 ctl.thread.start()
                 try:
                     while coord.t <= self.max_time:
@@ -247,12 +255,19 @@ class DryRun:
         )
         return result
 
-    def _handshake(self, node: ControllerNode, n_robots: int, timeout: float = 20.0) -> None:
-        """Wait until the controller sees every robot's liveliness token."""
+    def _handshake(self, node: ControllerNode, agents, coord, timeout: float = 20.0) -> None:
+        """Wait until both sides see each other: the controller holds every robot's liveliness
+        token, and every publisher on either side has a matching subscriber."""
+        pubs = node.publishers_for_handshake() + coord.publishers_for_handshake()
+        pubs += [a.pose_publisher for a in agents]
         deadline = time.monotonic() + timeout
-        while int(np.count_nonzero(node.present)) < n_robots:
+        while True:
+            up = int(np.count_nonzero(node.present))
+            if up == len(agents) and all(p.matching() for p in pubs):
+                return
             if time.monotonic() > deadline:
+                unmatched = [p.key for p in pubs if not p.matching()]
                 raise RuntimeError(
-                    f"only {int(np.count_nonzero(node.present))} of {n_robots} robots came up"
+                    f"{up} of {len(agents)} robots came up; unmatched keys: {unmatched}"
                 )
             time.sleep(0.01)

@@ -123,6 +123,10 @@ class Agent:
         self._stopped_sent = False
 
     @property
+    def pose_publisher(self):
+        return self._pose_pub
+
+    @property
     def counters(self) -> AgentCounters:
         return self.core.counters
 

@@ -63,6 +63,10 @@ class LockstepCoordinator:
         self._answered = -1
         self._commands_due = 0
 
+    def publishers_for_handshake(self) -> list:
+        """Publishers the controller side must have matched before the first tick."""
+        return [self._clock, self._object_pub]
+
     @property
     def t(self) -> float:
         return self.step_index * self.dt
@@ -132,6 +136,9 @@ class LockstepCoordinator:
         """Wait until the agents hold every command the controller says it published."""
         while sum(a.commands_seen() for a in self.agents) < self._commands_due:
             if time.monotonic() > deadline:
+                seen = sum(a.commands_seen() for a in self.agents)
+                log.warning("%d commands never arrived", self._commands_due - seen)
+                self._commands_due = seen  # resynchronise: do not wait for them again
                 return False
             time.sleep(0.0002)
         return True
