@@ -156,7 +156,9 @@ def quat_of(theta: float) -> tuple[float, float, float, float]:
 class PybulletWorld:
     """pybullet physics world with the ``sim_backend.base.World`` interface."""
 
-    control_every = 2  # physics steps between robot re-basing / re-aiming (and pose reads)
+    control_every = 2  # physics steps between robot pose reads, re-basing and re-aiming
+    rebase_distance = 1e-3  # m: a diff robot's F offset (its turning pivot error) is kept below
+    reaim_angle = 5e-3  # rad: an omni robot's targets are re-aimed past this heading change
 
     def __init__(
         self,
@@ -189,6 +191,7 @@ class PybulletWorld:
         self._build_object()
         self._build_robots()
         self._arrested = False
+        self._drive_target: tuple[float, float, float] | None = None
         self._script = ObjectScript(cfg.object.motion, cfg.object.start)
         self._read_state()
 
@@ -253,6 +256,7 @@ class PybulletWorld:
         o = self.cfg.object
         poly = self.cfg.object_polygon()
         self._poly = poly
+        self._obstacles = self.cfg.obstacle_polygons()
         m = o.mass
         h = o.height
         pieces = convex_pieces(poly)
@@ -453,7 +457,7 @@ class PybulletWorld:
                 self._pose[i] = (px, py, math.remainder(th, 2 * math.pi))
                 self._vel[i] = (vx + cs * vf, vy + sn * vf, wz)
                 self._offset[i] = f
-                if rebase and f != 0.0:
+                if rebase and abs(f) > self.rebase_distance:
                     pb.resetJointStatesMultiDof(
                         body, [0, 1, 3], [[px], [py], [0.0]], [[vx], [vy], [vf]], physicsClientId=c
                     )
@@ -464,7 +468,7 @@ class PybulletWorld:
                 th = js[2][0]
                 self._pose[i] = (js[0][0], js[1][0], math.remainder(th, 2 * math.pi))
                 self._vel[i] = (js[0][1], js[1][1], js[2][1])
-                if rebase and abs(th - self._aimed[i]) > 1e-6:
+                if rebase and abs(th - self._aimed[i]) > self.reaim_angle:
                     self._apply_command(i)
 
     def _read_object(self) -> None:
@@ -474,43 +478,40 @@ class PybulletWorld:
         th = yaw_of(quat)
         cs, sn = math.cos(th), math.sin(th)
         bx, by = self._base_com
+        # The base's centre of mass sits on the composite one (the light links are compensated).
         ox = pos[0] - (cs * bx - sn * by)
         oy = pos[1] - (sn * bx + cs * by)
-        # The base's centre of mass sits on the composite one (the light links are compensated).
-        self._com = np.array([pos[0], pos[1], pos[2]])
-        self._obj_pose = np.array([ox, oy, th])
-        rx, ry = ox - pos[0], oy - pos[1]
         w = ang[2]
-        self._obj_vel = np.array([lin[0] - w * ry, lin[1] + w * rx, w])
-        self._obj_com_vel = np.array([lin[0], lin[1], w])
+        self._com = pos
+        self._obj_state = (ox, oy, th, lin[0] - w * (oy - pos[1]), lin[1] + w * (ox - pos[0]), w)
+        self._obj_com_vel = (lin[0], lin[1], w)
 
     def _read_state(self) -> None:
         self._read_robots(rebase=True)
         self._read_object()
 
+    def _update_drive_target(self) -> None:
+        """Centre-of-mass velocity target (m/s, m/s, rad/s) of the live object from its script."""
+        ox, oy, th = self._obj_state[:3]
+        v = self._script.target_velocity(self.t, np.array([ox, oy, th]), self._pose[:, :2])
+        rx, ry = self._com[0] - ox, self._com[1] - oy
+        self._drive_target = (float(v[0] - v[2] * ry), float(v[1] + v[2] * rx), float(v[2]))
+
     def _drive_object(self) -> None:
         """Apply the live object's bounded tracking force and torque for this step."""
-        v = self._script.target_velocity(self.t, self._obj_pose, self._pose[:, :2])
-        # Target velocity of the centre of mass from the frame-origin target.
-        rx = self._com[0] - self._obj_pose[0]
-        ry = self._com[1] - self._obj_pose[1]
-        target = np.array([v[0] - v[2] * ry, v[1] + v[2] * rx])
-        m = self.cfg.object.mass
+        tx, ty, tw = self._drive_target
+        vx, vy, w = self._obj_com_vel
+        k = self.cfg.object.mass * self._gain
+        fx, fy = k * (tx - vx), k * (ty - vy)
         fmax = self.cfg.object.motion.max_force
-        force = m * self._gain * (target - self._obj_com_vel[:2])
-        norm = float(np.hypot(*force))
+        norm = math.hypot(fx, fy)
         if norm > fmax:
-            force *= fmax / norm
+            fx, fy = fx * fmax / norm, fy * fmax / norm
         tmax = fmax * self._radius_gyration
-        torque = float(np.clip(self._izz * self._gain * (v[2] - self._obj_com_vel[2]), -tmax, tmax))
+        torque = min(tmax, max(-tmax, self._izz * self._gain * (tw - w)))
         c = self._cid
         pb.applyExternalForce(
-            self._obj,
-            -1,
-            [float(force[0]), float(force[1]), 0.0],
-            self._com.tolist(),
-            pb.WORLD_FRAME,
-            physicsClientId=c,
+            self._obj, -1, [fx, fy, 0.0], self._com, pb.WORLD_FRAME, physicsClientId=c
         )
         pb.applyExternalTorque(self._obj, -1, [0.0, 0.0, torque], pb.WORLD_FRAME, physicsClientId=c)
 
@@ -544,6 +545,8 @@ class PybulletWorld:
         n = max(1, int(round(duration / self.dt)))
         for _ in range(n):
             if not self._arrested:
+                if self._steps % self.control_every == 0 or self._drive_target is None:
+                    self._update_drive_target()
                 self._drive_object()
             pb.stepSimulation(physicsClientId=self._cid)
             self._steps += 1
@@ -563,11 +566,11 @@ class PybulletWorld:
 
     def object_pose(self) -> np.ndarray:
         """True (x, y, theta) of the object's polygon frame (m, m, rad)."""
-        return self._obj_pose.copy()
+        return np.array(self._obj_state[:3])
 
     def object_velocity(self) -> np.ndarray:
         """True world-frame (vx, vy, wz) of the object frame's origin (m/s, m/s, rad/s)."""
-        return self._obj_vel.copy()
+        return np.array(self._obj_state[3:])
 
     def arrest(self) -> None:
         """Switch the object's drive off and its floor friction on."""
@@ -582,8 +585,8 @@ class PybulletWorld:
             self._pose[:, :2],
             self._radius,
             self._poly,
-            self._obj_pose,
-            self.cfg.obstacle_polygons(),
+            self.object_pose(),
+            self._obstacles,
             self.cfg.bounds_array(),
         )
 
@@ -592,7 +595,7 @@ class PybulletWorld:
 
         For tests and disturbances; ``at`` defaults to the centre of mass. Cleared by each step.
         """
-        p = self._com.tolist() if at is None else [at[0], at[1], float(self._com[2])]
+        p = list(self._com) if at is None else [at[0], at[1], self._com[2]]
         pb.applyExternalForce(
             self._obj, -1, [force[0], force[1], 0.0], p, pb.WORLD_FRAME, physicsClientId=self._cid
         )

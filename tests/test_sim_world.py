@@ -32,6 +32,7 @@ def config(
     mu: float = 0.2,
     backend: str = "pybullet",
     sim: dict | None = None,
+    obstacles: list[list[list[float]]] = (),
 ) -> FleetConfig:
     robots = robots or [{"id": "r0", "kind": "omni", "start": [0.5, 0.5, 0.0]}]
     return parse_config(
@@ -47,6 +48,7 @@ def config(
             },
             "robots": robots,
             "sim": {"backend": backend, **(sim or {})},
+            "obstacles": [{"polygon": o} for o in obstacles],
         }
     )
 
@@ -356,6 +358,18 @@ def test_robot_push_force_is_bounded(worlds):
         w.apply_robot_force("r", (-8.0, 0.0))
         w.step(w.dt)
     assert w.robot_pose("r")[0] < 12.6
+
+
+def test_concave_obstacle_blocks_with_its_real_shape(worlds):
+    """An L-shaped obstacle: a robot drives into its notch and stops at the inner face."""
+    obstacle = (np.array(L_SHAPE) * 2.0 + [2.0, 2.0]).tolist()  # notch x, y in 2.8 .. 4
+    cfg = config([robot("r", "omni", 3.5, 4.5, 0.0)], obstacles=[obstacle], start=(8.0, 8.0, 0.0))
+    w = worlds(cfg)
+    w.set_command("r", 0.0, -0.3, 0.0)
+    w.step(6.0)
+    x, y, _ = w.robot_pose("r")
+    assert x == pytest.approx(3.5, abs=1e-3)
+    assert y == pytest.approx(2.9, abs=3e-3)  # inner face y = 2.8, radius 0.1
 
 
 # --------------------------------------------------------------------------- sensors
