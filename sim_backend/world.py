@@ -9,17 +9,18 @@ Modelling choices (each measured on this machine, see tests/test_sim_world.py):
   ``max_force``. A differential robot: X and Y held at zero velocity by tyre-like locks bounded
   by ``tyre_grip`` · m · g, revolute Z, then a prismatic F along its heading driven at v and
   bounded by ``max_force``: it never moves sideways unless pushed harder than its tyres hold.
-  Its F offset is folded back into X/Y every ``control_every`` physics steps ("re-basing", at
-  most a few mm) so that it turns about its own centre. The heading motor's torque is bounded
-  by ``max_force`` · radius. The chain links weigh a tenth of the robot each: much lighter links
-  make the solver stall the motors well below their force bound.
+  Its F offset is folded back into X/Y ("re-basing") whenever it exceeds ``rebase_distance``
+  (1 mm, checked every ``control_every`` physics steps) so that it turns about its own centre.
+  The heading motor's torque is bounded by ``max_force`` · radius. The chain links weigh a
+  tenth of the robot each: much lighter links make the solver stall the motors well below their
+  force bound.
 - **The object** is one multibody: its polygon is split into convex pieces (constrained Delaunay
   triangles merged by Hertel–Mehlhorn) and each piece is a convex prism link, so an L or U keeps
   its notch. The whole mass and the planar inertia of the real shape sit on the base, with the
   centre of mass at the polygon's area centroid (the piece links carry a negligible mass, because
   pybullet's ``changeDynamics(localInertiaDiagonal=...)`` on a link writes the base's inertia).
 - **Floor friction** goes through three small skid spheres under the object, centred on the
-  centroid at the polygon's mean radius from it, while the prisms ride 2 mm above the floor. Three
+  centroid at the polygon's mean radius from it, while the prisms ride 12 mm above the floor. Three
   points make the normal load statically determinate (m·g/3 each), so the force to slide the
   object is μ_floor·m·g (measured within 1 %) and the torque to spin it μ_floor·m·g·r̄ (uniform
   pressure), instead of the 0.75–1.0 spread a prism resting on its own faces shows in pybullet.
@@ -60,7 +61,6 @@ WALL_HEIGHT = 0.3
 STATIC_FRICTION = 0.3  # walls and obstacles
 
 _LIGHT = 1e-3  # mass fraction of each of the object's piece and skid links
-_LOCK_FORCE = 1e5  # N, the X/Y locks of the robot chain
 _CHAIN = 0.1  # mass fraction of each robot chain link (solver conditioning)
 
 

@@ -30,6 +30,7 @@ def config(
     motion: dict | None = None,
     mass: float = 4.0,
     mu: float = 0.2,
+    contact_friction: float = 0.0,
     backend: str = "pybullet",
     sim: dict | None = None,
     obstacles: list[list[list[float]]] = (),
@@ -42,6 +43,7 @@ def config(
                 "polygon": polygon,
                 "mass": mass,
                 "floor_friction": mu,
+                "contact_friction": contact_friction,
                 "start": list(start),
                 "goal": [8.0, 8.0, 0.0],
                 "motion": motion or {"kind": "static"},
@@ -358,6 +360,27 @@ def test_robot_push_force_is_bounded(worlds):
         w.apply_robot_force("r", (-8.0, 0.0))
         w.step(w.dt)
     assert w.robot_pose("r")[0] < 12.6
+
+
+@pytest.mark.parametrize(("contact_friction", "drags"), [(0.0, False), (1.0, True)])
+def test_contact_friction_setting(worlds, contact_friction, drags):
+    """A robot pressing on the object's face while sliding along it drags the object along only
+    when robot-object contacts have friction (0 = Sharma et al.'s frictionless contacts)."""
+    tall_box = [[0.0, 0.0], [0.4, 0.0], [0.4, 0.9], [0.0, 0.9]]
+    cfg = config(
+        [robot("r", "omni", 4.895, 4.9, 0.0, max_force=20.0)],
+        polygon=tall_box,
+        start=(5.0, 4.8, 0.0),
+        contact_friction=contact_friction,
+    )
+    w = worlds(cfg)
+    w.arrest()
+    w.set_command("r", 0.02, 0.2, 0.0)  # press +x into the face, slide +y along it
+    w.step(2.0)
+    centre = geometry.transform([[0.2, 0.45]], w.object_pose())[0]
+    dy = centre[1] - 5.25  # along the face
+    # Frictionless, the push stays normal to the face (which turns a little as the box yaws).
+    assert (dy > 0.02) if drags else (abs(dy) < 0.005)
 
 
 def test_concave_obstacle_blocks_with_its_real_shape(worlds):
