@@ -8,6 +8,8 @@ import math
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from controller import geometry
 from controller.config import FleetConfig, parse_config
@@ -95,6 +97,22 @@ def test_convex_pieces_tile_the_polygon(poly):
         assert geometry.signed_area(p) > 0
         hull = geometry.convex_hull(p)
         assert abs(geometry.signed_area(hull) - geometry.signed_area(p)) < 1e-12
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.floats(0.3, 1.0), min_size=4, max_size=12), st.floats(0.0, 1.0))
+def test_convex_pieces_tile_star_polygons(radii, jitter):
+    """Property: star-shaped polygons (simple, often concave) are tiled by convex pieces."""
+    n = len(radii)
+    ang = (np.arange(n) + 0.4 * jitter) * 2 * np.pi / n
+    poly = np.stack([np.cos(ang), np.sin(ang)], axis=1) * np.array(radii)[:, None]
+    pieces = convex_pieces(poly)
+    union = shapely.union_all([shapely.Polygon(p) for p in pieces])
+    assert union.symmetric_difference(shapely.Polygon(poly)).area < 1e-9
+    for p in pieces:
+        hull = geometry.convex_hull(p)
+        assert abs(geometry.signed_area(hull) - geometry.signed_area(p)) < 1e-9
+    assert len(pieces) <= n - 2
 
 
 def test_robot_sits_in_the_notch_of_an_l(worlds):
