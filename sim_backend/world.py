@@ -224,7 +224,9 @@ class PybulletWorld:
                 )
         for ob in self.cfg.obstacles:
             for piece in convex_pieces(np.asarray(ob.polygon)):
-                shape, vis = self._prism(piece, 0.0, ob.height, (0.4, 0.4, 0.45, 1))
+                # Planar world: anything lower than a robot would still block it.
+                height = max(ob.height, ROBOT_LIFT + ROBOT_HEIGHT)
+                shape, vis = self._prism(piece, 0.0, height, (0.4, 0.4, 0.45, 1))
                 self._static.append(pb.createMultiBody(0, shape, vis, physicsClientId=c))
         for body in self._static:
             pb.changeDynamics(body, -1, lateralFriction=STATIC_FRICTION, physicsClientId=c)
@@ -258,7 +260,7 @@ class PybulletWorld:
         self._poly = poly
         self._obstacles = self.cfg.obstacle_polygons()
         m = o.mass
-        h = o.height
+        h = max(o.height, ROBOT_HEIGHT)  # planar world: robots must not pass over a flat object
         pieces = convex_pieces(poly)
         self._pieces = pieces
         centroid = geometry.centroid(poly)
