@@ -31,6 +31,7 @@ false, ``send`` raises ``LinkLost`` and no setpoint goes out.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import os
@@ -105,17 +106,31 @@ class MavLink:
         self._lock = threading.Lock()
         self._inbox: dict[int, deque[Any]] = {}
         self._addr: dict[int, tuple[str, int]] = {}
+        self._ticks: dict[int, Callable[[bool], None]] = {}
         self.unknown_sources = 0  # messages from systems nobody registered (dropped)
         self.refs = 0
 
-    def register(self, system_id: int) -> None:
+    def register(self, system_id: int, tick: Callable[[bool], None]) -> None:
+        """File messages from ``system_id``; ``tick(blocking)`` is called on every ``service``."""
         with self._lock:
             self._inbox.setdefault(system_id, deque(maxlen=8192))
+            self._ticks[system_id] = tick
 
     def unregister(self, system_id: int) -> None:
         with self._lock:
             self._inbox.pop(system_id, None)
             self._addr.pop(system_id, None)
+            self._ticks.pop(system_id, None)
+
+    def service(self, caller: int) -> None:
+        """Pump, then let every registered driver handle its messages and send its keepalives
+        (so robots sharing the link keep their heartbeats while one of them is busy, e.g. in a
+        handshake). Other drivers are ticked only if their lock is free (no lock-order cycle)."""
+        self.pump()
+        with self._lock:
+            ticks = list(self._ticks.items())
+        for sysid, tick in ticks:
+            tick(sysid == caller)
 
     def knows_address(self, system_id: int) -> bool:
         return not self.routed or system_id in self._addr
@@ -244,6 +259,17 @@ class LinkPool:
 DEFAULT_POOL = LinkPool()
 
 
+def _locked(method: Callable[..., Any]) -> Callable[..., Any]:
+    """Run a driver method under the driver's lock."""
+
+    @functools.wraps(method)
+    def wrapper(self: MavlinkDriver, *args: Any, **kwargs: Any) -> Any:
+        with self._lock:
+            return method(self, *args, **kwargs)
+
+    return wrapper
+
+
 @dataclass
 class _Setpoint:
     vx: float = 0.0  # FRD m/s
@@ -283,6 +309,7 @@ class MavlinkDriver:
         self._idle = idle
         self._pool = pool or DEFAULT_POOL
         self._link: MavLink | None = None
+        self._lock = threading.RLock()  # public calls vs. ticks from other drivers' threads
         self._connected = False
         self._closed = False
         self._t0 = clock()
@@ -306,6 +333,7 @@ class MavlinkDriver:
 
     # ------------------------------------------------------------------ contract
 
+    @_locked
     def connect(self, timeout: float) -> None:
         """Wait for the vehicle's HEARTBEAT, request telemetry, set the mode and arm.
 
@@ -317,7 +345,7 @@ class MavlinkDriver:
         if self._connected:
             return
         link = self._pool.acquire(self.cfg.url, self.gcs_id)
-        link.register(self.system_id)
+        link.register(self.system_id, self._tick)
         self._link = link
         try:
             self._handshake(timeout)
@@ -327,6 +355,7 @@ class MavlinkDriver:
         self._connected = True
         log.info("%s: connected to system %d on %s", self.robot_id, self.system_id, self.cfg.url)
 
+    @_locked
     def send(self, cmd: Twist2D) -> None:
         """Command a body-frame FLU velocity (m/s, m/s, rad/s) held for ``cmd.ttl`` s."""
         if not (math.isfinite(cmd.vx) and math.isfinite(cmd.vy) and math.isfinite(cmd.wz)):
@@ -343,6 +372,7 @@ class MavlinkDriver:
         self._setpoint = _Setpoint(vx, vy, yaw_rate, now + cmd.ttl)
         self._send_setpoint(now)
 
+    @_locked
     def poll(self) -> list[PoseMeasurement]:
         """World-frame poses built from LOCAL_POSITION_NED + ATTITUDE since the last call."""
         if self._link is None:
@@ -352,6 +382,7 @@ class MavlinkDriver:
         self._poses.clear()
         return out
 
+    @_locked
     def stop(self) -> None:
         """Zero setpoint now (and for the keepalive). Never raises."""
         self._setpoint = _Setpoint()
@@ -364,6 +395,7 @@ class MavlinkDriver:
         except Exception:  # noqa: BLE001 - stop must never raise
             log.exception("%s: stop failed", self.robot_id)
 
+    @_locked
     def health(self) -> LinkHealth:
         """Lost when no HEARTBEAT for ``link_timeout``; not ok either when the vehicle left the
         mode we put it in (e.g. a failsafe HOLD) or disarmed although ``arm`` is set."""
@@ -386,6 +418,7 @@ class MavlinkDriver:
             return LinkHealth(False, "vehicle disarmed", self._last_heard)
         return LinkHealth(True, "", self._last_heard)
 
+    @_locked
     def close(self) -> None:
         """Zero the robot and release the link. Idempotent."""
         if self._closed:
@@ -435,20 +468,31 @@ class MavlinkDriver:
             self._link.wait(seconds)
 
     def _service(self) -> float:
-        """Read and handle inbound messages, send due keepalives; returns the clock (s)."""
+        """Read and handle inbound messages, send due keepalives (for every driver on the
+        link); returns the clock (s)."""
         link = self._link
-        now = self._clock()
-        if link is None:
-            return now
-        link.pump()
-        for m in link.take(self.system_id):
-            self._handle(m, now)
-        if now - self._last_hb_sent >= HEARTBEAT_PERIOD:
-            self._send_heartbeat(now)
-        if self._streaming and now - self._last_sp_sent >= 1.0 / SETPOINT_HZ:
-            if not self._lost(now):
-                self._send_setpoint(now)
-        return now
+        if link is not None:
+            link.service(self.system_id)
+        return self._clock()
+
+    def _tick(self, blocking: bool) -> None:
+        """Handle this robot's inbox and send its due heartbeat and setpoint keepalive."""
+        if not self._lock.acquire(blocking=blocking):
+            return
+        try:
+            link = self._link
+            if link is None:
+                return
+            now = self._clock()
+            for m in link.take(self.system_id):
+                self._handle(m, now)
+            if now - self._last_hb_sent >= HEARTBEAT_PERIOD:
+                self._send_heartbeat(now)
+            if self._streaming and now - self._last_sp_sent >= 1.0 / SETPOINT_HZ:
+                if not self._lost(now):
+                    self._send_setpoint(now)
+        finally:
+            self._lock.release()
 
     def _handle(self, m: Any, now: float) -> None:
         kind = m.get_type()

@@ -603,3 +603,25 @@ def test_conversion_fixed_points():
     assert mc.enu_to_ned_pose(0.0, 0.0, 0.0)[2] == pytest.approx(math.pi / 2)  # east
     assert mc.enu_to_ned_pose(0.0, 0.0, math.pi)[2] == pytest.approx(-math.pi / 2)  # west
     assert mc.flu_to_frd(1.0, 0.5, 0.2) == (1.0, -0.5, -0.2)
+
+
+def test_shared_link_keeps_every_robots_heartbeat(pool):
+    """While only one driver on a port is being called (e.g. the others wait for a slow
+    handshake), the others still send their GCS heartbeats: no GCS failsafe."""
+    port = free_udp_port()
+    cfg = make_config([robot("a", "ardurover", port, 1), robot("b", "ardurover", port, 2)])
+    ls = Lockstep(cfg)
+    ea = ls.emulator(cfg.robots[0], gcs_timeout=2.0)
+    ls.emulator(cfg.robots[1], gcs_timeout=2.0)
+    da = MavlinkDriver(cfg.robots[0], clock=ls.clock, idle=ls.advance, pool=pool)
+    db = MavlinkDriver(cfg.robots[1], clock=ls.clock, idle=ls.advance, pool=pool)
+    da.connect(timeout=2.0)
+    db.connect(timeout=2.0)
+    for _ in range(120):  # 6 s, only b is polled
+        ls.advance(0.05)
+        db.poll()
+    assert ea.mode == mc.ROVER_GUIDED and not ea.failsafe
+    assert da.health().ok, da.health().detail
+    da.close()
+    db.close()
+    ls.close()
