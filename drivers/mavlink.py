@@ -317,6 +317,7 @@ class MavlinkDriver:
         self._mode: int | None = None
         self._armed = False
         self._autopilot: int | None = None
+        self._wall_deadline = math.inf
         self._acks: dict[int, int] = {}
         self._poses: deque[PoseMeasurement] = deque(maxlen=POSE_QUEUE)
         self._seq = 0
@@ -344,6 +345,11 @@ class MavlinkDriver:
             raise DriverError(f"robot {self.robot_id!r}: connect after close")
         if self._connected:
             return
+        self._last_heard = self._mode = self._autopilot = None
+        self._armed = self._streaming = False
+        self._acks.clear()
+        # a frozen injected clock must not hang us: a generous wall-clock bound as well
+        self._wall_deadline = time.monotonic() + 4.0 * timeout + PX4_STREAM_BEFORE_OFFBOARD + 5.0
         link = self._pool.acquire(self.cfg.url, self.gcs_id)
         link.register(self.system_id, self._tick)
         self._link = link
@@ -612,7 +618,7 @@ class MavlinkDriver:
                             f"{self.cfg.url} refused {what}: {name}"
                         )
                     return
-                if now >= deadline:
+                if now >= deadline or time.monotonic() > self._wall_deadline:
                     raise ConnectTimeout(
                         f"robot {self.robot_id!r}: no COMMAND_ACK for {what} from system "
                         f"{self.system_id} on {self.cfg.url} within {timeout} s"
@@ -627,7 +633,7 @@ class MavlinkDriver:
             now = self._service()
             if pred():
                 return True
-            if now >= deadline:
+            if now >= deadline or time.monotonic() > self._wall_deadline:
                 return False
             self._wait(min(0.02, deadline - now))
 

@@ -23,6 +23,19 @@ the world, send due telemetry) at time ``now`` (s) on the caller's clock; a lock
 it after each world step. ``start()`` runs the same in a background thread on ``clock``. The
 world is stepped by its owner; pass ``world_lock`` to share a lock with it in threaded use.
 Only loopback addresses are allowed.
+
+Dry-run recipe (lockstep)::
+
+    emus = start_emulators(world, cfg.robots, clock=sim_clock)   # one per driver = "mavlink"
+    def advance(dt):                       # also the drivers' ``idle`` hook during connect
+        for e in emus: e.pump(t)           # apply commands that arrived
+        world.step(dt); t += dt
+        for e in emus: e.pump(t)           # telemetry due at the new time
+    driver = MavlinkDriver(robot_cfg, clock=sim_clock, idle=advance)
+
+Telemetry goes out when due at a ``pump``, so poses arrive at min(requested rate, pump rate).
+Loopback ``sendto`` puts the datagram in the receiver's buffer before it returns, so a command
+sent before the sim's ``pump`` is always seen by it.
 """
 
 from __future__ import annotations

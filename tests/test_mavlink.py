@@ -28,7 +28,7 @@ from drivers import mavconv as mc
 from drivers.base import ConnectTimeout, LinkLost, RobotDriver
 from drivers.mavlink import LinkPool, MavlinkDriver
 from sim_backend.ideal import IdealWorld
-from sim_backend.mavlink_vehicle import VehicleEmulator, vehicle_url
+from sim_backend.mavlink_vehicle import VehicleEmulator, start_emulators, vehicle_url
 
 os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil  # noqa: E402
@@ -625,3 +625,17 @@ def test_shared_link_keeps_every_robots_heartbeat(pool):
     da.close()
     db.close()
     ls.close()
+
+
+def test_start_emulators_only_for_mavlink_robots():
+    port = free_udp_port()
+    sim_robot = {"id": "s", "kind": "omni", "start": [6.0, 6.0, 0.0]}
+    cfg = make_config([robot("m", "px4", port, 1), sim_robot])
+    ls = Lockstep(cfg)
+    emus = start_emulators(ls.world, cfg.robots, clock=ls.clock)
+    try:
+        assert [e.robot_id for e in emus] == ["m"]
+        assert emus[0].url == f"udpout:127.0.0.1:{port}"
+    finally:
+        for e in emus:
+            e.stop()
