@@ -230,6 +230,8 @@ class RobotConfig:
     profile: str = _rule("", choices=("",) + MAVLINK_PROFILES)
     link_timeout: float = _rule(1.0, gt=0, max=60)
     arm: bool = _rule(True)
+    gcs_system_id: int = _rule(255, min=1, max=255)  # our MAVLink system id (the GCS failsafe's)
+    telemetry_hz: float = _rule(50.0, min=30, max=1000)  # LOCAL_POSITION_NED/ATTITUDE rate asked
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -439,6 +441,20 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
                 raise ConfigError(
                     src, f"{path}.profile", f"a mavlink robot needs one of {MAVLINK_PROFILES}"
                 )
+            if r.gcs_system_id == r.system_id:
+                raise ConfigError(
+                    src,
+                    f"{path}.gcs_system_id",
+                    f"must differ from the robot's system_id {r.system_id}",
+                )
+            for j, other in enumerate(cfg.robots[:i]):
+                if other.driver == "mavlink" and other.url == r.url:
+                    if other.system_id == r.system_id:
+                        raise ConfigError(
+                            src,
+                            f"{path}.system_id",
+                            f"robots[{j}] uses system_id {r.system_id} on the same url {r.url!r}",
+                        )
             if r.profile == "ardurover" and r.kind != "diff":
                 raise ConfigError(
                     src,

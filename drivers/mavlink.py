@@ -1,0 +1,702 @@
+"""MAVLink adapter: one ArduPilot Rover or PX4 rover behind the ``RobotDriver`` contract.
+
+The robot's ``url`` is a pymavlink connection string: ``udpin:HOST:PORT`` (we listen, the vehicle
+or a router sends to us), ``udpout:HOST:PORT`` (we send first), ``tcp:HOST:PORT`` or
+``serial:DEVICE[:BAUD]``. Every driver of one url in a process shares one connection
+(``LinkPool``): inbound messages are routed by source system id to their robot, and on a
+``udpin`` port each robot's messages go only to the address that robot's packets came from
+(pymavlink's own ``udpin`` write would send every packet to every peer it has seen).
+
+Profiles:
+
+- ``ardurover``: GUIDED; SET_POSITION_TARGET_LOCAL_NED in BODY_NED with the velocity + yaw rate
+  mask, which ArduRover reads as signed forward speed + turn rate. vy is always sent as 0:
+  GUIDED never moves sideways, so the robot is differential to the planner.
+- ``px4``: OFFBOARD; body vx, vy and yaw rate (holonomic for an omni/mecanum rover). PX4 only
+  accepts OFFBOARD after a setpoint stream, so ``connect`` streams zero setpoints for
+  ``PX4_STREAM_BEFORE_OFFBOARD`` s first, and the driver keeps streaming while connected.
+
+Time: every timeout and rate runs on the injected ``clock`` (s). Waiting inside ``connect`` goes
+through ``idle(seconds)``; the default blocks on the socket for that long (real time, matching
+the default ``time.monotonic`` clock). A lockstep dry run passes its sim clock and an ``idle``
+that advances the sim. Nothing ever blocks without a timeout; ``poll``, ``send``, ``health`` and
+``stop`` never block.
+
+Keepalive: our HEARTBEAT goes to the robot at 1 Hz and the current setpoint is re-sent at
+``SETPOINT_HZ`` from ``poll``/``send``/``health``, so the agent must call ``poll`` regularly (it
+does, every tick). A command is held for its ``ttl``; after that the re-sent setpoint is zero.
+When no vehicle HEARTBEAT arrived for ``link_timeout``, the link is lost: ``health().ok`` is
+false, ``send`` raises ``LinkLost`` and no setpoint goes out.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+import os
+import select
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+os.environ["MAVLINK20"] = "1"  # before pymavlink picks its dialect: MAVLink 2 messages needed
+
+from pymavlink import mavutil  # noqa: E402
+
+from controller.wire import PoseMeasurement, Twist2D  # noqa: E402
+from drivers import mavconv as mc  # noqa: E402
+from drivers.base import Capabilities, ConnectTimeout, DriverError, LinkHealth, LinkLost  # noqa: E402
+
+if TYPE_CHECKING:
+    from controller.config import RobotConfig
+
+log = logging.getLogger(__name__)
+
+SETPOINT_HZ = 10.0  # Hz, keepalive rate of the current setpoint (PX4 needs > 2 Hz)
+HEARTBEAT_PERIOD = 1.0  # s, our GCS heartbeat
+PX4_STREAM_BEFORE_OFFBOARD = 1.2  # s of setpoints before asking for OFFBOARD (PX4 wants >= 1 s)
+COMMAND_RETRY = 0.5  # s before a COMMAND_LONG without an ACK is sent again
+AUTOPILOT_COMPONENT = 1  # MAV_COMP_ID_AUTOPILOT1
+GCS_COMPONENT = 190  # MAV_COMP_ID_MISSIONPLANNER
+MAX_DATAGRAMS_PER_PUMP = 4096
+POSE_QUEUE = 1024
+PAIR_WINDOW = 0.1  # s: LOCAL_POSITION_NED and ATTITUDE closer than this make one pose
+
+
+def mavutil_v2() -> Any:
+    """pymavlink's mavutil with a MAVLink 2 dialect (re-selected if imported earlier without)."""
+    if getattr(mavutil.mavlink, "WIRE_PROTOCOL_VERSION", "") != "2.0":
+        os.environ["MAVLINK20"] = "1"
+        mavutil.set_dialect("ardupilotmega")
+    return mavutil
+
+
+def _open_connection(url: str, source_system: int) -> Any:
+    """A pymavlink connection for a url (``serial:DEV[:BAUD]`` is split into device + baud)."""
+    mu = mavutil_v2()
+    if url.startswith("serial:"):
+        rest = url[len("serial:") :]
+        dev, _, baud = rest.rpartition(":")
+        if not dev or not baud.isdigit():
+            dev, baud = rest, "57600"
+        return mu.mavlink_connection(
+            dev, baud=int(baud), source_system=source_system, source_component=GCS_COMPONENT
+        )
+    if not url.startswith(("udpin:", "udpout:", "tcp:", "tcpin:", "udp:")):
+        raise DriverError(f"unsupported MAVLink url {url!r} (udpin:, udpout:, tcp:, serial:)")
+    return mu.mavlink_connection(url, source_system=source_system, source_component=GCS_COMPONENT)
+
+
+class MavLink:
+    """One MAVLink connection shared by the drivers of several systems (thread-safe).
+
+    ``pump`` reads everything available without blocking and files each message under its
+    source system id; ``take`` hands a system its messages; ``send_to`` sends a message to one
+    system only (on ``udpin``: to the address that system's packets came from).
+    """
+
+    def __init__(self, url: str, source_system: int):
+        self.url = url
+        self.conn = _open_connection(url, source_system)
+        self.routed = url.startswith(("udpin:", "udp:"))
+        self._lock = threading.Lock()
+        self._inbox: dict[int, deque[Any]] = {}
+        self._addr: dict[int, tuple[str, int]] = {}
+        self._ticks: dict[int, Callable[[bool], None]] = {}
+        self.unknown_sources = 0  # messages from systems nobody registered (dropped)
+        self.refs = 0
+
+    def register(self, system_id: int, tick: Callable[[bool], None]) -> None:
+        """File messages from ``system_id``; ``tick(blocking)`` is called on every ``service``."""
+        with self._lock:
+            self._inbox.setdefault(system_id, deque(maxlen=8192))
+            self._ticks[system_id] = tick
+
+    def unregister(self, system_id: int) -> None:
+        with self._lock:
+            self._inbox.pop(system_id, None)
+            self._addr.pop(system_id, None)
+            self._ticks.pop(system_id, None)
+
+    def service(self, caller: int) -> None:
+        """Pump, then let every registered driver handle its messages and send its keepalives
+        (so robots sharing the link keep their heartbeats while one of them is busy, e.g. in a
+        handshake). Other drivers are ticked only if their lock is free (no lock-order cycle)."""
+        self.pump()
+        with self._lock:
+            ticks = list(self._ticks.items())
+        for sysid, tick in ticks:
+            tick(sysid == caller)
+
+    def knows_address(self, system_id: int) -> bool:
+        return not self.routed or system_id in self._addr
+
+    def fileno(self) -> int:
+        return self.conn.fd if self.conn.fd is not None else self.conn.port.fileno()
+
+    def wait(self, seconds: float) -> None:
+        """Block until data arrives or ``seconds`` (real time) pass."""
+        if seconds <= 0:
+            return
+        try:
+            select.select([self.fileno()], [], [], seconds)
+        except (OSError, ValueError):
+            time.sleep(seconds)
+
+    def pump(self) -> None:
+        """Read every available message (bounded, non-blocking) into the per-system inboxes."""
+        with self._lock:
+            if self.routed:
+                sock = self.conn.port
+                for _ in range(MAX_DATAGRAMS_PER_PUMP):
+                    try:
+                        data, addr = sock.recvfrom(65535)
+                    except (BlockingIOError, InterruptedError):
+                        break
+                    except OSError:
+                        break
+                    msgs = self.conn.mav.parse_buffer(data) or []
+                    for m in msgs:
+                        self._file(m, addr)
+            else:
+                for _ in range(MAX_DATAGRAMS_PER_PUMP):
+                    try:
+                        m = self.conn.recv_msg()
+                    except OSError:
+                        break
+                    if m is None:
+                        break
+                    self._file(m, None)
+
+    def _file(self, m: Any, addr: tuple[str, int] | None) -> None:
+        if m.get_type() == "BAD_DATA":
+            return
+        src = m.get_srcSystem()
+        box = self._inbox.get(src)
+        if box is None:
+            self.unknown_sources += 1
+            return
+        if addr is not None and m.get_srcComponent() == AUTOPILOT_COMPONENT:
+            self._addr[src] = addr
+        elif addr is not None and src not in self._addr:
+            self._addr[src] = addr
+        box.append(m)
+
+    def take(self, system_id: int) -> list[Any]:
+        """The messages from ``system_id`` received since the last call."""
+        with self._lock:
+            box = self._inbox.get(system_id)
+            if not box:
+                return []
+            out = list(box)
+            box.clear()
+            return out
+
+    def send_to(self, system_id: int, build: Callable[[Any], Any], source_system: int) -> bool:
+        """Pack ``build(mav)`` as ``source_system`` and send it to ``system_id`` only.
+
+        Returns False when a routed link does not know that system's address yet.
+        """
+        with self._lock:
+            mav = self.conn.mav
+            mav.srcSystem = source_system
+            msg = build(mav)
+            buf = msg.pack(mav)
+            mav.seq = (mav.seq + 1) % 256
+            mav.total_packets_sent += 1
+            mav.total_bytes_sent += len(buf)
+            if self.routed:
+                addr = self._addr.get(system_id)
+                if addr is None:
+                    return False
+                try:
+                    self.conn.port.sendto(buf, addr)
+                except OSError:
+                    return False
+                return True
+            try:
+                self.conn.write(buf)
+            except OSError:
+                return False
+            return True
+
+    def close(self) -> None:
+        with self._lock:
+            try:
+                self.conn.close()
+            except OSError:
+                pass
+
+
+class LinkPool:
+    """The MAVLink connections of a process, one per url, shared and reference-counted."""
+
+    def __init__(self) -> None:
+        self._links: dict[str, MavLink] = {}
+        self._lock = threading.Lock()
+
+    def acquire(self, url: str, source_system: int) -> MavLink:
+        with self._lock:
+            link = self._links.get(url)
+            if link is None:
+                link = MavLink(url, source_system)
+                self._links[url] = link
+            link.refs += 1
+            return link
+
+    def release(self, link: MavLink) -> None:
+        with self._lock:
+            link.refs -= 1
+            if link.refs <= 0 and self._links.get(link.url) is link:
+                del self._links[link.url]
+                link.close()
+
+
+DEFAULT_POOL = LinkPool()
+
+
+def _locked(method: Callable[..., Any]) -> Callable[..., Any]:
+    """Run a driver method under the driver's lock."""
+
+    @functools.wraps(method)
+    def wrapper(self: MavlinkDriver, *args: Any, **kwargs: Any) -> Any:
+        with self._lock:
+            return method(self, *args, **kwargs)
+
+    return wrapper
+
+
+@dataclass
+class _Setpoint:
+    vx: float = 0.0  # FRD m/s
+    vy: float = 0.0  # FRD m/s (right)
+    yaw_rate: float = 0.0  # rad/s clockwise
+    until: float = math.inf  # driver clock time after which it decays to zero
+
+
+class MavlinkDriver:
+    """``RobotDriver`` for a MAVLink rover (profiles ``ardurover`` and ``px4``)."""
+
+    def __init__(
+        self,
+        cfg: RobotConfig,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        idle: Callable[[float], None] | None = None,
+        pool: LinkPool | None = None,
+    ):
+        if cfg.profile not in ("ardurover", "px4"):
+            raise DriverError(f"robot {cfg.id!r}: unknown MAVLink profile {cfg.profile!r}")
+        if not cfg.url:
+            raise DriverError(f"robot {cfg.id!r}: a MAVLink robot needs a url")
+        self.cfg = cfg
+        self.robot_id = cfg.id
+        self.profile = cfg.profile
+        self.system_id = cfg.system_id
+        self.gcs_id = cfg.gcs_system_id
+        self.capabilities = Capabilities(
+            kind=cfg.kind,
+            holonomic=cfg.profile == "px4" and cfg.kind == "omni",
+            max_speed=cfg.max_speed,
+            max_yaw_rate=cfg.max_yaw_rate,
+            radius=cfg.radius,
+        )
+        self._clock = clock
+        self._idle = idle
+        self._pool = pool or DEFAULT_POOL
+        self._link: MavLink | None = None
+        self._lock = threading.RLock()  # public calls vs. ticks from other drivers' threads
+        self._connected = False
+        self._closed = False
+        self._t0 = clock()
+        self._last_heard: float | None = None
+        self._mode: int | None = None
+        self._armed = False
+        self._autopilot: int | None = None
+        self._wall_deadline = math.inf
+        self._acks: dict[int, int] = {}
+        self._poses: deque[PoseMeasurement] = deque(maxlen=POSE_QUEUE)
+        self._seq = 0
+        self._lpn: Any = None
+        self._att: Any = None
+        self._boot_offset: float | None = None
+        self._last_boot = -1.0
+        self._setpoint = _Setpoint()
+        self._last_sp_sent = -math.inf
+        self._last_hb_sent = -math.inf
+        self._streaming = False
+        self._lost_logged = False
+        self.counters = {"setpoints": 0, "poses": 0, "unrouted": 0, "vy_dropped": 0}
+
+    # ------------------------------------------------------------------ contract
+
+    @_locked
+    def connect(self, timeout: float) -> None:
+        """Wait for the vehicle's HEARTBEAT, request telemetry, set the mode and arm.
+
+        ``timeout`` (s, driver clock) bounds each handshake step; raises ConnectTimeout naming
+        the url and system id when the vehicle does not answer, DriverError when it refuses.
+        """
+        if self._closed:
+            raise DriverError(f"robot {self.robot_id!r}: connect after close")
+        if self._connected:
+            return
+        self._last_heard = self._mode = self._autopilot = None
+        self._armed = self._streaming = False
+        self._acks.clear()
+        # a frozen injected clock must not hang us: a generous wall-clock bound as well
+        self._wall_deadline = time.monotonic() + 4.0 * timeout + PX4_STREAM_BEFORE_OFFBOARD + 5.0
+        link = self._pool.acquire(self.cfg.url, self.gcs_id)
+        link.register(self.system_id, self._tick)
+        self._link = link
+        try:
+            self._handshake(timeout)
+        except BaseException:
+            self._release()
+            raise
+        self._connected = True
+        log.info("%s: connected to system %d on %s", self.robot_id, self.system_id, self.cfg.url)
+
+    @_locked
+    def send(self, cmd: Twist2D) -> None:
+        """Command a body-frame FLU velocity (m/s, m/s, rad/s) held for ``cmd.ttl`` s."""
+        if not (math.isfinite(cmd.vx) and math.isfinite(cmd.vy) and math.isfinite(cmd.wz)):
+            raise ValueError(f"robot {self.robot_id!r}: non-finite command {cmd}")
+        self._require_link()
+        now = self._service()
+        if self._lost(now):
+            raise LinkLost(self._lost_detail(now))
+        vx, vy, yaw_rate = mc.flu_to_frd(cmd.vx, cmd.vy, cmd.wz)
+        if not self.capabilities.holonomic:
+            if vy != 0.0:
+                self.counters["vy_dropped"] += 1
+            vy = 0.0
+        self._setpoint = _Setpoint(vx, vy, yaw_rate, now + cmd.ttl)
+        self._send_setpoint(now)
+
+    @_locked
+    def poll(self) -> list[PoseMeasurement]:
+        """World-frame poses built from LOCAL_POSITION_NED + ATTITUDE since the last call."""
+        if self._link is None:
+            return []
+        self._service()
+        out = list(self._poses)
+        self._poses.clear()
+        return out
+
+    @_locked
+    def stop(self) -> None:
+        """Zero setpoint now (and for the keepalive). Never raises."""
+        self._setpoint = _Setpoint()
+        if self._link is None or not self._connected:
+            return
+        try:
+            now = self._clock()
+            if not self._lost(now):
+                self._send_setpoint(now)
+        except Exception:  # noqa: BLE001 - stop must never raise
+            log.exception("%s: stop failed", self.robot_id)
+
+    @_locked
+    def health(self) -> LinkHealth:
+        """Lost when no HEARTBEAT for ``link_timeout``; not ok either when the vehicle left the
+        mode we put it in (e.g. a failsafe HOLD) or disarmed although ``arm`` is set."""
+        if self._closed:
+            return LinkHealth(False, "closed", self._last_heard)
+        if not self._connected:
+            return LinkHealth(False, "not connected", self._last_heard)
+        now = self._service()
+        if self._lost(now):
+            return LinkHealth(False, self._lost_detail(now), self._last_heard)
+        want = self._wanted_mode()
+        if self._mode != want:
+            got = mc.mode_name(self.profile, self._mode or 0)
+            return LinkHealth(
+                False,
+                f"vehicle in {got}, expected {mc.mode_name(self.profile, want)}",
+                self._last_heard,
+            )
+        if self.cfg.arm and not self._armed:
+            return LinkHealth(False, "vehicle disarmed", self._last_heard)
+        return LinkHealth(True, "", self._last_heard)
+
+    @_locked
+    def close(self) -> None:
+        """Zero the robot and release the link. Idempotent."""
+        if self._closed:
+            return
+        self.stop()
+        self._closed = True
+        self._connected = False
+        self._release()
+
+    # ------------------------------------------------------------------ internals
+
+    def _release(self) -> None:
+        link, self._link = self._link, None
+        if link is not None:
+            link.unregister(self.system_id)
+            self._pool.release(link)
+
+    def _require_link(self) -> MavLink:
+        if self._link is None or not self._connected:
+            raise DriverError(f"robot {self.robot_id!r}: not connected")
+        return self._link
+
+    def _wanted_mode(self) -> int:
+        return mc.ROVER_GUIDED if self.profile == "ardurover" else mc.PX4_OFFBOARD
+
+    def _lost(self, now: float) -> bool:
+        lost = self._last_heard is None or now - self._last_heard > self.cfg.link_timeout
+        if lost and not self._lost_logged:
+            log.warning("%s: %s", self.robot_id, self._lost_detail(now))
+            self._lost_logged = True
+        elif not lost and self._lost_logged:
+            log.info("%s: link to system %d back", self.robot_id, self.system_id)
+            self._lost_logged = False
+        return lost
+
+    def _lost_detail(self, now: float) -> str:
+        ago = "ever" if self._last_heard is None else f"{now - self._last_heard:.2f} s"
+        return (
+            f"robot {self.robot_id!r}: link lost, no HEARTBEAT from system {self.system_id} "
+            f"on {self.cfg.url} for {ago} (link_timeout {self.cfg.link_timeout} s)"
+        )
+
+    def _wait(self, seconds: float) -> None:
+        if self._idle is not None:
+            self._idle(seconds)
+        elif self._link is not None:
+            self._link.wait(seconds)
+
+    def _service(self) -> float:
+        """Read and handle inbound messages, send due keepalives (for every driver on the
+        link); returns the clock (s)."""
+        link = self._link
+        if link is not None:
+            link.service(self.system_id)
+        return self._clock()
+
+    def _tick(self, blocking: bool) -> None:
+        """Handle this robot's inbox and send its due heartbeat and setpoint keepalive."""
+        if not self._lock.acquire(blocking=blocking):
+            return
+        try:
+            link = self._link
+            if link is None:
+                return
+            now = self._clock()
+            for m in link.take(self.system_id):
+                self._handle(m, now)
+            if now - self._last_hb_sent >= HEARTBEAT_PERIOD:
+                self._send_heartbeat(now)
+            if self._streaming and now - self._last_sp_sent >= 1.0 / SETPOINT_HZ:
+                if not self._lost(now):
+                    self._send_setpoint(now)
+        finally:
+            self._lock.release()
+
+    def _handle(self, m: Any, now: float) -> None:
+        kind = m.get_type()
+        if kind == "HEARTBEAT":
+            if m.get_srcComponent() != AUTOPILOT_COMPONENT or m.autopilot == mc.AUTOPILOT_INVALID:
+                return
+            self._last_heard = now
+            self._mode = m.custom_mode
+            self._armed = bool(m.base_mode & mc.MODE_FLAG_ARMED)
+            self._autopilot = m.autopilot
+        elif kind == "COMMAND_ACK":
+            self._acks[m.command] = m.result
+        elif kind == "ATTITUDE":
+            self._att = m
+            self._try_pose(now)
+        elif kind == "LOCAL_POSITION_NED":
+            self._lpn = m
+            self._try_pose(now)
+
+    def _try_pose(self, now: float) -> None:
+        lpn, att = self._lpn, self._att
+        if lpn is None or att is None:
+            return
+        if abs(lpn.time_boot_ms - att.time_boot_ms) > PAIR_WINDOW * 1000.0:
+            return
+        self._lpn = self._att = None
+        boot = lpn.time_boot_ms / 1000.0
+        if boot < self._last_boot - 1.0:  # the vehicle rebooted
+            self._boot_offset = None
+        self._last_boot = boot
+        offset = now - boot
+        if self._boot_offset is None or offset < self._boot_offset:
+            self._boot_offset = offset
+        x, y, theta = mc.ned_to_enu_pose(lpn.x, lpn.y, att.yaw)
+        if not all(math.isfinite(v) for v in (x, y, theta)):
+            return
+        self._seq += 1
+        self.counters["poses"] += 1
+        self._poses.append(
+            PoseMeasurement(
+                t=boot + self._boot_offset,
+                seq=self._seq,
+                x=x,
+                y=y,
+                theta=theta,
+                source=f"mavlink:{self.system_id}",
+            )
+        )
+
+    def _send(self, build: Callable[[Any], Any]) -> bool:
+        link = self._link
+        if link is None:
+            return False
+        ok = link.send_to(self.system_id, build, self.gcs_id)
+        if not ok:
+            self.counters["unrouted"] += 1
+        return ok
+
+    def _send_heartbeat(self, now: float) -> None:
+        self._last_hb_sent = now
+        self._send(lambda mav: mav.heartbeat_encode(mc.TYPE_GCS, mc.AUTOPILOT_INVALID, 0, 0, 4))
+
+    def _boot_ms(self, now: float) -> int:
+        return int(max(0.0, now - self._t0) * 1000.0) & 0xFFFFFFFF
+
+    def _send_setpoint(self, now: float) -> None:
+        sp = self._setpoint
+        if now > sp.until:
+            sp = self._setpoint = _Setpoint()
+        self._last_sp_sent = now
+        self._streaming = True
+        self.counters["setpoints"] += 1
+        ms = self._boot_ms(now)
+        self._send(
+            lambda mav: mav.set_position_target_local_ned_encode(
+                ms,
+                self.system_id,
+                AUTOPILOT_COMPONENT,
+                mc.FRAME_BODY_NED,
+                mc.MASK_VELOCITY_YAW_RATE,
+                0.0,
+                0.0,
+                0.0,
+                sp.vx,
+                sp.vy,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                sp.yaw_rate,
+            )
+        )
+
+    def _command(self, command: int, params: tuple[float, ...], timeout: float, what: str) -> None:
+        """Send a COMMAND_LONG until its COMMAND_ACK arrives; raise if refused or unanswered."""
+        p = list(params) + [0.0] * (7 - len(params))
+        self._acks.pop(command, None)
+        deadline = self._clock() + timeout
+        confirmation = 0
+        while True:
+            now = self._clock()
+
+            def build(mav: Any, c: int = confirmation) -> Any:
+                return mav.command_long_encode(self.system_id, AUTOPILOT_COMPONENT, command, c, *p)
+
+            self._send(build)
+            retry_at = now + COMMAND_RETRY
+            while True:
+                now = self._service()
+                if command in self._acks:
+                    result = self._acks.pop(command)
+                    if result != mc.RESULT_ACCEPTED:
+                        name = mc.RESULT_NAMES.get(result, str(result))
+                        raise DriverError(
+                            f"robot {self.robot_id!r}: system {self.system_id} on "
+                            f"{self.cfg.url} refused {what}: {name}"
+                        )
+                    return
+                if now >= deadline or time.monotonic() > self._wall_deadline:
+                    raise ConnectTimeout(
+                        f"robot {self.robot_id!r}: no COMMAND_ACK for {what} from system "
+                        f"{self.system_id} on {self.cfg.url} within {timeout} s"
+                    )
+                if now >= retry_at:
+                    break
+                self._wait(min(0.02, deadline - now, retry_at - now))
+            confirmation = min(confirmation + 1, 255)
+
+    def _wait_until(self, pred: Callable[[], bool], deadline: float) -> bool:
+        while True:
+            now = self._service()
+            if pred():
+                return True
+            if now >= deadline or time.monotonic() > self._wall_deadline:
+                return False
+            self._wait(min(0.02, deadline - now))
+
+    def _handshake(self, timeout: float) -> None:
+        link = self._link
+        assert link is not None
+        self._send_heartbeat(self._clock())  # lets a udpout/tcp vehicle learn our address
+        if not self._wait_until(lambda: self._last_heard is not None, self._clock() + timeout):
+            raise ConnectTimeout(
+                f"robot {self.robot_id!r}: no HEARTBEAT from system {self.system_id} on "
+                f"{self.cfg.url} within {timeout} s"
+            )
+        want_ap = mc.AUTOPILOT_ARDUPILOT if self.profile == "ardurover" else mc.AUTOPILOT_PX4
+        if self._autopilot != want_ap:
+            raise DriverError(
+                f"robot {self.robot_id!r}: system {self.system_id} on {self.cfg.url} is "
+                f"autopilot {self._autopilot}, profile {self.profile!r} expects {want_ap}"
+            )
+        self._send_heartbeat(self._clock())  # the vehicle's address is known now
+        interval_us = 1e6 / self.cfg.telemetry_hz
+        for msg_id, name in ((mc.MSG_LOCAL_POSITION_NED, "LOCAL_POSITION_NED"),
+                             (mc.MSG_ATTITUDE, "ATTITUDE")):  # fmt: skip
+            self._command(
+                mc.CMD_SET_MESSAGE_INTERVAL,
+                (msg_id, interval_us),
+                timeout,
+                f"SET_MESSAGE_INTERVAL {name}",
+            )
+        try:  # heartbeats often enough that link_timeout never flaps (vehicles default to 1 Hz)
+            self._command(
+                mc.CMD_SET_MESSAGE_INTERVAL,
+                (mc.MSG_HEARTBEAT, 1e6 * min(1.0, self.cfg.link_timeout / 4.0)),
+                timeout,
+                "SET_MESSAGE_INTERVAL HEARTBEAT",
+            )
+        except DriverError as exc:
+            log.warning("%s: %s; link_timeout may flap with 1 Hz heartbeats", self.robot_id, exc)
+        if self.profile == "ardurover":
+            self._command(
+                mc.CMD_DO_SET_MODE, (mc.MODE_FLAG_CUSTOM, mc.ROVER_GUIDED), timeout, "GUIDED"
+            )
+        else:
+            self._setpoint = _Setpoint()
+            start = self._clock()
+            self._send_setpoint(start)  # the keepalive in _service streams from here on
+            self._wait_until(lambda: False, start + PX4_STREAM_BEFORE_OFFBOARD)
+            self._command(
+                mc.CMD_DO_SET_MODE,
+                (mc.MODE_FLAG_CUSTOM, mc.PX4_MAIN_OFFBOARD, 0),
+                timeout,
+                "OFFBOARD",
+            )
+        if self.cfg.arm:
+            self._command(mc.CMD_COMPONENT_ARM_DISARM, (1.0,), timeout, "arming")
+        want = self._wanted_mode()
+        if not self._wait_until(
+            lambda: self._mode == want and (self._armed or not self.cfg.arm),
+            self._clock() + timeout,
+        ):
+            raise ConnectTimeout(
+                f"robot {self.robot_id!r}: system {self.system_id} on {self.cfg.url} did not "
+                f"report {mc.mode_name(self.profile, want)}{' and armed' if self.cfg.arm else ''}"
+                f" within {timeout} s (it reports {mc.mode_name(self.profile, self._mode or 0)})"
+            )
+        self._streaming = True
+        self._connected = True
