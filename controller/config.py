@@ -110,7 +110,7 @@ class MotionSection:
     heading: float = _rule(0.0, min=-10, max=10)
     max_speed: float = _rule(0.2, min=0, max=10)
     flee_radius: float = _rule(1.5, gt=0, max=100)
-    max_force: float = _rule(20.0, gt=0, max=1e4)
+    max_force: float = _rule(4.0, gt=0, max=1e4)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -26,7 +26,9 @@ from drivers.agent import Agent, AgentParams
 from drivers.base import Capabilities
 from drivers.lockstep import LockstepCoordinator
 from drivers.sim import SimDriver
-from sim_backend.hub import PerfectSensor, SimHub
+from sim_backend.factory import make_world
+from sim_backend.hub import SimHub
+from sim_backend.sensors import make_sensors
 
 log = logging.getLogger(__name__)
 
@@ -41,27 +43,11 @@ def capabilities(robot) -> Capabilities:
     )
 
 
-def make_world(cfg: FleetConfig, gui: bool = False):
-    """The stand-in world named by ``sim.backend``."""
-    try:
-        from sim_backend.factory import make_world as factory
-    except ImportError:  # pragma: no cover - before the pybullet world landed
-        from sim_backend.ideal import IdealWorld
-
-        return IdealWorld(cfg)
-    return factory(cfg, gui=gui)
-
-
-def make_sensors(cfg: FleetConfig):
-    """One pose sensor per robot and one for the object, seeded from ``sim.seed``."""
-    try:
-        from sim_backend.sensors import sensors_from_config
-    except ImportError:  # pragma: no cover
-        return (
-            {r.id: PerfectSensor(cfg.sim.pose_rate_hz) for r in cfg.robots},
-            PerfectSensor(cfg.sim.object_pose_rate_hz),
-        )
-    return sensors_from_config(cfg)
+def make_hub(cfg: FleetConfig, gui: bool = False) -> SimHub:
+    """The stand-in world named by ``sim.backend`` with its seeded sensors."""
+    world = make_world(cfg, gui=gui)
+    sensors = make_sensors(cfg)
+    return SimHub(world, sensors.robots, sensors.object, cfg.sim.timestep)
 
 
 def make_estimator(cfg: FleetConfig):
@@ -157,9 +143,8 @@ class DryRun:
         cfg = self.cfg
         wall0 = time.monotonic()
         control_dt = 1.0 / cfg.fleet.rate_hz
-        world = make_world(cfg, self.gui)
-        robot_sensors, object_sensor = make_sensors(cfg)
-        hub = SimHub(world, robot_sensors, object_sensor, cfg.sim.timestep)
+        hub = make_hub(cfg, self.gui)
+        world = hub.world
         recorder = McapRecorder(self.out, cfg.fleet.name, cfg.log.flush_interval)
         arrested_at: list[float] = []
         result: dict[str, Any] = {}

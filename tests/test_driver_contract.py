@@ -36,7 +36,7 @@ def _sim_rig(backend: str, kind: str) -> Rig:
             "sim": {"backend": backend},
         }
     )
-    from controller.runtime import make_world
+    from sim_backend.factory import make_world
 
     world = make_world(cfg)
     hub = SimHub(
