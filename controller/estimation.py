@@ -22,11 +22,15 @@ lag, ``dv/dt = (c - v) / command_tau``, with white acceleration noise on top (``
 interval uses the command that was active in each part of it. Estimates report world-frame
 velocities.
 
-Object while alive: constant velocity with ``object_process_accel``. After the arrest event the
-object no longer moves by itself; it keeps the same constant-velocity form (a random walk on the
-velocity) with the tighter ``object_arrested_accel``: the robots that hold it move smoothly, and
-the measurements at 20-50 Hz carry the push. (Driving it from the commanded push velocity would
-need the runtime to say which robots push; this simpler model needs nothing from it.)
+Object while alive: constant velocity (a random walk on the world velocity) with
+``object_process_accel``. After the arrest event (``set_object_arrested(True)``) it no longer
+moves by itself: it keeps the random walk, with ``object_arrested_accel`` (tighter by default: a
+held object moves only as fast as the formation's slow, smooth transport commands). If the
+runtime also reports the push it commands (``push_object(t, vx, vy, wz)``, world frame, e.g. the
+object twist the transport planner asks of the formation), the arrested object's velocity follows
+that push through the same first-order lag as a robot's (``command_tau``); a push of zero lets it
+come to rest. Without push reports it stays a pure random walk. Push reports are cleared when
+the object is released.
 
 Measurement: (x, y, theta) with noise (``meas_xy``, ``meas_theta``). A measurement's own stamp is
 used; one not newer than the filter's timeline is dropped and counted (``out_of_order``). Each is
@@ -65,7 +69,7 @@ FloatArray = NDArray[np.float64]
 ROBOT_MODELS = ("omni", "diff")
 MODELS = ("omni", "diff", "object")
 STATE_DIM = {"omni": 6, "diff": 5, "object": 6}
-COMMAND_DIM = {"omni": 3, "diff": 2, "object": 0}
+COMMAND_DIM = {"omni": 3, "diff": 2, "object": 3}
 YAW_RATE_INDEX = {"omni": 5, "diff": 4, "object": 5}
 MEAS_DIM = 3
 THETA = 2
@@ -140,8 +144,9 @@ def motion(
         model: "omni", "diff" or "object" (see the module docstring for the state layouts).
         x: state vector.
         dt: time step (s), >= 0; integrated in sub-steps of at most ``MAX_SUBSTEP``.
-        u: body-frame command (vx m/s, vy m/s, wz rad/s) for omni, (vx, wz) for diff; ignored by
-            "object". ``None`` means a zero command.
+        u: body-frame command (vx m/s, vy m/s, wz rad/s) for omni, (vx, wz) for diff; for
+            "object" the world-frame push velocity (vx, vy, wz) of an arrested object. ``None``
+            means a zero command for robots and constant velocity for the object.
         tau: time constant (s) with which a robot's velocity follows the command.
         jacobian: also return the Jacobian dF/dx (EKF); skip it for the UKF's sigma points.
 
@@ -156,11 +161,25 @@ def motion(
     steps = max(1, math.ceil(dt / MAX_SUBSTEP - 1e-9))
     h = dt / steps
     if model == "object":
-        s[0] += h * steps * s[3]
-        s[1] += h * steps * s[4]
-        s[2] = _wrap(s[2] + h * steps * s[5])
-        if F is not None:
-            F[0, 3] = F[1, 4] = F[2, 5] = dt
+        if u is None:  # constant velocity
+            s[0] += dt * s[3]
+            s[1] += dt * s[4]
+            s[2] = _wrap(s[2] + dt * s[5])
+            if F is not None:
+                F[0, 3] = F[1, 4] = F[2, 5] = dt
+            return np.array(s), F
+        # Pushed: the world-frame velocity follows the commanded push velocity (linear model).
+        a = math.exp(-dt / tau)
+        beta = tau / dt * (1.0 - a)
+        for k in range(3):
+            c = float(u[k])  # type: ignore[index]
+            v0 = s[3 + k]
+            s[k] += dt * (beta * v0 + (1.0 - beta) * c)
+            s[3 + k] = a * v0 + (1.0 - a) * c
+            if F is not None:
+                F[k, 3 + k] = dt * beta
+                F[3 + k, 3 + k] = a
+        s[2] = _wrap(s[2])
         return np.array(s), F
     omni = model == "omni"
     if not omni and model != "diff":
@@ -461,6 +480,12 @@ class TrackFilter:
         self._cmd_u.insert(i, uv)
         self._version += 1
 
+    def clear_commands(self) -> None:
+        """Forget every recorded command (predictions fall back to the uncommanded model)."""
+        self._cmd_t.clear()
+        self._cmd_u.clear()
+        self._version += 1
+
     def _command_at(self, t: float) -> FloatArray | None:
         i = bisect.bisect_right(self._cmd_t, t) - 1
         return self._cmd_u[i] if i >= 0 else None
@@ -759,7 +784,8 @@ class FleetEstimator:
         return status
 
     def set_object_arrested(self, arrested: bool) -> None:
-        """Switch the object's process noise between live and arrested (keeps its state)."""
+        """Switch the object's model between live and arrested (keeps its state; see the
+        module docstring). Releasing it forgets the push reports."""
         arrested = bool(arrested)
         if arrested == self._arrested:
             return
@@ -767,9 +793,17 @@ class FleetEstimator:
         acc = p.object_arrested_accel if arrested else p.object_process_accel
         self._object.q_lin = acc**2
         self._object.q_yaw = (acc * p.process_yaw_accel / p.process_accel) ** 2
+        if not arrested:
+            self._object.clear_commands()
         self._object._version += 1
         self._arrested = arrested
         log.info("object filter: %s model", "arrested" if arrested else "live")
+
+    def push_object(self, t: float, vx: float, vy: float, wz: float) -> None:
+        """Optional: the world-frame push velocity (m/s, m/s, rad/s) commanded for the arrested
+        object from time t (s) on. Ignored while the object is not arrested."""
+        if self._arrested:
+            self._object.command(t, (vx, vy, wz))
 
     # ---- outputs
 

@@ -50,7 +50,8 @@ def measure(
     z[:, :2] += rng.normal(0.0, sigma_xy, (m, 2))
     z[:, 2] += rng.normal(0.0, sigma_theta, m)
     z[:, 2] = (z[:, 2] + math.pi) % (2 * math.pi) - math.pi
-    out = rng.random(m) < outlier_rate
+    out = np.zeros(m, dtype=bool)
+    out[rng.choice(m, int(round(outlier_rate * m)), replace=False)] = True
     ang = rng.uniform(-math.pi, math.pi, m)
     z[out, 0] += outlier_mag * np.cos(ang[out])
     z[out, 1] += outlier_mag * np.sin(ang[out])
