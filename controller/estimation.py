@@ -56,7 +56,6 @@ from typing import Any
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
-from filterpy.kalman.unscented_transform import unscented_transform
 from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
@@ -153,7 +152,7 @@ def motion(
     Returns:
         The new state (heading wrapped) and the Jacobian (or ``None``).
     """
-    s = [float(v) for v in np.ravel(x)]
+    s = np.ravel(np.asarray(x, dtype=float)).tolist()
     n = len(s)
     F = np.eye(n) if jacobian else None
     if dt <= 0.0:
@@ -194,6 +193,7 @@ def motion(
     a = math.exp(-h / tau)  # velocity memory over one sub-step
     beta = tau / h * (1.0 - a)  # share of the initial velocity in the sub-step's mean velocity
     iw = 5 if omni else 4
+    Fs: FloatArray | None = None
     for _ in range(steps):
         th = s[2]
         u0 = s[3]
@@ -228,8 +228,84 @@ def motion(
             J[2, iw] = beta * h
             J[3, 3] = a
             J[iw, iw] = a
-            F = J @ F
-    return np.array(s), F
+            Fs = J if Fs is None else J @ Fs
+    return np.array(s), Fs
+
+
+def motion_batch(
+    model: str,
+    X: ArrayLike,
+    dt: float,
+    u: ArrayLike | None = None,
+    tau: float = 0.15,
+) -> FloatArray:
+    """:func:`motion` for many states at once (rows of X, e.g. a UKF's sigma points)."""
+    S = np.array(X, dtype=float)
+    if dt <= 0.0:
+        return S
+    if model == "object":
+        if u is None:
+            S[:, :3] += dt * S[:, 3:6]
+        else:
+            a = math.exp(-dt / tau)
+            beta = tau / dt * (1.0 - a)
+            c = np.asarray(u, dtype=float)
+            S[:, :3] += dt * (beta * S[:, 3:6] + (1.0 - beta) * c)
+            S[:, 3:6] = a * S[:, 3:6] + (1.0 - a) * c
+        S[:, 2] = (S[:, 2] + math.pi) % _TWO_PI - math.pi
+        return S
+    omni = model == "omni"
+    if not omni and model != "diff":
+        raise ValueError(f"unknown motion model {model!r}; expected one of {MODELS}")
+    if u is None:
+        cu, cv, cw = 0.0, 0.0, 0.0
+    elif omni:
+        cu, cv, cw = (float(c) for c in u)  # type: ignore[union-attr]
+    else:
+        cu, cw = (float(c) for c in u)  # type: ignore[union-attr]
+        cv = 0.0
+    steps = max(1, math.ceil(dt / MAX_SUBSTEP - 1e-9))
+    h = dt / steps
+    a = math.exp(-h / tau)
+    beta = tau / h * (1.0 - a)
+    iw = 5 if omni else 4
+    for _ in range(steps):
+        u0 = S[:, 3].copy()
+        v0 = S[:, 4].copy() if omni else 0.0
+        w0 = S[:, iw].copy()
+        ua = beta * u0 + (1.0 - beta) * cu
+        va = beta * v0 + (1.0 - beta) * cv
+        wa = beta * w0 + (1.0 - beta) * cw
+        thm = S[:, 2] + 0.5 * wa * h
+        c, sn = np.cos(thm), np.sin(thm)
+        S[:, 0] += h * (c * ua - sn * va)
+        S[:, 1] += h * (sn * ua + c * va)
+        S[:, 2] = (S[:, 2] + wa * h + math.pi) % _TWO_PI - math.pi
+        S[:, 3] = a * u0 + (1.0 - a) * cu
+        if omni:
+            S[:, 4] = a * v0 + (1.0 - a) * cv
+        S[:, iw] = a * w0 + (1.0 - a) * cw
+    return S
+
+
+def unscented_transform_wrapped(
+    sigmas: ArrayLike,
+    Wm: ArrayLike,
+    Wc: ArrayLike,
+    noise_cov: ArrayLike | None = None,
+    mean_fn: Any = None,  # noqa: ARG001 - filterpy's UT signature; the heading is always circular
+    residual_fn: Any = None,  # noqa: ARG001
+) -> tuple[FloatArray, FloatArray]:
+    """filterpy's unscented transform, vectorised, with column 2 (heading) treated as an angle:
+    circular weighted mean and wrapped deviations. Drop-in ``UT`` for filterpy's UKF."""
+    sg = np.asarray(sigmas, dtype=float)
+    x = weighted_mean(sg, Wm)
+    y = sg - x
+    y[:, THETA] = (y[:, THETA] + math.pi) % _TWO_PI - math.pi
+    P = (y.T * np.asarray(Wc)) @ y
+    if noise_cov is not None:
+        P = P + noise_cov
+    return x, P
 
 
 def process_noise(model: str, theta: float, dt: float, q_lin: float, q_yaw: float) -> FloatArray:
@@ -309,7 +385,7 @@ def innovation_unscented(
 ) -> tuple[FloatArray, FloatArray]:
     """Innovation and its covariance from a UKF's prior sigma points (unscented transform)."""
     zs = np.asarray(sigmas)[:, :MEAS_DIM]
-    zp, S = unscented_transform(zs, Wm, Wc, R, weighted_mean, residual)
+    zp, S = unscented_transform_wrapped(zs, Wm, Wc, R)
     return residual(np.ravel(z), zp), S
 
 
@@ -359,8 +435,8 @@ def propagate_ukf(
     for h, u in segments:
         Q = process_noise(model, xs[THETA], h, q_lin, q_yaw)
         sig = points.sigma_points(xs, Ps)
-        f = np.array([motion(model, s, h, u, tau, jacobian=False)[0] for s in sig])
-        xs, Ps = unscented_transform(f, points.Wm, points.Wc, Q, weighted_mean, residual)
+        f = motion_batch(model, sig, h, u, tau)
+        xs, Ps = unscented_transform_wrapped(f, points.Wm, points.Wc, Q)
         Ps = _sym(Ps)
     return xs, Ps
 
@@ -379,6 +455,52 @@ class _PoseEKF(ExtendedKalmanFilter):
 
     def predict_x(self, u: Any = 0) -> None:  # noqa: ARG002 - filterpy's signature
         self.x = self._x_next
+
+
+class PoseSigmaPoints(MerweScaledSigmaPoints):
+    """filterpy's Merwe scaled sigma points, computed in one vectorised step, heading wrapped.
+
+    Same points as the parent with ``subtract=residual`` (rows of the upper Cholesky factor of
+    (lambda + n) P added to and subtracted from x)."""
+
+    def __init__(self, n: int, alpha: float, beta: float, kappa: float):
+        super().__init__(n, alpha, beta, kappa, subtract=residual)
+        self._scale = alpha**2 * (n + kappa)  # lambda + n
+
+    def sigma_points(self, x: ArrayLike, P: ArrayLike) -> FloatArray:
+        xv = np.ravel(np.asarray(x, dtype=float))
+        U = np.linalg.cholesky(self._scale * np.asarray(P, dtype=float)).T  # upper, as scipy's
+        sig = np.empty((2 * self.n + 1, self.n))
+        sig[0] = xv
+        sig[1 : self.n + 1] = xv + U
+        sig[self.n + 1 :] = xv - U
+        sig[:, THETA] = (sig[:, THETA] + math.pi) % _TWO_PI - math.pi
+        return sig
+
+
+class _PoseUKF(UnscentedKalmanFilter):
+    """filterpy's UKF with the sigma points propagated as one batch and a vectorised
+    angle-aware unscented transform (same maths as filterpy's loops, ~3x less overhead)."""
+
+    model = "omni"
+    tau = 0.15
+
+    def compute_process_sigmas(self, dt: float, fx: Any = None, **fx_args: Any) -> None:
+        sigmas = self.points_fn.sigma_points(self.x, self.P)
+        self.sigmas_f = motion_batch(self.model, sigmas, dt, fx_args.get("u"), self.tau)
+
+    def predict(self, dt: float | None = None, UT: Any = None, fx: Any = None, **fx_args: Any):
+        super().predict(dt, UT or unscented_transform_wrapped, fx, **fx_args)
+
+    def update(self, z: Any, R: Any = None, UT: Any = None, hx: Any = None, **hx_args: Any):
+        super().update(z, R, UT or unscented_transform_wrapped, hx, **hx_args)
+
+    def cross_variance(self, x: Any, z: Any, sigmas_f: Any, sigmas_h: Any) -> FloatArray:
+        dx = np.asarray(sigmas_f) - x
+        dx[:, THETA] = (dx[:, THETA] + math.pi) % _TWO_PI - math.pi
+        dz = np.asarray(sigmas_h) - z
+        dz[:, THETA] = (dz[:, THETA] + math.pi) % _TWO_PI - math.pi
+        return (dx.T * self.Wc) @ dz
 
 
 def _hx(x: FloatArray) -> FloatArray:
@@ -420,10 +542,8 @@ class TrackFilter:
         if filter_name == "ekf":
             self.kf: Any = _PoseEKF(self.n, MEAS_DIM)
         else:
-            self.points = MerweScaledSigmaPoints(
-                self.n, UKF_ALPHA, UKF_BETA, UKF_KAPPA, subtract=residual
-            )
-            self.kf = UnscentedKalmanFilter(
+            self.points = PoseSigmaPoints(self.n, UKF_ALPHA, UKF_BETA, UKF_KAPPA)
+            self.kf = _PoseUKF(
                 self.n,
                 MEAS_DIM,
                 MAX_SUBSTEP,
@@ -435,6 +555,8 @@ class TrackFilter:
                 residual_x=residual,
                 residual_z=residual,
             )
+            self.kf.model = model
+            self.kf.tau = self.tau
         self.kf.R = self.R.copy()
         self.t: float | None = None
         self.t_accepted: float | None = None
