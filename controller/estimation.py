@@ -564,6 +564,7 @@ class TrackFilter:
         self.rejected = 0
         self.out_of_order = 0
         self.reacquired = 0
+        self.invalid = 0  # non-finite or malformed measurements (also counted as rejected)
         self.consecutive_rejected = 0
         self._run: list[tuple[float, FloatArray]] = []  # consistent run of rejected measurements
         self.last_d2 = 0.0
@@ -597,6 +598,12 @@ class TrackFilter:
     def command(self, t: float, u: ArrayLike) -> None:
         """Record the command sent at time t (s); it acts from t on."""
         uv = np.asarray(u, dtype=float)
+        if uv.shape != (COMMAND_DIM[self.model],) or not np.all(np.isfinite(uv)):
+            raise ValueError(
+                f"{self.model} command must be {COMMAND_DIM[self.model]} finite numbers, got {u!r}"
+            )
+        if not math.isfinite(t):
+            raise ValueError(f"command time must be finite, got {t!r}")
         i = bisect.bisect_right(self._cmd_t, t)
         self._cmd_t.insert(i, t)
         self._cmd_u.insert(i, uv)
@@ -703,9 +710,13 @@ class TrackFilter:
     def measure(self, t: float, z: ArrayLike) -> str:
         """Process a pose measurement (x m, y m, theta rad) stamped t (s); returns a status."""
         zv = np.array(np.ravel(z), dtype=float)
-        zv[THETA] = _wrap(float(zv[THETA]))
         self._version += 1
         self.just_reacquired = False
+        if zv.shape != (MEAS_DIM,) or not (np.all(np.isfinite(zv)) and math.isfinite(t)):
+            self.rejected += 1  # garbage never touches the filter
+            self.invalid += 1
+            return STATUS_REJECTED
+        zv[THETA] = _wrap(float(zv[THETA]))
         if self.t is None:
             self._initialize(t, zv)
             self._prune_commands()
@@ -713,9 +724,16 @@ class TrackFilter:
         if t <= self.t:
             self.out_of_order += 1
             return STATUS_OUT_OF_ORDER
-        self._predict_filter(t)
-        y, S = self.innovation(zv)
-        self.last_d2 = mahalanobis2(y, S)
+        try:
+            self._predict_filter(t)
+            y, S = self.innovation(zv)
+            self.last_d2 = mahalanobis2(y, S)
+        except np.linalg.LinAlgError:  # covariance lost definiteness: start over from z
+            self.reacquired += 1
+            self.just_reacquired = True
+            self._initialize(t, zv)
+            self._prune_commands()
+            return STATUS_INITIALIZED
         if not self.last_d2 <= self.threshold:
             self.rejected += 1
             self.consecutive_rejected += 1
@@ -758,9 +776,14 @@ class TrackFilter:
             x, P = propagate_ekf(self.model, self.x, self.P, segs, self.tau, self.q_lin, self.q_yaw)
         else:
             assert self.points is not None
-            x, P = propagate_ukf(
-                self.model, self.x, self.P, segs, self.tau, self.q_lin, self.q_yaw, self.points
-            )
+            try:
+                x, P = propagate_ukf(
+                    self.model, self.x, self.P, segs, self.tau, self.q_lin, self.q_yaw, self.points
+                )
+            except np.linalg.LinAlgError:  # no sigma points without a Cholesky factor
+                x, P = propagate_ekf(
+                    self.model, self.x, self.P, segs, self.tau, self.q_lin, self.q_yaw
+                )
         self._cache = (now, self._version, x, P)
         return x.copy(), P.copy()
 
@@ -887,7 +910,10 @@ class FleetEstimator:
         """
         tr = self._track(robot_id)
         u = (vx, vy, wz) if tr.model == "omni" else (vx, wz)
-        tr.command(t, u)
+        try:
+            tr.command(t, u)
+        except ValueError as e:
+            raise ValueError(f"robot {robot_id!r}: {e}") from None
 
     def measure_robot(self, robot_id: str, t: float, x: float, y: float, theta: float) -> str:
         """Feed a robot's pose measurement (m, m, rad) stamped t (s).

@@ -454,6 +454,34 @@ def test_bad_inputs_name_the_culprit() -> None:
         est.measure_robot("nope", 0.0, 0, 0, 0)
 
 
+def test_garbage_inputs_never_reach_the_filter() -> None:
+    est = FleetEstimator([("r1", "omni")], params("ekf"), STALE_AFTER)
+    est.measure_robot("r1", 0.0, 1.0, 1.0, 0.0)
+    assert est.measure_robot("r1", 0.05, math.nan, 1.0, 0.0) == "rejected"
+    assert est.measure_robot("r1", math.inf, 1.0, 1.0, 0.0) == "rejected"
+    e = est.robot_estimate("r1", 0.06)
+    assert e.rejected == 2 and math.isfinite(e.x) and not e.stale
+    assert est.measure_robot("r1", 0.07, 1.0, 1.0, 0.01) == "accepted"
+    with pytest.raises(ValueError, match="'r1'.*finite"):
+        est.command("r1", 0.1, math.nan, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("filter_name", FILTERS)
+def test_track_recovers_when_the_first_measurement_is_an_outlier(filter_name: str) -> None:
+    est = FleetEstimator([("r1", "diff")], params(filter_name), STALE_AFTER)
+    rng = np.random.default_rng(6)
+    assert est.measure_robot("r1", 0.0, 1.5, 1.0, 0.0) == "initialized"  # 0.5 m off
+    t, statuses = 0.0, []
+    for _ in range(15):
+        t += 0.03
+        statuses.append(
+            est.measure_robot("r1", t, *(np.array([1.0, 1.0, 0.0]) + rng.normal(0, 0.005, 3)))
+        )
+    assert statuses[4] == "initialized" and set(statuses[5:]) == {"accepted"}
+    e = est.robot_estimate("r1", t)
+    assert math.hypot(e.x - 1.0, e.y - 1.0) < 0.02 and e.reacquired == 1
+
+
 def test_estimation_core_imports_no_middleware() -> None:
     src = Path(__file__).resolve().parents[1] / "controller" / "estimation.py"
     tree = ast.parse(src.read_text())
