@@ -41,6 +41,21 @@ rejected ones are counted. ``reacquire_after`` consecutive rejections that agree
 the one before) re-initialise the track from the latest measurement: a robot that was really
 moved, or a filter that lost it. Scattered outliers never agree, so they never re-initialise.
 
+A rejected measurement still moves the timeline to its stamp (the filter holds the prior there,
+which is a valid state); a non-finite one is rejected without touching the filter.
+
+Latency: ``robot_estimate(now)``, ``robot_arrays(now)`` and ``object_estimate(now)`` predict
+copies of the mean and covariance from the filter's timeline to ``now`` (cached per ``now``);
+the filter itself stays at its last measurement. Staleness: a track with no *accepted*
+measurement for more than ``stale_after`` seconds is stale. Before its first measurement a
+track is stale, not initialised, and its pose is NaN (sigmas inf): never publish or plan on it.
+
+UKF: filterpy's ``UnscentedKalmanFilter`` with ``residual_x``/``residual_z``/``x_mean_fn``/
+``z_mean_fn`` set to the angle-aware functions, and its sigma points, propagation, unscented
+transform and cross-covariance done as vectorised numpy (same maths as filterpy's loops, checked
+against them in the tests). EKF: filterpy's ``ExtendedKalmanFilter`` with the nonlinear motion
+model and its Jacobian, the Joseph-form update and a wrapped residual.
+
 The holder logs only on changes (a track starts or stops rejecting, re-acquires, turns stale or
 fresh), never per tick.
 """
