@@ -88,6 +88,7 @@ YAW_RATE_INDEX = {"omni": 5, "diff": 4, "object": 5}
 MEAS_DIM = 3
 THETA = 2
 REJECT_EPISODE = 3  # consecutive rejections logged as a rejection episode (isolated: counted)
+MAX_COMMANDS = 24  # commands kept past the filter's timeline before it is time-updated
 MAX_SUBSTEP = 0.05  # s, longest step of the motion integration (a dropout is cut into these)
 
 # Sigma points: alpha=1, kappa=0 gives non-negative weights (the covariance sum stays PSD).
@@ -623,6 +624,24 @@ class TrackFilter:
         self._cmd_t.insert(i, t)
         self._cmd_u.insert(i, uv)
         self._version += 1
+        if len(self._cmd_t) > MAX_COMMANDS:
+            self._bound_history()
+
+    def _bound_history(self) -> None:
+        """Without measurements the command history would grow without end: time-update the
+        filter over the older half (a plain Kalman prediction) and forget those commands."""
+        cut = self._cmd_t[len(self._cmd_t) - MAX_COMMANDS // 2]
+        if self.t is None:
+            keep = bisect.bisect_right(self._cmd_t, cut) - 1
+            del self._cmd_t[:keep]
+            del self._cmd_u[:keep]
+            return
+        if cut > self.t:
+            try:
+                self._predict_filter(cut)
+            except np.linalg.LinAlgError:
+                return
+        self._prune_commands()
 
     def clear_commands(self) -> None:
         """Forget every recorded command (predictions fall back to the uncommanded model)."""
