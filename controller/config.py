@@ -184,11 +184,16 @@ class TransportSection:
 class EstimationSection:
     filter: str = _rule("ekf", choices=FILTERS)
     gate_probability: float = _rule(0.999, gt=0, max=1)
-    process_accel: float = _rule(1.0, gt=0, max=1e3)
-    process_yaw_accel: float = _rule(2.0, gt=0, max=1e3)
-    object_process_accel: float = _rule(0.2, gt=0, max=1e3)
+    process_accel: float = _rule(0.3, gt=0, max=1e3)
+    process_yaw_accel: float = _rule(1.0, gt=0, max=1e3)
+    object_process_accel: float = _rule(0.1, gt=0, max=1e3)
     meas_xy: float = _rule(0.01, gt=0, max=10)
     meas_theta: float = _rule(0.0175, gt=0, max=10)
+    command_tau: float = _rule(0.15, gt=0, max=10)
+    reacquire_after: int = _rule(5, min=1, max=100000)
+    object_arrested_accel: float = _rule(0.05, gt=0, max=1e3)
+    init_sigma_speed: float = _rule(0.5, gt=0, max=100)
+    init_sigma_yaw_rate: float = _rule(1.0, gt=0, max=100)
 
 
 @dataclass(frozen=True, kw_only=True)
