@@ -19,6 +19,8 @@ from controller.config import FleetConfig
 
 log = logging.getLogger(__name__)
 
+SIGMA_CAP = 999.0  # m or rad: a sigma this large means "unknown" on the wire (limit 1e3)
+
 
 @dataclass(frozen=True)
 class FleetView:
@@ -175,8 +177,8 @@ class ControllerNode:
     # -- the tick
     def view(self, now: float) -> FleetView:
         poses, vels, stale = self.est.robot_arrays(now)
-        obj = self.est.object_estimate(now)
-        pred = self.est.predict_object(now, self.cfg.approach.prediction_horizon)
+        obj = _known(self.est.object_estimate(now))
+        pred = _known(self.est.predict_object(now, self.cfg.approach.prediction_horizon))
         return FleetView(
             t=now,
             ids=self.ids,
@@ -226,8 +228,8 @@ class ControllerNode:
 
     def _publish_states(self, now: float, view: FleetView) -> None:
         for i, rid in enumerate(self.ids):
-            e = self.est.robot_estimate(rid, now)
-            if e is None or not getattr(e, "initialized", True):
+            e = _known(self.est.robot_estimate(rid, now))
+            if e is None:
                 continue
             self._state_pub[rid].put(
                 wire.RobotState(
@@ -246,7 +248,7 @@ class ControllerNode:
                     rejected=int(e.rejected),
                 )
             )
-        o = self.est.object_estimate(now)
+        o = _known(self.est.object_estimate(now))
         if o is not None:
             self._object_pub.put(
                 wire.ObjectState(
@@ -279,3 +281,10 @@ class ControllerNode:
             robots=robots,
             counters=dict(vars(self.counters)),
         )
+
+
+def _known(estimate: Any) -> Any:
+    """The estimate, or None before its first measurement."""
+    if estimate is None or not getattr(estimate, "initialized", True):
+        return None
+    return estimate

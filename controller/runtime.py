@@ -20,6 +20,7 @@ import numpy as np
 from controller import wire
 from controller.bus import Bus
 from controller.config import FleetConfig
+from controller.estimation import FleetEstimator
 from controller.node import ControllerNode, Mission
 from controller.recorder import McapRecorder
 from drivers.agent import Agent, AgentParams
@@ -44,19 +45,64 @@ def capabilities(robot) -> Capabilities:
 
 
 def make_hub(cfg: FleetConfig, gui: bool = False) -> SimHub:
-    """The stand-in world named by ``sim.backend`` with its seeded sensors."""
+    """The stand-in world named by ``sim.backend`` with its seeded sensors (sim-driven robots
+    only: a MAVLink robot reports its own pose through its vehicle)."""
     world = make_world(cfg, gui=gui)
     sensors = make_sensors(cfg)
-    return SimHub(world, sensors.robots, sensors.object, cfg.sim.timestep)
+    sim_ids = {r.id for r in cfg.robots if r.driver == "sim"}
+    robots = {rid: s for rid, s in sensors.robots.items() if rid in sim_ids}
+    return SimHub(world, robots, sensors.object, cfg.sim.timestep)
 
 
-def make_estimator(cfg: FleetConfig):
+def make_sim_drivers(cfg: FleetConfig, hub: SimHub, connect_timeout: float = 5.0):
+    """One connected driver per robot of a dry run, and the MAVLink vehicle emulators.
+
+    Sim robots get a SimDriver on the hub; MAVLink robots get the real MavlinkDriver talking
+    over loopback UDP to an emulator that the hub pumps after every physics step, all on sim time.
+    """
+    from drivers.mavlink import LinkPool, MavlinkDriver
+    from sim_backend.mavlink_vehicle import start_emulators
+
+    def clock() -> float:
+        return hub.t
+
+    connected: list[MavlinkDriver] = []
+
+    def idle(dt: float) -> None:
+        # at least one physics step, or time would stand still; and keep the links of robots
+        # already connected serviced (setpoint keepalive, heartbeats), as their agents would
+        hub.advance_to(hub.t + max(dt, hub.dt))
+        for d in connected:
+            d.health()
+
+    emulators = start_emulators(hub.world, cfg.robots, clock=clock)
+    if emulators:
+        hub.step_hooks.append(lambda t: [e.pump(t) for e in emulators])
+    pool = LinkPool()
+    drivers = []
     try:
-        from controller.estimation import FleetEstimator
-    except ImportError:  # pragma: no cover
-        from controller.raw_estimator import RawEstimator
+        for r in cfg.robots:
+            if r.driver == "mavlink":
+                drv = MavlinkDriver(r, clock=clock, idle=idle, pool=pool)
+            else:
+                drv = SimDriver(
+                    hub, r.id, capabilities(r), cfg.sim.pose_noise.xy, cfg.sim.pose_noise.theta
+                )
+            drv.connect(timeout=connect_timeout)
+            drivers.append(drv)
+            if isinstance(drv, MavlinkDriver):
+                connected.append(drv)
+    except BaseException:
+        for d in drivers:
+            d.close()
+        for e in emulators:
+            e.stop()
+        raise
+    return drivers, emulators
 
-        return RawEstimator(list(cfg.robot_ids), cfg.fleet.stale_after)
+
+def make_estimator(cfg: FleetConfig) -> FleetEstimator:
+    """Kalman filters for every robot and the object (``[estimation]``)."""
     return FleetEstimator(
         [(r.id, r.kind) for r in cfg.robots], cfg.estimation, cfg.fleet.stale_after
     )
@@ -163,15 +209,11 @@ class DryRun:
                 node = ControllerNode(
                     cfg, ctl_bus, self.mission, make_estimator(cfg), lossless_commands=True
                 )
-                agents = []
-                for r in cfg.robots:
-                    drv = SimDriver(
-                        hub, r.id, capabilities(r), cfg.sim.pose_noise.xy, cfg.sim.pose_noise.theta
-                    )
-                    drv.connect(timeout=1.0)
-                    agents.append(
-                        Agent(robot_bus, drv, AgentParams(r.id, cfg.fleet.name, cfg.fleet.cmd_ttl))
-                    )
+                drivers, emulators = make_sim_drivers(cfg, hub)
+                agents = [
+                    Agent(robot_bus, drv, AgentParams(r.id, cfg.fleet.name, cfg.fleet.cmd_ttl))
+                    for r, drv in zip(cfg.robots, drivers, strict=True)
+                ]
                 arrest_box = robot_bus.subscribe(
                     wire.key("plan", cfg.fleet.name, what="arrest"), wire.PlanEvent
                 )
@@ -205,6 +247,8 @@ class DryRun:
                     self.verdict.clamped_commands += a.counters.clamped
                     self.verdict.vy_dropped += a.counters.vy_dropped
                     a.close()
+                for e in emulators:
+                    e.stop()
                 self.verdict.missed_ticks = coord.counters.missed
                 out = node.last_output
                 result = {

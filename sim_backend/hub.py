@@ -8,6 +8,7 @@ tick. It knows nothing of the bus.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
@@ -53,6 +54,7 @@ class SimHub:
         self.dt = physics_dt
         self.robot_queues: dict[str, deque[Measurement]] = {r: deque() for r in robot_sensors}
         self.object_queue: deque[Measurement] = deque()
+        self.step_hooks: list[Callable[[float], None]] = []
         self._sample()
 
     @property
@@ -66,10 +68,13 @@ class SimHub:
         self.object_queue.extend(self.object_sensor.sample(t, self.world.object_pose()))
 
     def advance_to(self, t_end: float) -> None:
-        """Step physics until sim time reaches ``t_end``, sampling sensors after every step."""
+        """Step physics until sim time reaches ``t_end``, sampling sensors and running the step
+        hooks (e.g. MAVLink vehicle emulators) after every step."""
         while self.world.t + 0.5 * self.dt < t_end:
             self.world.step(self.dt)
             self._sample()
+            for hook in self.step_hooks:
+                hook(self.world.t)
 
     def take_robot(self, robot_id: str) -> list[Measurement]:
         q = self.robot_queues[robot_id]

@@ -54,9 +54,35 @@ def _sim_rig(backend: str, kind: str) -> Rig:
     return Rig(drv, advance, world.close, lambda: SimDriver(hub, "nobody", caps))
 
 
+def _mavlink_rig(kind: str) -> Rig:
+    """An emulated MAVLink rover on loopback UDP: px4 (holonomic) for omni, ardurover for diff."""
+    from drivers.mavlink import LinkPool, MavlinkDriver
+    from tests.test_mavlink import Lockstep, free_udp_port, robot
+    from tests.test_mavlink import make_config as mav_config
+
+    profile = "px4" if kind == "omni" else "ardurover"
+    cfg = mav_config([robot("r1", profile, free_udp_port(), 1, theta=0.3)])
+    ls = Lockstep(cfg)
+    ls.emulator(cfg.robots[0])
+    pool = LinkPool()
+    drv = MavlinkDriver(cfg.robots[0], clock=ls.clock, idle=ls.advance, pool=pool)
+    drv.connect(timeout=2.0)
+
+    def unreachable() -> RobotDriver:
+        other = mav_config([robot("r9", profile, free_udp_port(), 9)]).robots[0]
+        return MavlinkDriver(other, clock=ls.clock, idle=ls.advance, pool=pool)
+
+    def close() -> None:
+        drv.close()
+        ls.close()
+
+    return Rig(drv, ls.advance, close, unreachable)
+
+
 ADAPTERS: dict[str, Callable[[str], Rig]] = {
     "ideal": lambda kind: _sim_rig("ideal", kind),
     "pybullet": lambda kind: _sim_rig("pybullet", kind),
+    "mavlink": _mavlink_rig,
 }
 
 

@@ -51,3 +51,53 @@ def test_every_command_crosses_the_bus_and_is_logged(tmp_path):
     assert res["node"]["commands"] == len(cmds)
     assert res["bad_payloads"] == 0
     json.dumps(res)  # the summary is JSON-ready
+
+
+def mavlink_patch(port_a: int, port_b: int) -> dict:
+    return {
+        "sim": {"backend": "ideal"},
+        "robots": [
+            {**r, **extra}
+            for r, extra in zip(
+                base_robots(),
+                [
+                    {
+                        "driver": "mavlink",
+                        "profile": "px4",
+                        "url": f"udpin:127.0.0.1:{port_a}",
+                        "system_id": 1,
+                    },
+                    {},
+                    {
+                        "driver": "mavlink",
+                        "profile": "ardurover",
+                        "url": f"udpin:127.0.0.1:{port_b}",
+                        "system_id": 3,
+                    },
+                    {},
+                    {},
+                    {},
+                ],
+                strict=True,
+            )
+        ],
+    }
+
+
+def base_robots() -> list[dict]:
+    from tests.conftest import base_config_dict
+
+    return base_config_dict()["robots"]
+
+
+def test_mavlink_robots_run_the_same_job(tmp_path):
+    from tests.test_mavlink import free_udp_port
+
+    cfg = make_config(mavlink_patch(free_udp_port(), free_udp_port()))
+    assert [r.driver for r in cfg.robots][:3] == ["mavlink", "sim", "mavlink"]
+    res = run_goto(cfg, tmp_path / "m.mcap", max_time=25.0)
+    assert res["done"], res
+    assert res["missed_ticks"] == 0
+    recs = list(read_log(tmp_path / "m.mcap"))
+    mav_poses = [r for r in recs if r.topic == "fleet/lab/robot/r1/pose"]
+    assert len(mav_poses) > 100  # the MAVLink robot's poses crossed the bus
