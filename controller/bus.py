@@ -66,6 +66,10 @@ class Received:
     msg: wire.Message
 
 
+class BusError(ConnectionError):
+    """The zenoh session could not be opened (e.g. a client found nothing to connect to)."""
+
+
 class DecodeStats:
     """Counts payloads that did not decode, per key; logs the first of each burst."""
 
@@ -162,7 +166,15 @@ class Bus:
         self.stats = DecodeStats()
         self._handles: list[Any] = []
         conf = zenoh_config(section, mode=mode, listen=listen, connect=connect, lease_s=lease_s)
-        self.session = zenoh.open(conf)
+        try:
+            self.session = zenoh.open(conf)
+        except zenoh.ZError as exc:
+            where = list(connect if connect is not None else section.connect)
+            here = list(listen if listen is not None else section.listen)
+            raise BusError(
+                f"cannot open a zenoh {mode or section.mode} session (listen {here}, "
+                f"connect {where}): {str(exc).split(' at ')[0]}"
+            ) from exc
         self._closed = False
 
     # -- lifecycle

@@ -90,6 +90,7 @@ THETA = 2
 REJECT_EPISODE = 3  # consecutive rejections logged as a rejection episode (isolated: counted)
 MAX_COMMANDS = 24  # commands kept past the filter's timeline before it is time-updated
 MAX_SUBSTEP = 0.05  # s, longest step of the motion integration (a dropout is cut into these)
+MAX_GAP = 5.0  # s, longest gap ever integrated (older time is skipped: the track is stale)
 
 # Sigma points: alpha=1, kappa=0 gives non-negative weights (the covariance sum stays PSD).
 UKF_ALPHA, UKF_BETA, UKF_KAPPA = 1.0, 2.0, 0.0
@@ -654,9 +655,14 @@ class TrackFilter:
         return self._cmd_u[i] if i >= 0 else None
 
     def segments(self, t0: float, t1: float) -> list[Segment]:
-        """Piecewise-constant command segments covering (t0, t1]."""
+        """Piecewise-constant command segments covering (t0, t1].
+
+        A gap longer than ``MAX_GAP`` is cut to its last ``MAX_GAP`` seconds: such a track is
+        long stale, and integrating a day-long gap (a sender's clock far off ours) in 50 ms
+        steps would stall the control loop."""
         if t1 <= t0:
             return []
+        t0 = max(t0, t1 - MAX_GAP)
         if not self._cmd_t:
             return [(t1 - t0, None)]
         out: list[Segment] = []

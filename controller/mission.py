@@ -100,3 +100,13 @@ class GotoMission:
         cmds[view.stale | ~view.present] = 0.0
         done = bool(np.all(dist < self.tolerance))
         return MissionOutput(commands=cmds, phase="goto" if not done else "done", done=done)
+
+
+@dataclass
+class HoldMission:
+    """Keep every robot stopped (bring-up checks: poses flow, estop works); never ends."""
+
+    n: int
+
+    def step(self, view: FleetView) -> MissionOutput:
+        return MissionOutput(commands=np.zeros((self.n, 3)), phase="hold")

@@ -6,7 +6,7 @@ import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
-from controller.mission import GotoMission, RobotLimits
+from controller.mission import GotoMission, HoldMission, RobotLimits
 
 
 def staging_targets(cfg: FleetConfig, margin: float = 0.6) -> np.ndarray:
@@ -19,5 +19,9 @@ def staging_targets(cfg: FleetConfig, margin: float = 0.6) -> np.ndarray:
     return c + r * np.stack([np.cos(ang), np.sin(ang)], axis=1)
 
 
-def build_mission(cfg: FleetConfig):
+def build_mission(cfg: FleetConfig, kind: str = "capture"):
+    """The mission a config runs: ``capture`` (the whole job), ``stage`` (drive to a ring of
+    staging points around the object) or ``hold`` (everyone stopped)."""
+    if kind == "hold":
+        return HoldMission(len(cfg.robots))
     return GotoMission(staging_targets(cfg), RobotLimits.from_config(cfg.robots))

@@ -226,6 +226,12 @@ class ControllerNode:
         self.last_output = out
         return out
 
+    def hold(self, now: float) -> None:
+        """Command every robot to stop now (shutdown, mission end)."""
+        for rid in self.ids:
+            self._seq += 1
+            self._cmd_pub[rid].put(wire.Twist2D(t=now, seq=self._seq, ttl=self.cfg.fleet.cmd_ttl))
+
     def _publish_states(self, now: float, view: FleetView) -> None:
         for i, rid in enumerate(self.ids):
             e = _known(self.est.robot_estimate(rid, now))

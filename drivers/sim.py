@@ -21,7 +21,10 @@ class SimDriver:
         capabilities: Capabilities,
         sigma_xy: float = 0.0,
         sigma_theta: float = 0.0,
+        time_offset: float = 0.0,
     ) -> None:
+        """``time_offset`` (s) is added to sim time in pose stamps (e.g. the wall-clock start
+        time when the world runs in real time beside a lab daemon)."""
         self.hub = hub
         self.robot_id = robot_id
         self.capabilities = capabilities
@@ -29,6 +32,7 @@ class SimDriver:
         self._connected = False
         self._lost = ""
         self._seq = 0
+        self._offset = time_offset
 
     def connect(self, timeout: float) -> None:
         if self.robot_id not in self.hub.world.robot_ids:
@@ -51,7 +55,7 @@ class SimDriver:
             self._seq += 1
             out.append(
                 PoseMeasurement(
-                    t=t,
+                    t=t + self._offset,
                     seq=self._seq,
                     x=x,
                     y=y,

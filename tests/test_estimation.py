@@ -555,3 +555,20 @@ def test_push_reports_drive_the_arrested_object(filter_name: str) -> None:
     # fall inside the horizon, which no filter can know at the time).
     assert results[True] < 0.7 * results[False]
     assert results[True] < 0.02
+
+
+def test_a_huge_time_gap_does_not_stall_the_loop():
+    """A sender whose clock is a day off must not make one tick integrate a day in 50 ms steps."""
+    import time as _time
+
+    from controller.config import EstimationSection
+    from controller.estimation import FleetEstimator
+
+    est = FleetEstimator([("r1", "omni")], EstimationSection(), stale_after=0.3)
+    est.measure_robot("r1", 10.0, 1.0, 2.0, 0.0)
+    for k in range(30):
+        est.command("r1", 1.8e9 + 0.05 * k, 0.1, 0.0, 0.0)
+    t0 = _time.perf_counter()
+    poses, _, stale = est.robot_arrays(1.8e9 + 2.0)
+    assert _time.perf_counter() - t0 < 1.0
+    assert stale[0] and np.all(np.isfinite(poses[0]))

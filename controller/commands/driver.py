@@ -1,17 +1,39 @@
-"""`fleet driver`: not built yet (see the issues)."""
+"""``fleet driver ROBOT_ID [--config F] [--duration S]``: one robot's agent.
+
+Binds the robot's driver (``robots[].driver``) to the bus: commands in, poses out, liveliness,
+watchdog, e-stop. Runs on the robot's computer or beside the daemon, on the wall clock at
+``fleet.rate_hz`` (at least 20 Hz). A ``mavlink`` robot is the real vehicle at its url; a ``sim``
+robot runs alone in a real-time stand-in world of its own (bench-top bring-up without hardware).
+Exit 1 when the robot does not answer or its link is lost, 2 on bad config.
+"""
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
 
 from controller.commands import add_config_argument
 
 
 def add_arguments(parser, word: str) -> None:
+    parser.add_argument("robot_id", help="the robot's id in the config")
     add_config_argument(parser)
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
+    parser.add_argument("--connect-timeout", type=float, default=10.0, help="seconds")
 
 
 def run(args) -> int:
-    print("fleet: this command is not built yet", file=sys.stderr)
-    return 1
+    from controller.config import ConfigError, load_config
+    from controller.runtime import run_agent
+
+    cfg = load_config(args.config)
+    if args.robot_id not in cfg.robot_ids:
+        raise ConfigError(cfg.source, "robots", f"no robot {args.robot_id!r}; ids: {cfg.robot_ids}")
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    code, message = run_agent(cfg, args.robot_id, stop, args.duration, args.connect_timeout)
+    if message:
+        print(f"fleet driver {args.robot_id}: {message}", file=sys.stderr)
+    return code

@@ -1,0 +1,119 @@
+"""The lab path as separate processes: daemon, a robot agent, and the status/estop/resume tools."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from controller.recorder import read_log
+from tests.conftest import ROOT, base_config_dict, write_toml
+
+
+def fleet(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "controller.cli", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+    )
+
+
+def spawn(log_path, *args: str) -> subprocess.Popen:
+    """A fleet process writing to a file, so a chatty child never blocks on a full pipe."""
+    with open(log_path, "w") as out:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "controller.cli", *args],
+            cwd=ROOT,
+            env=dict(os.environ, PYTHONPATH=str(ROOT)),
+            stdout=out,
+            stderr=out,
+        )
+    proc.log_path = log_path  # type: ignore[attr-defined]
+    return proc
+
+
+@pytest.fixture
+def lab_config(tmp_path, port):
+    cfg = base_config_dict()
+    cfg["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
+    cfg["sim"]["backend"] = "ideal"
+    cfg["log"] = {"dir": str(tmp_path / "runs")}
+    return write_toml(tmp_path / "lab.toml", cfg)
+
+
+def status(cfg) -> dict:
+    proc = fleet("status", "--config", str(cfg), "--json", "--timeout", "2")
+    return json.loads(proc.stdout) if proc.stdout.strip() else {"ok": False}
+
+
+def test_daemon_agent_status_estop_resume(lab_config, tmp_path):
+    log = tmp_path / "daemon.mcap"
+    daemon = spawn(
+        tmp_path / "daemon.txt",
+        "daemon",
+        "--config",
+        str(lab_config),
+        "--mission",
+        "hold",
+        "--out",
+        str(log),
+    )
+    agent = spawn(tmp_path / "agent.txt", "driver", "r1", "--config", str(lab_config))
+    try:
+        deadline = time.monotonic() + 40
+        st = {"ok": False}
+        while time.monotonic() < deadline:  # handshake: the daemon reports r1 present
+            st = status(lab_config)
+            if st.get("ok") and any(r["id"] == "r1" and r["present"] for r in st["robots"]):
+                break
+        assert st.get("ok"), "the daemon never answered fleet status"
+        assert st["phase"] == "hold" and st["estop"] is False
+        assert st["counters"]["poses"] > 0  # r1's poses reach the daemon
+        est = fleet("estop", "--config", str(lab_config), "--json", "--reason", "test")
+        assert est.returncode == 0, est.stderr
+        assert json.loads(est.stdout)["confirmed"] is True
+        assert status(lab_config)["estop"] is True
+        res = fleet("resume", "--config", str(lab_config), "--json")
+        assert res.returncode == 0 and json.loads(res.stdout)["confirmed"] is True
+        assert status(lab_config)["estop"] is False
+    finally:
+        for p in (agent, daemon):
+            p.send_signal(signal.SIGTERM)
+        codes = []
+        for p in (agent, daemon):
+            try:
+                codes.append(p.wait(timeout=30))
+            except subprocess.TimeoutExpired:
+                p.kill()  # never leave a process behind
+                codes.append(p.wait())
+    assert codes == [0, 0], [open(p.log_path).read()[-2000:] for p in (agent, daemon)]
+    topics = {r.topic for r in read_log(log)}
+    assert "fleet/lab/robot/r1/pose" in topics and "fleet/lab/estop" in topics
+
+
+def test_status_without_daemon_exits_1(lab_config):
+    proc = fleet("status", "--config", str(lab_config), "--timeout", "0.5")
+    assert proc.returncode == 1 and "no daemon" in proc.stderr
+
+
+def test_driver_for_unanswering_mavlink_robot_exits_1(tmp_path, port):
+    from tests.test_mavlink import free_udp_port
+
+    cfg = base_config_dict()
+    cfg["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
+    udp = free_udp_port()
+    cfg["robots"][2].update(
+        driver="mavlink", profile="ardurover", url=f"udpin:127.0.0.1:{udp}", system_id=3
+    )
+    path = write_toml(tmp_path / "m.toml", cfg)
+    proc = fleet("driver", "r3", "--config", str(path), "--connect-timeout", "0.5")
+    assert proc.returncode == 1
+    assert f"udpin:127.0.0.1:{udp}" in proc.stderr and "system 3" in proc.stderr
