@@ -122,14 +122,13 @@ def _check_weights(wg: float, wh: float) -> None:
 
 
 def _search_object(
-    free: bytes,
+    h: list[float],
     layer: int,
     n_layers: int,
     toff: list[int],
     tcost: list[float],
     rcost: float,
     manip: float,
-    h: list[float],
     start_c: int,
     goal_c: int,
     wg: float,
@@ -140,14 +139,22 @@ def _search_object(
 ) -> tuple[list[int] | None, float, int, int, list[float], bool]:
     """Weighted A* with pathmax over states ``cell * N_MODES + mode`` (cell = k * layer + p).
 
-    Returns (states of the path or None, cost, expanded, generated, f trace, hit the limit).
+    ``h`` (s) per cell is inf on occupied cells and on cells that cannot reach the goal, so one
+    lookup both tests a cell and scores it. Returns (states of the path or None, cost, expanded,
+    generated, f trace, hit the limit).
     """
     big_m = N_MODES
+    # per mode: (cell offset, state offset, cost, new mode) of the 8 translations
     tmoves = []
     for m in range(big_m):
         tmoves.append(
             tuple(
-                (toff[d], tcost[d] + (0.0 if m in (d, MODE_START) else manip), d) for d in range(8)
+                (
+                    toff[d],
+                    toff[d] * big_m + d,
+                    tcost[d] + (0.0 if m in (d, MODE_START) else manip),
+                )
+                for d in range(8)
             )
         )
     rmove = [rcost + (0.0 if m in (MODE_ROTATE, MODE_START) else manip) for m in range(big_m)]
@@ -163,7 +170,7 @@ def _search_object(
             rot.append((up, dn))
 
     s0 = start_c * big_m + MODE_START
-    n_cells = len(free)
+    n_cells = len(h)
     # g per state, and per cell the best g over its modes: a state whose g exceeds its cell's
     # best by the manipulation cost or more is dominated (switching modes costs exactly that).
     gbest = [INF] * (n_cells * big_m)
@@ -194,48 +201,43 @@ def _search_object(
             return path[::-1], g, expanded, generated, ftrace, False
         if expanded >= max_expanded:
             return None, INF, expanded, generated, ftrace, True
-        for off, cost, d in tmoves[m]:
+        base = s - m
+        for off, soff, cost in tmoves[m]:
             c2 = c + off
-            if free[c2]:
+            h2 = h[c2]
+            if h2 < INF:
                 g2 = g + cost
-                s2 = c2 * big_m + d
+                s2 = base + soff
                 if g2 < gbest[s2]:
                     gm = gmin[c2]
-                    if g2 >= gm + manip:
-                        continue
-                    h2 = h[c2]
-                    if h2 == INF:
-                        continue
-                    gbest[s2] = g2
-                    if g2 < gm:
-                        gmin[c2] = g2
-                    parent[s2] = s
-                    f2 = wg * g2 + wh * h2
-                    if pathmax and f2 < f:
-                        f2 = f
-                    push(heap, (f2, h2, g2, s2))
-                    generated += 1
+                    if g2 < gm + manip:
+                        gbest[s2] = g2
+                        if g2 < gm:
+                            gmin[c2] = g2
+                        parent[s2] = s
+                        f2 = wg * g2 + wh * h2
+                        if pathmax and f2 < f:
+                            f2 = f
+                        push(heap, (f2, h2, g2, s2))
+                        generated += 1
         g2 = g + rmove[m]
         for off in rot[c // layer]:
             c2 = c + off
-            if free[c2]:
+            h2 = h[c2]
+            if h2 < INF:
                 s2 = c2 * big_m + MODE_ROTATE
                 if g2 < gbest[s2]:
                     gm = gmin[c2]
-                    if g2 >= gm + manip:
-                        continue
-                    h2 = h[c2]
-                    if h2 == INF:
-                        continue
-                    gbest[s2] = g2
-                    if g2 < gm:
-                        gmin[c2] = g2
-                    parent[s2] = s
-                    f2 = wg * g2 + wh * h2
-                    if pathmax and f2 < f:
-                        f2 = f
-                    push(heap, (f2, h2, g2, s2))
-                    generated += 1
+                    if g2 < gm + manip:
+                        gbest[s2] = g2
+                        if g2 < gm:
+                            gmin[c2] = g2
+                        parent[s2] = s
+                        f2 = wg * g2 + wh * h2
+                        if pathmax and f2 < f:
+                            f2 = f
+                        push(heap, (f2, h2, g2, s2))
+                        generated += 1
     return None, INF, expanded, generated, ftrace, False
 
 
@@ -421,20 +423,21 @@ def plan_route(
     dk = np.abs(np.arange(k_bins) - gc[0])
     dk = np.minimum(dk, k_bins - dk)
     hth = dk * step / params.yaw_rate
-    h = (hth[:, None, None] + hxy[None]).ravel().tolist()
+    h3 = hth[:, None, None] + hxy[None]
+    h3[free3 == 0] = INF
+    h = h3.ravel().tolist()
     toff = [int(dy * w + dx) for dx, dy in MOVES_8]
     tcost = [fr.resolution * math.hypot(dx, dy) / params.speed for dx, dy in MOVES_8]
     start_c = sc[0] * layer + (sc[1] + 1) * w + sc[2] + 1
     goal_c = gc[0] * layer + (gc[1] + 1) * w + gc[2] + 1
     path, cost, expanded, generated, ftrace, limited = _search_object(
-        free3.tobytes(),
+        h,
         layer,
         k_bins,
         toff,
         tcost,
         step / params.yaw_rate,
         params.manipulation_cost,
-        h,
         start_c,
         goal_c,
         wg,
