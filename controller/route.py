@@ -242,7 +242,6 @@ def _search_object(
 
 
 def _search_grid(
-    free: bytes,
     moves: list[tuple[int, float]],
     h: list[float],
     start: int,
@@ -253,8 +252,11 @@ def _search_grid(
     max_expanded: int,
     trace: bool,
 ) -> tuple[list[int] | None, float, int, int, list[float], bool]:
-    """Weighted A* with pathmax over padded flat cells of a 2-D grid (the robot's search)."""
-    n = len(free)
+    """Weighted A* with pathmax over padded flat cells of a 2-D grid (the robot's search).
+
+    ``h`` (s) is inf on occupied cells, so one lookup both tests a cell and scores it.
+    """
+    n = len(h)
     gbest = [INF] * n
     parent = [-1] * n
     gbest[start] = 0.0
@@ -280,12 +282,10 @@ def _search_grid(
             return None, INF, expanded, generated, ftrace, True
         for off, cost in moves:
             t = s + off
-            if free[t]:
+            h2 = h[t]
+            if h2 < INF:
                 g2 = g + cost
                 if g2 < gbest[t]:
-                    h2 = h[t]
-                    if h2 == INF:
-                        continue
                     gbest[t] = g2
                     parent[t] = s
                     f2 = wg * g2 + wh * h2
@@ -499,7 +499,7 @@ def plan_route(
 class RobotRoadmap:
     """A robot disc's 2-D C-space prepared once for many searches (the approach planner's use).
 
-    Holds the padded free mask as bytes and the move table; :meth:`plan` runs one search.
+    Holds the padded free mask and the move table; :meth:`plan` runs one search.
     Heuristics: "euclid" (admissible), "wavefront" (exact, admissible), "skeleton" (not).
     Moves cost distance / ``speed`` (s); there is no manipulation cost for a lone robot.
     """
@@ -513,7 +513,7 @@ class RobotRoadmap:
         self._w = fr.nx + 2
         pad = np.zeros((fr.ny + 2, fr.nx + 2), dtype=np.uint8)
         pad[1:-1, 1:-1] = ~cspace.occupied
-        self._free = pad.tobytes()
+        self._free = pad.astype(bool)
         self._moves = [
             (int(dy * self._w + dx), fr.resolution * math.hypot(dx, dy) / self.speed)
             for dx, dy in MOVES_8
@@ -581,8 +581,8 @@ class RobotRoadmap:
         hpad[1:-1, 1:-1] = np.asarray(h_table, dtype=float) / self.speed
         start = (sc[0] + 1) * w + sc[1] + 1
         goal = (gc[0] + 1) * w + gc[1] + 1
+        hpad[~self._free] = INF
         path, cost, expanded, generated, ftrace, limited = _search_grid(
-            self._free,
             self._moves,
             hpad.ravel().tolist(),
             start,
