@@ -15,11 +15,14 @@ translation direction, or switching between translating and turning): the robots
 object must re-arrange (Yamashita puts the manipulation constraints into the cost function). To
 keep that cost exact the search state is (cell, heading, last move), 10 "modes" per cell.
 
-The heuristic h (s) is a distance table from :mod:`controller.heuristics` divided by ``speed``,
-plus the smallest heading change to the goal divided by ``yaw_rate``. Translations and rotations
-are separate moves, so the sum of two lower bounds is a lower bound: with Euclid or wavefront the
-heuristic is admissible and consistent and ``w_g = w_h = 1`` returns the optimal cost; the
-skeleton wavefront is not admissible.
+The heuristic h (s) is a distance table from :mod:`controller.heuristics` divided by ``speed``
+(the paper's potential normalized by the velocity), plus the smallest heading change to the goal
+divided by ``yaw_rate``, plus ``manipulation_cost`` times the fewest changes of travel direction
+still needed from this cell and mode (a link distance, :func:`controller.heuristics.turn_bounds`;
+``turn_bound=False`` leaves it out). Translation, rotation and manipulation are separate cost
+terms, so the sum of three lower bounds is a lower bound: with Euclid or wavefront the heuristic
+is admissible and ``w_g = w_h = 1`` returns the optimal cost (the mode term can make it
+inconsistent; pathmax and re-opening handle that). The skeleton wavefront is not admissible.
 
 Unreachable goals are answers, not errors: the C-space's connected components are checked first
 (exactly the planner's move graph), so an enclosed goal returns ``no_path`` at once.
@@ -123,6 +126,7 @@ def _check_weights(wg: float, wh: float) -> None:
 
 def _search_object(
     h: list[float],
+    hmode: list[list[float]],
     layer: int,
     n_layers: int,
     toff: list[int],
@@ -140,8 +144,9 @@ def _search_object(
     """Weighted A* with pathmax over states ``cell * N_MODES + mode`` (cell = k * layer + p).
 
     ``h`` (s) per cell is inf on occupied cells and on cells that cannot reach the goal, so one
-    lookup both tests a cell and scores it. Returns (states of the path or None, cost, expanded,
-    generated, f trace, hit the limit).
+    lookup both tests a cell and scores it; ``hmode[m]`` (s) per (x, y) cell of a layer adds the
+    mode-dependent part (the manipulation bound) for a state entered in mode m.
+    Returns (states of the path or None, cost, expanded, generated, f trace, hit the limit).
     """
     big_m = N_MODES
     # per mode: (cell offset, state offset, cost, new mode) of the 8 translations
@@ -153,6 +158,7 @@ def _search_object(
                     toff[d],
                     toff[d] * big_m + d,
                     tcost[d] + (0.0 if m in (d, MODE_START) else manip),
+                    hmode[d],
                 )
                 for d in range(8)
             )
@@ -178,7 +184,8 @@ def _search_object(
     parent: dict[int, int] = {s0: -1}
     gbest[s0] = 0.0
     gmin[start_c] = 0.0
-    h0 = h[start_c]
+    h0 = h[start_c] + hmode[MODE_START][start_c % layer]
+    hrot = hmode[MODE_ROTATE]
     heap: list[tuple[float, float, float, int]] = [(wh * h0, h0, 0.0, s0)]
     push, pop = heapq.heappush, heapq.heappop
     ftrace: list[float] = []
@@ -202,10 +209,12 @@ def _search_object(
         if expanded >= max_expanded:
             return None, INF, expanded, generated, ftrace, True
         base = s - m
-        for off, soff, cost in tmoves[m]:
+        k, p = divmod(c, layer)
+        for off, soff, cost, hm in tmoves[m]:
             c2 = c + off
             h2 = h[c2]
             if h2 < INF:
+                h2 += hm[p + off]
                 g2 = g + cost
                 s2 = base + soff
                 if g2 < gbest[s2]:
@@ -221,10 +230,12 @@ def _search_object(
                         push(heap, (f2, h2, g2, s2))
                         generated += 1
         g2 = g + rmove[m]
-        for off in rot[c // layer]:
+        hr = hrot[p]
+        for off in rot[k]:
             c2 = c + off
             h2 = h[c2]
             if h2 < INF:
+                h2 += hr
                 s2 = c2 * big_m + MODE_ROTATE
                 if g2 < gbest[s2]:
                     gm = gmin[c2]
@@ -329,6 +340,34 @@ def _lengths(wp: FloatArray) -> tuple[float, float]:
 # --------------------------------------------------------------------------- object route
 
 
+def _manipulation_bound(
+    cspace: ObjectCSpace, goal_cell: tuple[int, int], manip: float
+) -> list[list[float]]:
+    """Per mode, per padded (x, y) cell: a lower bound (s) on the manipulation cost still to pay.
+
+    Translation mode d: ``manip`` times the fewest direction changes when the last move was d
+    (:func:`controller.heuristics.turn_bounds` over the projected free space). Rotating: one
+    change to start translating again, plus the fewest changes after it, unless already at the
+    goal cell. Start: the fewest changes with the first direction free. Each mode change is
+    charged ``manip`` and every change of translation direction needs at least one, so the
+    bound is admissible.
+    """
+    fr = cspace.frame
+    w, hh = fr.nx + 2, fr.ny + 2
+    out: list[list[float]] = []
+    if manip <= 0:
+        zero = [0.0] * (w * hh)
+        return [zero] * N_MODES
+    t, v = heuristics.turn_bounds(cspace.free.any(axis=0), goal_cell, MOVES_8)
+    rot = 1.0 + v
+    rot[goal_cell] = 0.0
+    for layer_val in [*t, rot, v]:
+        pad = np.full((hh, w), INF)
+        pad[1:-1, 1:-1] = manip * layer_val
+        out.append(pad.ravel().tolist())
+    return out
+
+
 def object_heuristic(cspace: ObjectCSpace, kind: str, goal_cell: tuple[int, int]) -> FloatArray:
     """The named heuristic's (x, y) distance table (m) over the projected free space.
 
@@ -351,6 +390,7 @@ def plan_route(
     cspace: ObjectCSpace | None = None,
     h_table: FloatArray | None = None,
     pathmax: bool = True,
+    turn_bound: bool = True,
     max_expanded: int = 20_000_000,
     trace: bool = False,
 ) -> RouteResult:
@@ -362,7 +402,8 @@ def plan_route(
     manipulation_cost, subgoal_spacing). ``cspace`` reuses a C-space from
     :func:`build_object_cspace` (then bounds, obstacles, footprint and radius are not used);
     ``h_table`` reuses an (x, y) heuristic table (m) from :func:`object_heuristic` for this goal.
-    ``pathmax=False`` turns Eq. 2 off (for tests); ``trace`` records f of each expansion.
+    ``pathmax=False`` turns Eq. 2 off (for tests); ``turn_bound=False`` drops the manipulation
+    bound from h (the bare paper potentials); ``trace`` records f of each expansion.
     Never raises for an unreachable goal: the result's status is "no_path" with a reason.
     """
     kind, wg, wh = params.heuristic, float(params.wg), float(params.wh)
@@ -430,8 +471,12 @@ def plan_route(
     tcost = [fr.resolution * math.hypot(dx, dy) / params.speed for dx, dy in MOVES_8]
     start_c = sc[0] * layer + (sc[1] + 1) * w + sc[2] + 1
     goal_c = gc[0] * layer + (gc[1] + 1) * w + gc[2] + 1
+    hmode = _manipulation_bound(
+        cspace, (gc[1], gc[2]), params.manipulation_cost if turn_bound else 0.0
+    )
     path, cost, expanded, generated, ftrace, limited = _search_object(
         h,
+        hmode,
         layer,
         k_bins,
         toff,

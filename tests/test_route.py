@@ -114,6 +114,41 @@ def test_heuristic_ordering_and_skeleton_is_a_thin_midline():
     assert set(np.nonzero(line[:, 10:30])[0]) <= {5}
 
 
+def test_turn_bounds_match_a_brute_force_link_distance():
+    from collections import deque
+
+    from controller.cspace import MOVES_8
+
+    rng = np.random.default_rng(5)
+    free = rng.random((9, 12)) > 0.25
+    goal = (4, 6)
+    free[goal] = True
+    t, v = heuristics.turn_bounds(free, goal, MOVES_8)
+    ny, nx = free.shape
+    # 0-1 BFS backwards is fiddly; search forward from every state instead (tiny grid)
+    for d in range(8):
+        for iy, ix in np.argwhere(free):
+            best = {(iy, ix, d): 0}
+            dq = deque([(0, iy, ix, d)])
+            found = math.inf
+            while dq:
+                k, y, x, dd = dq.popleft()
+                if k > best.get((y, x, dd), math.inf):
+                    continue
+                if (y, x) == goal:
+                    found = min(found, k)
+                    continue
+                for d2, (dx, dy) in enumerate(MOVES_8):
+                    y2, x2 = y + dy, x + dx
+                    if 0 <= y2 < ny and 0 <= x2 < nx and free[y2, x2]:
+                        k2 = k + (d2 != dd)
+                        if k2 < best.get((y2, x2, d2), math.inf):
+                            best[(y2, x2, d2)] = k2
+                            (dq.appendleft if k2 == k else dq.append)((k2, y2, x2, d2))
+            assert t[d, iy, ix] == found, (d, iy, ix)
+    assert np.array_equal(v, t.min(axis=0))
+
+
 # --------------------------------------------------------------------------- the search
 
 
@@ -193,6 +228,9 @@ def test_admissible_astar_cost_equals_dijkstra(kind):
         None, None, None, None, start, goal, dataclasses.replace(base, wg=0.0), cspace=cs
     )
     assert greedy.ok and greedy.cost >= dijkstra.cost - 1e-9
+    bare = plan_route(None, None, None, None, start, goal, base, cspace=cs, turn_bound=False)
+    assert bare.cost == pytest.approx(dijkstra.cost, rel=1e-12)
+    assert astar.expanded < bare.expanded < dijkstra.expanded
 
 
 def test_pathmax_keeps_f_non_decreasing_with_an_inconsistent_heuristic():
