@@ -176,11 +176,10 @@ def _search_object(
             rot.append((up, dn))
 
     s0 = start_c * big_m + MODE_START
-    n_cells = len(h)
     # g per state, and per cell the best g over its modes: a state whose g exceeds its cell's
     # best by the manipulation cost or more is dominated (switching modes costs exactly that).
-    gbest = [INF] * (n_cells * big_m)
-    gmin = [INF] * n_cells
+    gbest: dict[int, float] = {}
+    gmin: dict[int, float] = {}
     parent: dict[int, int] = {s0: -1}
     gbest[s0] = 0.0
     gmin[start_c] = 0.0
@@ -217,8 +216,8 @@ def _search_object(
                 h2 += hm[p + off]
                 g2 = g + cost
                 s2 = base + soff
-                if g2 < gbest[s2]:
-                    gm = gmin[c2]
+                if g2 < gbest.get(s2, INF):
+                    gm = gmin.get(c2, INF)
                     if g2 < gm + manip:
                         gbest[s2] = g2
                         if g2 < gm:
@@ -237,8 +236,8 @@ def _search_object(
             if h2 < INF:
                 h2 += hr
                 s2 = c2 * big_m + MODE_ROTATE
-                if g2 < gbest[s2]:
-                    gm = gmin[c2]
+                if g2 < gbest.get(s2, INF):
+                    gm = gmin.get(c2, INF)
                     if g2 < gm + manip:
                         gbest[s2] = g2
                         if g2 < gm:
