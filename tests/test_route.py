@@ -175,6 +175,25 @@ def test_route_goes_round_the_wall_and_accounts_its_cost():
     expect = dist.sum() / p.speed + turn.sum() / p.yaw_rate + res.manipulations * 1.5
     assert res.cost == pytest.approx(expect, abs=1e-6)
     assert len(inner) > 10
+    # subgoals (with no spacing cuts) are exactly where the kind of move changes
+    far = plan_route(
+        BOUNDS, obstacles, L_SHAPE, RADIUS, (0.8, 0.8, 0.0), (3.2, 0.8, 1.0),
+        dataclasses.replace(p, subgoal_spacing=100.0),
+    )  # fmt: skip
+    kinds = [
+        (round(float(dx), 6), round(float(dy), 6)) if abs(dt) < 1e-9 else "turn"
+        for dx, dy, dt in steps
+    ]
+    changes = [i for i in range(1, len(kinds)) if kinds[i] != kinds[i - 1]]
+    want = np.vstack([snapped[changes], snapped[-1:]])
+    got = np.array(
+        [
+            [*cs.frame.center(*cs.cell_of(q)[1:]), cs.heading_of(cs.cell_of(q)[0])]
+            for q in far.subgoals
+        ]
+    )
+    assert np.allclose(got, want)
+    assert res.manipulations == len(changes)  # every change after the first move is paid for
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
