@@ -84,9 +84,6 @@ def wavefront(
     return out
 
 
-_ZS_LUT: tuple[BoolArray, BoolArray] | None = None
-
-
 def _zhang_suen_luts() -> tuple[BoolArray, BoolArray]:
     codes = np.arange(256)
     b = (codes[:, None] >> np.arange(8)) & 1  # P2..P9 = N, NE, E, SE, S, SW, W, NW
