@@ -1,17 +1,164 @@
-"""`fleet plan_route`: not built yet (see the issues)."""
+"""``fleet plan route``: the object's global route (weighted A* with pathmax), offline.
+
+``fleet plan route [--config F] [--map NAME|F --goal N] [--heuristic euclid|wavefront|skeleton]
+[--wg W] [--wh W] [--json] [--plot F.png]``
+
+Without ``--map`` the scenario is the config's world, obstacles, object start and goal, and the
+fleet's largest robot radius. ``--map`` plans on a route map instead (a name shipped in
+``controller/maps/``, e.g. ``yamashita``, or a path) toward its goal ``--goal`` (number or name).
+The search parameters come from the config's ``[route]`` section (defaults when ``--map`` is used
+without ``--config``); ``--heuristic``, ``--wg`` and ``--wh`` override them.
+Exit status: 0 a route, 1 no path, 2 bad input.
+"""
 
 from __future__ import annotations
 
 import sys
+from pathlib import Path
+from typing import Any
 
-from controller.commands import add_config_argument
+from controller.commands import DEFAULT_CONFIG
+
+HEURISTIC_CHOICES = ("euclid", "wavefront", "skeleton")
+JSON_FIELDS = (
+    "status",
+    "waypoints",
+    "subgoals",
+    "cost",
+    "length_m",
+    "expanded",
+    "seconds",
+    "heuristic",
+    "wg",
+    "wh",
+)
 
 
 def add_arguments(parser, word: str) -> None:
-    add_config_argument(parser)
+    parser.add_argument("--config", default=None, help=f"fleet config (default: {DEFAULT_CONFIG})")
+    parser.add_argument("--map", default=None, help="a route map: shipped name or TOML path")
+    parser.add_argument("--goal", default="4", help="goal of the --map (number or name)")
+    parser.add_argument("--heuristic", choices=HEURISTIC_CHOICES, default=None)
+    parser.add_argument("--wg", type=float, choices=(0.0, 1.0), default=None, help="0 or 1")
+    parser.add_argument("--wh", type=float, default=None, help="heuristic weight >= 0")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--plot", default=None, help="write a figure (PNG)")
+
+
+def maps_dir() -> Path:
+    """Where the shipped route maps live."""
+    return Path(__file__).resolve().parent.parent / "maps"
+
+
+def load_route_map(name_or_path: str):
+    """Read a route map by shipped name or path (raises ValueError naming the file)."""
+    import tomllib
+
+    from controller.route import parse_route_map
+
+    p = Path(name_or_path)
+    if not p.suffix:
+        p = maps_dir() / f"{name_or_path}.toml"
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as exc:
+        known = sorted(q.stem for q in maps_dir().glob("*.toml"))
+        raise ValueError(
+            f"{p}: cannot read ({exc.strerror or exc}); shipped maps: {known}"
+        ) from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{p}: not valid TOML: {exc}") from exc
+    return parse_route_map(data, str(p))
 
 
 def run(args) -> int:
-    print("fleet: this command is not built yet", file=sys.stderr)
-    return 1
+    import dataclasses
+    import time
+
+    from controller.cli import emit_json
+    from controller.config import RouteSection, load_config
+    from controller.route import plan_route
+
+    params = RouteSection()
+    if args.config is not None or args.map is None:
+        cfg = load_config(args.config or DEFAULT_CONFIG)
+        params = cfg.route
+    if args.wh is not None and not args.wh >= 0:
+        print(f"fleet plan route: --wh: expected >= 0, got {args.wh}", file=sys.stderr)
+        return 2
+    over: dict[str, Any] = {}
+    if args.heuristic is not None:
+        over["heuristic"] = args.heuristic
+    if args.wg is not None:
+        over["wg"] = args.wg
+    if args.wh is not None:
+        over["wh"] = args.wh
+    params = dataclasses.replace(params, **over)
+    if args.map is not None:
+        try:
+            rmap = load_route_map(args.map)
+            goal = rmap.goal(args.goal)
+        except (ValueError, KeyError) as exc:
+            print(f"fleet plan route: {exc}", file=sys.stderr)
+            return 2
+        bounds, obstacles = rmap.bounds, list(rmap.obstacles)
+        footprint, radius, start = rmap.footprint, rmap.robot_radius, rmap.start
+    else:
+        bounds, obstacles = cfg.bounds_array(), cfg.obstacle_polygons()
+        footprint, radius = cfg.object_polygon(), cfg.max_robot_radius
+        start, goal = cfg.object.start, cfg.object.goal
+    print(
+        f"fleet plan route: {params.heuristic}, wg={params.wg}, wh={params.wh}, "
+        f"{params.resolution} m x {params.heading_bins} headings",
+        file=sys.stderr,
+    )
+    t0 = time.perf_counter()
+    res = plan_route(bounds, obstacles, footprint, radius, start, goal, params)
+    seconds = time.perf_counter() - t0
+    out = res.to_dict()
+    out["seconds"] = seconds
+    if args.json:
+        emit_json({k: out[k] for k in JSON_FIELDS})
+    elif res.ok:
+        print(
+            f"route: cost {res.cost:.1f} s, {res.length_m:.2f} m, {len(res.subgoals)} subgoals, "
+            f"{res.manipulations} re-arrangements, N_open {res.expanded}, {seconds:.2f} s"
+        )
+    if not res.ok:
+        print(f"fleet plan route: no path: {res.reason}", file=sys.stderr)
+    if args.plot:
+        _plot(args.plot, bounds, obstacles, footprint, start, goal, res)
+    return 0 if res.ok else 1
+
+
+def _plot(path: str, bounds, obstacles, footprint, start, goal, res) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from controller import geometry
+
+    fig, ax = plt.subplots(figsize=(7, 7))
+    b = np.asarray(bounds, dtype=float).reshape(2, 2)
+    ax.plot(b[[0, 1, 1, 0, 0], 0], b[[0, 0, 1, 1, 0], 1], "k-", lw=1)
+    for o in obstacles:
+        o = np.asarray(o)
+        ax.fill(o[:, 0], o[:, 1], color="0.4")
+    for pose, colour in ((start, "tab:green"), (goal, "tab:red")):
+        q = geometry.transform(footprint, pose)
+        ax.fill(q[:, 0], q[:, 1], color=colour, alpha=0.5)
+    if res.ok:
+        wp = res.waypoints
+        ax.plot(wp[:, 0], wp[:, 1], "-", color="tab:blue", lw=1.5, label="route")
+        for sg in res.subgoals:
+            q = geometry.transform(footprint, sg)
+            ax.plot(
+                np.r_[q[:, 0], q[0, 0]], np.r_[q[:, 1], q[0, 1]], "-", color="tab:orange", lw=0.8
+            )
+        ax.legend(loc="upper right")
+    ax.set_aspect("equal")
+    ax.set_title(f"{res.status}: {res.heuristic}, wg={res.wg}, wh={res.wh}, N_open={res.expanded}")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
