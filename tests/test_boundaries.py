@@ -18,7 +18,7 @@ from tests.conftest import ROOT
 
 IO_LIBS = {"zenoh", "pybullet", "pybullet_data", "pymavlink", "mcap"}
 CLOCK_LIBS = {"time", "datetime"}
-EDGE = {"bus", "recorder", "replay", "runtime", "cli", "lockstep", "daemon_loop"}
+EDGE = {"bus", "recorder", "replay", "runtime", "cli", "ratekeeper"}
 COMPOSITION_ROOT = {"runtime"}
 
 
