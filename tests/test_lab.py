@@ -70,13 +70,20 @@ def test_daemon_agent_status_estop_resume(lab_config, tmp_path):
     try:
         deadline = time.monotonic() + 40
         st = {"ok": False}
-        while time.monotonic() < deadline:  # handshake: the daemon reports r1 present
+        while time.monotonic() < deadline:
+            # handshake: the daemon reports r1 present and has received its poses (the
+            # liveliness token can arrive before the first pose sample)
             st = status(lab_config)
-            if st.get("ok") and any(r["id"] == "r1" and r["present"] for r in st["robots"]):
+            if (
+                st.get("ok")
+                and any(r["id"] == "r1" and r["present"] for r in st["robots"])
+                and st["counters"]["poses"] > 0
+            ):
                 break
         assert st.get("ok"), "the daemon never answered fleet status"
         assert st["phase"] == "hold" and st["estop"] is False
-        assert st["counters"]["poses"] > 0  # r1's poses reach the daemon
+        assert any(r["id"] == "r1" and r["present"] for r in st["robots"])
+        assert st["counters"]["poses"] > 0, st  # r1's poses reach the daemon
         est = fleet("estop", "--config", str(lab_config), "--json", "--reason", "test")
         assert est.returncode == 0, est.stderr
         assert json.loads(est.stdout)["confirmed"] is True
