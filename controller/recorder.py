@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 from mcap.exceptions import McapError
-from mcap.records import Channel, Message, Schema
+from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 from zstandard import ZstdError as zstd_error
@@ -32,6 +32,7 @@ from controller import wire
 log = logging.getLogger(__name__)
 
 PROFILE = "fleet"
+_META = object()  # queue tag of a metadata record
 
 
 @dataclass(frozen=True)
@@ -68,7 +69,7 @@ class McapRecorder:
         self._writer = Writer(self._stream, compression=CompressionType.ZSTD)
         self._writer.start(profile=PROFILE, library="fleet-controller")
         self._writer.flush()
-        self._q: queue.Queue[tuple[str, bytes, float] | None] = queue.Queue()
+        self._q: queue.Queue[tuple[Any, ...] | None] = queue.Queue()
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self.written = 0
@@ -83,6 +84,11 @@ class McapRecorder:
     def record(self, key: str, msg: wire.Message, recv_time: float | None = None) -> None:
         """Record a message that did not come over the bus (e.g. the run summary)."""
         self.on_sample(key, wire.encode(msg), time.time() if recv_time is None else recv_time)
+
+    def metadata(self, name: str, data: dict[str, str]) -> None:
+        """An MCAP metadata record (e.g. the run's config), written in order with the messages,
+        so a file cut by a crash still carries it."""
+        self._q.put((_META, name, {str(k): str(v) for k, v in data.items()}))
 
     def _channel(self, key: str) -> int:
         ch = self._channels.get(key)
@@ -128,7 +134,9 @@ class McapRecorder:
                 item = ()  # type: ignore[assignment]
             if item is None:
                 break
-            if item:
+            if item and item[0] is _META:
+                self._writer.add_metadata(item[1], item[2])
+            elif item:
                 try:
                     self._write(*item)
                 except Exception:  # noqa: BLE001 - never lose the thread
@@ -182,3 +190,35 @@ def read_log(path: str | Path, topics: list[str] | None = None) -> Iterator[LogR
                     )
         except (McapError, EOFError, struct.error, zstd_error) as exc:
             log.info("%s ends early (%s): read up to the cut", path, type(exc).__name__)
+
+
+def config_metadata(cfg: Any, mode: str) -> dict[str, str]:
+    """The ``fleet.config`` metadata record of a run: the config as JSON, its file, the mode."""
+    from controller.config import config_to_dict
+
+    data = config_to_dict(cfg)
+    data.pop("source", None)
+    return {"source": cfg.source, "mode": mode, "config": json.dumps(data)}
+
+
+def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
+    """The metadata records of an MCAP file by name (a crash-cut file: those before the cut)."""
+    out: dict[str, dict[str, str]] = {}
+    with open(path, "rb") as f:
+        try:
+            for rec in StreamReader(f).records:
+                if isinstance(rec, Metadata):
+                    out[rec.name] = dict(rec.metadata)
+        except (McapError, EOFError, struct.error, zstd_error) as exc:
+            log.info("%s ends early (%s): read up to the cut", path, type(exc).__name__)
+    return out
+
+
+def log_is_complete(path: str | Path) -> bool:
+    """Whether the file was finished (footer and closing magic present): False after a crash."""
+    with open(path, "rb") as f:
+        f.seek(0, 2)
+        if f.tell() < 8 + 37:
+            return False
+        f.seek(-8, 2)
+        return f.read(8) == b"\x89MCAP0\r\n"

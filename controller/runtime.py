@@ -22,7 +22,7 @@ from controller.bus import Bus
 from controller.config import FleetConfig
 from controller.estimation import FleetEstimator
 from controller.node import ControllerNode, Mission
-from controller.recorder import McapRecorder
+from controller.recorder import McapRecorder, config_metadata
 from drivers.agent import Agent, AgentParams
 from drivers.base import Capabilities
 from drivers.lockstep import LockstepCoordinator
@@ -192,6 +192,7 @@ class DryRun:
         hub = make_hub(cfg, self.gui)
         world = hub.world
         recorder = McapRecorder(self.out, cfg.fleet.name, cfg.log.flush_interval)
+        recorder.metadata("fleet.config", config_metadata(cfg, f"run/{cfg.sim.backend}"))
         arrested_at: list[float] = []
         result: dict[str, Any] = {}
         try:

@@ -40,7 +40,7 @@ def run(args) -> int:
     from controller.missions import build_mission
     from controller.node import ControllerNode
     from controller.ratekeeper import Ratekeeper
-    from controller.recorder import McapRecorder
+    from controller.recorder import McapRecorder, config_metadata
     from controller.runtime import make_estimator
 
     cfg = load_config(args.config)
@@ -50,6 +50,7 @@ def run(args) -> int:
         signal.signal(sig, lambda *_: stop.set())
     mission = build_mission(cfg, args.mission)
     recorder = McapRecorder(out, cfg.fleet.name, cfg.log.flush_interval)
+    recorder.metadata("fleet.config", config_metadata(cfg, f"daemon/{args.mission}"))
     status = 0
     try:
         with Bus(cfg.zenoh, cfg.fleet.name) as bus:

@@ -1,0 +1,313 @@
+"""Replay of a run's MCAP log: metrics, plots and re-publication on the bus (the I/O edge).
+
+``load_run`` reads a log (a crash-cut one up to the cut) into tracks and events; ``metrics``
+turns them into the ``fleet replay --json`` object with the pure functions of
+``controller.metrics``; ``plot_run`` draws PNGs; ``republish`` plays the messages back on a
+zenoh bus with their original spacing (scaled by ``speed``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections import Counter, defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controller import geometry, metrics, wire
+from controller.config import ConfigError, FleetConfig, parse_config
+from controller.recorder import log_is_complete, read_log, read_metadata
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RunLog:
+    """What a log holds, sorted into tracks (rows t, x, y, theta) and events."""
+
+    path: Path
+    complete: bool
+    fleet: str | None = None
+    config: FleetConfig | None = None
+    mode: str = ""
+    topics: Counter = field(default_factory=Counter)
+    stamps: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
+    undecodable: int = 0
+    measured: dict[str, list] = field(default_factory=lambda: defaultdict(list))
+    estimated: dict[str, list] = field(default_factory=lambda: defaultdict(list))
+    truth: dict[str, list] = field(default_factory=lambda: defaultdict(list))
+    commands: dict[str, list] = field(default_factory=lambda: defaultdict(list))
+    stale: dict[str, int] = field(default_factory=Counter)
+    object_measured: list = field(default_factory=list)
+    object_estimated: list = field(default_factory=list)
+    object_truth: list = field(default_factory=list)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    robot_events: list[dict[str, Any]] = field(default_factory=list)
+    estops: list[dict[str, Any]] = field(default_factory=list)
+
+
+def load_run(path: str | Path) -> RunLog:
+    """Read a log into a :class:`RunLog`. Messages that do not decode are counted, not fatal."""
+    path = Path(path)
+    run = RunLog(path=path, complete=log_is_complete(path))
+    meta = read_metadata(path).get("fleet.config")
+    if meta:
+        run.mode = meta.get("mode", "")
+        try:
+            run.config = parse_config(json.loads(meta["config"]), meta.get("source", ""))
+        except (ConfigError, ValueError, KeyError) as exc:
+            log.warning("%s: the recorded config does not load: %s", path, exc)
+        else:
+            run.fleet = run.config.fleet.name
+    for rec in read_log(path):
+        parts = rec.topic.split("/")
+        if run.fleet is None and len(parts) > 2 and parts[0] == "fleet":
+            run.fleet = parts[1]
+        run.topics[rec.topic] += 1
+        try:
+            msg = rec.message()
+        except wire.WireError:
+            run.undecodable += 1
+            continue
+        if msg is None:
+            continue
+        run.stamps[rec.topic].append(msg.t)
+        _sort(run, parts[2:], msg)
+    return run
+
+
+def _sort(run: RunLog, rest: list[str], msg: Any) -> None:
+    """File one decoded message by its key (after ``fleet/<name>/``)."""
+    match rest:
+        case ["robot", rid, "pose"]:
+            run.measured[rid].append((msg.t, msg.x, msg.y, msg.theta))
+        case ["robot", rid, "state"]:
+            run.estimated[rid].append((msg.t, msg.x, msg.y, msg.theta))
+            run.stale[rid] += bool(msg.stale)
+        case ["robot", rid, "cmd"]:
+            run.commands[rid].append((msg.t, msg.vx, msg.vy, msg.wz))
+        case ["robot", rid, "event"]:
+            run.robot_events.append({"t": msg.t, "robot": rid, "kind": msg.kind, "data": msg.data})
+        case ["object", "pose"]:
+            run.object_measured.append((msg.t, msg.x, msg.y, msg.theta))
+        case ["object", "state"]:
+            run.object_estimated.append((msg.t, msg.x, msg.y, msg.theta))
+        case ["sim", "truth", "robot", rid]:
+            run.truth[rid].append((msg.t, msg.x, msg.y, msg.theta))
+        case ["sim", "truth", "object"]:
+            run.object_truth.append((msg.t, msg.x, msg.y, msg.theta))
+        case ["plan", what]:
+            run.events.append({"t": msg.t, "kind": what, "phase": msg.phase, "data": msg.data})
+        case ["estop"]:
+            run.estops.append({"t": msg.t, "engaged": msg.engaged, "source": msg.source})
+        case _:
+            pass
+
+
+def _track(rows: list) -> metrics.Track:
+    return metrics.Track.from_rows(rows)
+
+
+def metrics_of(run: RunLog) -> dict[str, Any]:
+    """The ``fleet replay --json`` object."""
+    cfg = run.config
+    ids = list(cfg.robot_ids) if cfg else sorted(set(run.measured) | set(run.truth))
+    all_t = [t for ts in run.stamps.values() for t in ts]
+    robots: dict[str, Any] = {}
+    for rid in ids:
+        meas = _track(run.measured.get(rid, []))
+        est = _track(run.estimated.get(rid, []))
+        truth = _track(run.truth.get(rid, []))
+        cmd = np.asarray(run.commands.get(rid, []), dtype=float).reshape(-1, 4)
+        best = truth if len(truth) else (est if len(est) else meas)
+        robots[rid] = {
+            "poses": len(meas),
+            "pose_rate_hz": metrics.rate_hz(meas.t),
+            "commands": len(cmd),
+            "command_rate_hz": metrics.rate_hz(cmd[:, 0]),
+            "max_command_speed": float(np.max(np.hypot(cmd[:, 1], cmd[:, 2]))) if len(cmd) else 0,
+            "path_length_m": metrics.path_length(best.pose[:, :2]),
+            "final_pose": best.pose[-1].tolist() if len(best) else None,
+            "stale_states": int(run.stale.get(rid, 0)),
+            "estimate_error": metrics.tracking_error(est, truth),
+            "measurement_error": metrics.tracking_error(meas, truth),
+        }
+    otruth = _track(run.object_truth)
+    oest = _track(run.object_estimated)
+    omeas = _track(run.object_measured)
+    obest = otruth if len(otruth) else (oest if len(oest) else omeas)
+    arrests = [e for e in run.events if e["kind"] == "arrest"]
+    phases: list[dict[str, Any]] = []
+    for e in sorted(run.events, key=lambda e: e["t"]):
+        if not phases or phases[-1]["phase"] != e["phase"]:
+            phases.append({"phase": e["phase"], "t": e["t"]})
+    out: dict[str, Any] = {
+        "log": str(run.path),
+        "complete": run.complete,
+        "fleet": run.fleet,
+        "mode": run.mode,
+        "config_recorded": cfg is not None,
+        "messages": int(sum(run.topics.values())),
+        "undecodable": run.undecodable,
+        "start_s": min(all_t) if all_t else None,
+        "duration_s": (max(all_t) - min(all_t)) if all_t else 0.0,
+        "topics": {
+            k: {"count": n, "rate_hz": round(metrics.rate_hz(sorted(run.stamps.get(k, []))), 3)}
+            for k, n in sorted(run.topics.items())
+        },
+        "robots": robots,
+        "object": {
+            "poses": len(omeas),
+            "path_length_m": metrics.path_length(obest.pose[:, :2]),
+            "final_pose": obest.pose[-1].tolist() if len(obest) else None,
+            "estimate_error": metrics.tracking_error(oest, otruth),
+        },
+        "phases": phases,
+        "events": run.events,
+        "arrested": bool(arrests),
+        "arrest_time_s": arrests[0]["t"] if arrests else None,
+        "arrival_spread_s": arrests[0]["data"].get("arrival_spread_s") if arrests else None,
+        "estops": run.estops,
+        "link_lost": sorted({e["robot"] for e in run.robot_events if e["kind"] == "link_lost"}),
+        "ground_truth": bool(run.truth),
+        "min_clearance_m": None,
+        "min_clearance_t": None,
+        "max_object_penetration_m": None,
+    }
+    if cfg is not None:
+        # discs from ground truth when the log has it (dry run), else from the estimates
+        src = run.truth if run.truth else run.estimated
+        tracks = [_track(src.get(rid, [])) for rid in ids]
+        radii = [cfg.robot(rid).radius for rid in ids]
+        have = [i for i, tr in enumerate(tracks) if len(tr)]
+        tr_h, r_h = [tracks[i] for i in have], [radii[i] for i in have]
+        mc = metrics.min_clearance(tr_h, r_h)
+        if mc is not None:
+            out["min_clearance_m"], out["min_clearance_t"] = mc
+        obj = otruth if run.truth else oest
+        if len(obj) and tr_h:
+            poly = geometry.ensure_ccw(cfg.object_polygon())
+            depth, _ = metrics.object_penetration(tr_h, r_h, obj, poly)
+            out["max_object_penetration_m"] = depth
+    return out
+
+
+def plot_run(run: RunLog, out_dir: str | Path) -> list[Path]:
+    """PNG plots of a run: trajectories (with obstacles and object outlines), robot clearance
+    and estimation error over time. Returns the files written."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg = run.config
+    ids = list(cfg.robot_ids) if cfg else sorted(set(run.measured) | set(run.truth))
+    src = run.truth if run.truth else (run.estimated or run.measured)
+    written: list[Path] = []
+
+    fig, ax = plt.subplots(figsize=(7, 7))
+    if cfg is not None:
+        b = cfg.bounds_array()
+        ax.set_xlim(b[0, 0], b[1, 0])
+        ax.set_ylim(b[0, 1], b[1, 1])
+        for poly in cfg.obstacle_polygons():
+            ax.fill(*np.asarray(poly).T, color="0.6")
+    for rid in ids:
+        tr = _track(src.get(rid, []))
+        if len(tr):
+            (line,) = ax.plot(tr.pose[:, 0], tr.pose[:, 1], lw=1, label=rid)
+            ax.plot(*tr.pose[-1, :2], "o", ms=4, color=line.get_color())
+    obj = _track(run.object_truth or run.object_estimated or run.object_measured)
+    if len(obj):
+        ax.plot(obj.pose[:, 0], obj.pose[:, 1], "k--", lw=1, label="object")
+        if cfg is not None:
+            poly = cfg.object_polygon()
+            for k in np.linspace(0, len(obj) - 1, 6).astype(int):
+                ax.fill(*geometry.transform(poly, obj.pose[k]).T, fill=False, ec="k", lw=0.6)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(fontsize=7, loc="upper left")
+    ax.set_title(f"{run.path.name}: trajectories")
+    written.append(out / "trajectories.png")
+    fig.savefig(written[-1], dpi=110)
+    plt.close(fig)
+
+    if cfg is not None and len(ids) > 1:
+        tracks = [_track(src.get(rid, [])) for rid in ids]
+        tracks_h = [tr for tr in tracks if len(tr)]
+        radii = np.array(
+            [cfg.robot(r).radius for r, tr in zip(ids, tracks, strict=True) if len(tr)]
+        )
+        grid = metrics.common_grid(tracks_h)
+        if len(grid) and len(tracks_h) > 1:
+            xy = np.stack([tr.at(grid)[:, :2] for tr in tracks_h], axis=1)
+            d = np.linalg.norm(xy[:, :, None] - xy[:, None, :], axis=-1)
+            gap = d - radii[None, :, None] - radii[None, None, :]
+            n = len(tracks_h)
+            gap[:, np.arange(n), np.arange(n)] = np.inf
+            fig, ax = plt.subplots(figsize=(7, 3))
+            ax.plot(grid, gap.min(axis=(1, 2)))
+            ax.axhline(0, color="r", lw=0.8)
+            ax.set_xlabel("t (s)")
+            ax.set_ylabel("min robot gap (m)")
+            written.append(out / "clearance.png")
+            fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+            plt.close(fig)
+
+    if run.truth and run.estimated:
+        fig, ax = plt.subplots(figsize=(7, 3))
+        for rid in ids:
+            est, truth = _track(run.estimated.get(rid, [])), _track(run.truth.get(rid, []))
+            if len(est) and len(truth) > 1:
+                err = np.linalg.norm(est.pose[:, :2] - truth.at(est.t)[:, :2], axis=1)
+                ax.plot(est.t, err * 100, lw=0.8, label=rid)
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel("estimate error (cm)")
+        ax.legend(fontsize=7)
+        written.append(out / "estimation_error.png")
+        fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+        plt.close(fig)
+    return written
+
+
+def republish(
+    path: str | Path,
+    bus: Any,
+    speed: float = 1.0,
+    topics: list[str] | None = None,
+    wait_matching: float = 0.0,
+) -> int:
+    """Publish a log's messages again on ``bus`` (raw payloads, original keys), spaced as they
+    were logged divided by ``speed`` (0: as fast as possible). With ``wait_matching`` > 0, first
+    wait up to that many seconds until every key has a subscriber. Returns the count published."""
+    keys = topics if topics is not None else sorted({r.topic for r in read_log(path)})
+    pubs = {k: bus.session.declare_publisher(k) for k in keys}
+    try:
+        deadline = time.monotonic() + wait_matching
+        while wait_matching > 0 and time.monotonic() < deadline:
+            if all(p.matching_status.matching for p in pubs.values()):
+                break
+            time.sleep(0.01)
+        sent = 0
+        t0_log: int | None = None
+        t0 = time.monotonic()
+        for rec in read_log(path, keys):
+            if t0_log is None:
+                t0_log = rec.log_time_ns
+            if speed > 0:
+                delay = t0 + (rec.log_time_ns - t0_log) / 1e9 / speed - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            pubs[rec.topic].put(rec.data)
+            sent += 1
+        return sent
+    finally:
+        for p in pubs.values():
+            p.undeclare()
