@@ -194,6 +194,7 @@ class DryRun:
         recorder = McapRecorder(self.out, cfg.fleet.name, cfg.log.flush_interval)
         recorder.metadata("fleet.config", config_metadata(cfg, f"run/{cfg.sim.backend}"))
         arrested_at: list[float] = []
+        spread: float | None = None
         result: dict[str, Any] = {}
         try:
             with (
@@ -227,9 +228,11 @@ class DryRun:
                 try:
                     while coord.t <= self.max_time:
                         coord.tick()
-                        if arrest_box.drain() and not world.arrested:
+                        arrests = arrest_box.drain()
+                        if arrests and not world.arrested:
                             world.arrest()
                             arrested_at.append(world.t)
+                            spread = arrests[0].msg.data.get("arrival_spread_s")
                         self.verdict.update(world.check())
                         if ctl.error is not None:
                             raise RuntimeError("controller loop failed") from ctl.error
@@ -258,6 +261,7 @@ class DryRun:
                     "failed": bool(out.failed) if out else False,
                     "arrested": world.arrested,
                     "arrest_time_s": arrested_at[0] if arrested_at else None,
+                    "arrival_spread_s": spread,
                     "sim_time_s": round(coord.t, 4),
                     "ticks": coord.counters.ticks,
                     "node": dict(vars(node.counters)),

@@ -52,6 +52,7 @@ def run(args) -> int:
             "phase",
             "arrested",
             "arrest_time_s",
+            "arrival_spread_s",
             "sim_time_s",
             "wall_time_s",
             "min_clearance_m",
