@@ -143,6 +143,15 @@ def _sym(P: FloatArray) -> FloatArray:
     return 0.5 * (P + P.T)
 
 
+def _is_pd(P: FloatArray) -> bool:
+    """Whether a covariance has a Cholesky factor (is positive definite)."""
+    try:
+        np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        return False
+    return bool(np.all(np.isfinite(P)))
+
+
 # --------------------------------------------------------------------------- models
 
 
@@ -376,6 +385,20 @@ def world_velocity(model: str, x: ArrayLike) -> FloatArray:
 # --------------------------------------------------------------------------- gating
 
 
+def linear_update(
+    x: ArrayLike, P: ArrayLike, z: ArrayLike, R: ArrayLike, H: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """The Kalman update for the linear pose measurement (heading residual wrapped), Joseph
+    form so the result stays symmetric positive definite."""
+    xs = np.ravel(np.asarray(x, dtype=float))
+    Pm = np.asarray(P, dtype=float)
+    Hm = np.asarray(H, dtype=float)
+    y, S = innovation_linear(xs, Pm, z, R)
+    K = np.linalg.solve(S, Hm @ Pm).T
+    IKH = np.eye(len(xs)) - K @ Hm
+    return xs + K @ y, _sym(IKH @ Pm @ IKH.T + K @ np.asarray(R) @ K.T)
+
+
 def gate_threshold(probability: float, dof: int = MEAS_DIM) -> float:
     """Chi-squared quantile for the gate; ``probability >= 1`` disables gating (inf)."""
     if probability >= 1.0:
@@ -453,8 +476,13 @@ def propagate_ukf(
         Q = process_noise(model, xs[THETA], h, q_lin, q_yaw)
         sig = points.sigma_points(xs, Ps)
         f = motion_batch(model, sig, h, u, tau)
-        xs, Ps = unscented_transform_wrapped(f, points.Wm, points.Wc, Q)
-        Ps = _sym(Ps)
+        x1, P1 = unscented_transform_wrapped(f, points.Wm, points.Wc, Q)
+        P1 = _sym(P1)
+        if not _is_pd(P1):
+            # sigma points spread past ±π in heading wrap around and the negative central
+            # weight can leave an indefinite covariance: take the linearised step instead
+            x1, P1 = propagate_ekf(model, xs, Ps, [(h, u)], tau, q_lin, q_yaw)
+        xs, Ps = x1, P1
     return xs, Ps
 
 
@@ -736,8 +764,16 @@ class TrackFilter:
                 x1, F = motion(self.model, x, h, u, self.tau)
                 self.kf.predict_nonlinear(x1, F, Q)
             else:
+                P0 = self.kf.P.copy()
                 self.kf.Q = Q
                 self.kf.predict(dt=h, u=u)
+                if not _is_pd(_sym(self.kf.P)):
+                    # heading sigma points wrapped past ±π: the linearised step instead (the
+                    # sigma points for the update are drawn again from the repaired prior)
+                    x1, P1 = propagate_ekf(self.model, x, P0, [(h, u)], self.tau, self.q_lin,
+                                           self.q_yaw)  # fmt: skip
+                    self.kf.x, self.kf.P = x1, P1
+                    self.kf.sigmas_f = self.points.sigma_points(x1, P1)
             self.kf.P = _sym(self.kf.P)
         self.t = t
 
@@ -790,7 +826,12 @@ class TrackFilter:
             self.kf.update(zv.reshape(-1, 1), lambda _x: H, _hx, R=self.R, residual=residual)
             self.kf.x[THETA, 0] = _wrap(float(self.kf.x[THETA, 0]))
         else:
+            x_prior, P_prior = self.kf.x.copy(), self.kf.P.copy()
             self.kf.update(zv, R=self.R)
+            if not _is_pd(_sym(self.kf.P)):
+                # wrapped heading sigma points spoiled the cross-covariance; the measurement is
+                # linear (H = [I3 0]), so the Kalman update on the same prior is exact
+                self.kf.x, self.kf.P = linear_update(x_prior, P_prior, zv, self.R, self._H)
             self.kf.x[THETA] = _wrap(float(self.kf.x[THETA]))
         self.kf.P = _sym(self.kf.P)
         self.accepted += 1

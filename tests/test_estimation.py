@@ -572,3 +572,20 @@ def test_a_huge_time_gap_does_not_stall_the_loop():
     poses, _, stale = est.robot_arrays(1.8e9 + 2.0)
     assert _time.perf_counter() - t0 < 1.0
     assert stale[0] and np.all(np.isfinite(poses[0]))
+
+
+def test_ukf_object_stays_positive_definite_after_rejected_jumps() -> None:
+    """Found by the property test above: two rejected 1 m jumps grow the heading variance until
+    wrapped sigma points spoil the UKF update; the exact linear update takes over."""
+    trk = TrackFilter("object", "ukf", params("ukf"), 0.09, 1.0)
+    t, pose = 0.0, np.zeros(3)
+    trk.measure(t, pose)
+    steps = [0.5] * 6 + [0.25, 0.5625, 0.5625, 0.5]
+    jumps = [(0, 0, 0)] * 7 + [(0, 1, 0), (0, 1, 0), (0, 0, 0)]
+    statuses = []
+    for dt, jump in zip(steps, jumps, strict=True):
+        t += dt
+        statuses.append(trk.measure(t, pose + np.array(jump)))
+        assert np.linalg.eigvalsh(trk.P).min() > 0
+    assert statuses[-3:] == ["rejected", "rejected", "accepted"]
+    assert trk.P[2, 2] < 1e-3  # the accepted heading measurement shrank the heading variance

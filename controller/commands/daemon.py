@@ -37,7 +37,7 @@ def run(args) -> int:
     from controller.bus import Bus
     from controller.commands.record import default_log_path
     from controller.config import load_config
-    from controller.missions import build_mission
+    from controller.missions import MissionError, build_mission
     from controller.node import ControllerNode
     from controller.ratekeeper import Ratekeeper
     from controller.recorder import McapRecorder, config_metadata
@@ -48,7 +48,11 @@ def run(args) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    mission = build_mission(cfg, args.mission)
+    try:
+        mission = build_mission(cfg, args.mission)
+    except MissionError as exc:
+        print(f"fleet daemon: {exc}", file=sys.stderr)
+        return 1
     recorder = McapRecorder(out, cfg.fleet.name, cfg.log.flush_interval)
     recorder.metadata("fleet.config", config_metadata(cfg, f"daemon/{args.mission}"))
     status = 0

@@ -32,14 +32,18 @@ def run(args) -> int:
     from controller.cli import emit_json
     from controller.commands.record import default_log_path
     from controller.config import load_config
-    from controller.missions import build_mission
+    from controller.missions import MissionError, build_mission
     from controller.runtime import DryRun
 
     cfg = load_config(args.config)
     if args.backend:
         cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, backend=args.backend))
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name)
-    mission = build_mission(cfg)
+    try:
+        mission = build_mission(cfg)
+    except MissionError as exc:
+        print(f"fleet run: {exc}", file=sys.stderr)
+        return 1
     print(f"fleet run: {cfg.source}, backend {cfg.sim.backend}, log {out}", file=sys.stderr)
     summary = DryRun(cfg, mission, out, gui=args.gui, max_time=args.max_time).run()
     ok = summary["done"] and not summary["failed"] and verdict_ok(summary)
