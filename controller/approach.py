@@ -42,6 +42,7 @@ class ApproachParams:
     contact_gap: float = 0.01  # m
     gain: float = 2.0  # 1/s
     clearance: float = 0.02  # m kept from polygons by the projection test
+    station_gap: float = 0.1  # m between two stations' discs, and from station to contact goal
 
     @classmethod
     def from_config(cls, a) -> ApproachParams:
@@ -96,10 +97,34 @@ def capture_goals(
     p_w = geometry.transform(points, object_pose)
     n_w = normals @ geometry.rot(float(object_pose[2])).T
     hull = envelope(geometry.transform(polygon, object_pose), params.envelope_margin)
-    t = ray_exit(p_w, n_w, hull)
-    env = p_w + n_w * (t + params.envelope_margin + radii)[:, None]
+    out = ray_exit(p_w, n_w, hull) + params.envelope_margin + radii
+    out = separate_stations(p_w, n_w, out, radii, params)
+    env = p_w + n_w * out[:, None]
     contact = p_w + n_w * (radii + params.contact_gap)[:, None]
     return env, contact
+
+
+def separate_stations(
+    p: FloatArray, n: FloatArray, out: FloatArray, radii: FloatArray, params: ApproachParams
+) -> FloatArray:
+    """Distances along the normals for the stations, pulled in where two stations would be
+    closer than their discs plus ``station_gap`` (points in a notch: their rays converge
+    outside it). Never closer to the object than the contact goal plus ``station_gap``."""
+    out = out.copy()
+    floor = radii + params.contact_gap + params.station_gap
+    m = len(p)
+    for _ in range(50):
+        st = p + n * out[:, None]
+        d = np.linalg.norm(st[:, None] - st[None], axis=-1)
+        need = radii[:, None] + radii[None] + params.station_gap
+        bad = (d < need) & ~np.eye(m, dtype=bool)
+        if not bad.any():
+            break
+        shrink = bad.any(axis=1) & (out > floor)
+        if not shrink.any():
+            break
+        out[shrink] = np.maximum(floor[shrink], out[shrink] - 0.02)
+    return out
 
 
 # --------------------------------------------------------------------------- Table I

@@ -104,10 +104,16 @@ class CaptureMission:
         diff = ~omni
         cmds[diff, 0] = body[diff, 0]
         cmds[diff, 2] = body[diff, 1] / self.lookahead
+        # scale (v, ω) together, never clip one alone: the look-ahead point then still moves
+        # along the filtered direction, only slower, and every barrier condition with h ≥ 0
+        # still holds (∇h·kv ≥ −kγh ≥ −γh for 0 < k ≤ 1)
         sp = np.linalg.norm(cmds[:, :2], axis=1)
         k = np.where(sp > lim.max_speed, lim.max_speed / np.maximum(sp, 1e-12), 1.0)
-        cmds[:, :2] *= k[:, None]
-        cmds[:, 2] = np.clip(cmds[:, 2], -lim.max_yaw_rate, lim.max_yaw_rate)
+        wz = np.abs(cmds[:, 2])
+        k = np.minimum(
+            k, np.where(wz > lim.max_yaw_rate, lim.max_yaw_rate / np.maximum(wz, 1e-12), 1.0)
+        )
+        cmds *= k[:, None]
         return cmds
 
     # -- the tick

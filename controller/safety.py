@@ -84,6 +84,7 @@ class SafetyFilter:
         self._solver: osqp.OSQP | None = None
         self.solves = 0
         self.infeasible = 0
+        self.relaxed = 0
         # row layout: pairs | obstacle | object | walls x-, x+, y-, y+ | velocity box (2N)
         self._r_obs = self.n_pairs
         self._r_obj = self._r_obs + n
@@ -98,8 +99,8 @@ class SafetyFilter:
             for i in range(n):
                 rows += [base + i, base + i]
                 cols += [2 * i, 2 * i + 1]
-        for w in range(4):
-            for i in range(n):
+        for i in range(n):
+            for w in range(4):
                 rows.append(self._r_wall + 4 * i + w)
                 cols.append(2 * i + (0 if w < 2 else 1))
         for c in range(2 * n):
@@ -196,6 +197,14 @@ class SafetyFilter:
         lo[self._r_box :] = -vb
         hi[self._r_box :] = vb
         v_nom[stale] = 0.0
+        # a violated barrier (h < 0) asks for a recovery speed γ|h|: never more than the box
+        # allows, or one bad estimate makes the whole QP infeasible
+        cap = 0.9 * vb.reshape(n, 2).min(axis=1)
+        lo[self.n_pairs : self._r_box] = np.minimum(
+            lo[self.n_pairs : self._r_box],
+            np.concatenate([cap, cap, np.repeat(cap, 4)]),
+        )
+        lo[: self.n_pairs] = np.minimum(lo[: self.n_pairs], cap[self._pi] + cap[self._pj])
         ours = np.concatenate(
             [pair_vals, obs_vals, obj_vals.reshape(-1), wall_vals, np.ones(2 * n)]
         )
@@ -214,6 +223,15 @@ class SafetyFilter:
         res = self._solver.solve(raise_error=False)
         self.solves += 1
         status = res.info.status
+        if res.info.status_val not in (1, 2):
+            # the object may corner a robot against a wall or a neighbour: let it be touched
+            # (it is pushed, not crushed) rather than stop the whole fleet
+            lo_soft = lo.copy()
+            lo_soft[self._r_obj : self._r_wall] = -INF
+            self._solver.update(l=lo_soft)
+            res = self._solver.solve(raise_error=False)
+            self.solves += 1
+            self.relaxed += 1
         if res.info.status_val not in (1, 2) or res.x is None or np.any(~np.isfinite(res.x)):
             # infeasible or failed: the robots whose constraints are violated at zero velocity
             # stop, the rest keep the nominal command scaled down; the caller reports it
