@@ -113,6 +113,9 @@ class Problem:
     one_per_edge: bool
     params: CaptureParams
     n_robots_note: str = ""
+    side_neg: NDArray[np.bool_] | None = None  # (K, K, K) wrench i below the plane of (a, b)
+    side_pos: NDArray[np.bool_] | None = None
+    pair_plane: NDArray[np.bool_] | None = None  # (K, K) the pair spans a plane
 
 
 def make_problem(
@@ -140,14 +143,19 @@ def make_problem(
         else "polygon has fewer than 4 edges: the one-robot-per-edge rule yields to the spacing "
         "rule (planar form closure needs 4 frictionless contacts)"
     )
+    wrench = np.column_stack([f, m])
+    neg, pos, plane = _side_tables(wrench)
     return Problem(
+        side_neg=neg,
+        side_pos=pos,
+        pair_plane=plane,
         cand=cand,
         centroid=c,
         moments=m,
         ccw=(m > params.tau).astype(float),
         cw=(m < -params.tau).astype(float),
         conflict=conflict,
-        wrench=np.column_stack([f, m]),
+        wrench=wrench,
         angles=np.arctan2(f[:, 1], f[:, 0]),
         one_per_edge=one_per_edge,
         params=params,
@@ -181,9 +189,11 @@ def translation_closure(prob: Problem, x: NDArray[np.bool_]) -> NDArray[np.bool_
     return ok
 
 
-def wrench_closure(prob: Problem, x: NDArray[np.bool_], tol: float = 1e-9) -> NDArray[np.bool_]:
+def wrench_closure(prob: Problem, x: NDArray[np.bool_]) -> NDArray[np.bool_]:
     """First-order form closure: the wrenches positively span R³. A set fails iff some closed
-    half-space holds them all; its boundary can be taken through two of them (rank 3 aside)."""
+    half-space holds them all; its boundary plane can be taken through two of them (a set of
+    rank ≤ 2 lies in such a plane; rank ≤ 1 fails translation closure before this check). The
+    sign of every wrench against every pair's plane is tabulated once per problem."""
     cnt = x.sum(1)
     ok = np.zeros(len(x), bool)
     rows = np.flatnonzero((cnt >= 4) & (cnt <= MAX_SET))
@@ -191,20 +201,26 @@ def wrench_closure(prob: Problem, x: NDArray[np.bool_], tol: float = 1e-9) -> ND
         return ok
     size = int(cnt[rows].max())
     idx, mask = _chosen_index(x[rows], size)
-    w = prob.wrench[idx]  # (R, s, 3)
-    w = w / np.maximum(np.linalg.norm(w, axis=-1, keepdims=True), 1e-12)
-    y = np.cross(w[:, :, None, :], w[:, None, :, :])  # (R, s, s, 3)
-    ny = np.linalg.norm(y, axis=-1)
-    d = np.einsum("rabk,rik->rabi", y, w)  # (R, s, s, s)
+    a = idx[:, :, None, None]
+    b = idx[:, None, :, None]
+    i = idx[:, None, None, :]
     real = mask[:, None, None, :]
-    neg = np.any((d < -tol) & real, axis=-1)
-    pos = np.any((d > tol) & real, axis=-1)
-    pair_ok = mask[:, :, None] & mask[:, None, :] & (ny > 1e-9)
-    # a supporting plane: all on one closed side
+    neg = np.any(prob.side_neg[a, b, i] & real, axis=-1)
+    pos = np.any(prob.side_pos[a, b, i] & real, axis=-1)
+    pair_ok = (
+        mask[:, :, None] & mask[:, None, :] & prob.pair_plane[idx[:, :, None], idx[:, None, :]]
+    )
     one_side = pair_ok & ~(neg & pos)
-    rank3 = np.linalg.matrix_rank(np.where(mask[..., None], w, 0.0)) == 3
-    ok[rows] = rank3 & ~one_side.any(axis=(1, 2))
+    ok[rows] = ~one_side.any(axis=(1, 2))
     return ok
+
+
+def _side_tables(wrench: FloatArray, tol: float = 1e-9):
+    """Signs of every wrench against the plane through every pair of wrenches (unit-scaled)."""
+    w = wrench / np.maximum(np.linalg.norm(wrench, axis=1, keepdims=True), 1e-12)
+    y = np.cross(w[:, None, :], w[None, :, :])  # (K, K, 3)
+    d = np.einsum("abk,ik->abi", y, w)
+    return d < -tol, d > tol, np.linalg.norm(y, axis=-1) > 1e-9
 
 
 def evaluate(prob: Problem, x: NDArray[np.bool_]) -> tuple[FloatArray, NDArray[np.int64]]:
@@ -267,22 +283,26 @@ def _initial(k: int, size: int, rng: np.random.Generator, lo: int = 3, hi: int =
 
 def _mutate(x: np.ndarray, rate: float, rng: np.random.Generator) -> np.ndarray:
     """Per child with probability ``rate``: move one robot 1–2 nodes along the boundary (70 %),
-    jump it anywhere (10 %), add one (10 %) or remove one (10 %)."""
+    jump it anywhere (10 %), add one (10 %) or remove one (10 %; never below three)."""
     p, k = x.shape
     out = x.copy()
-    hit = np.flatnonzero(rng.random(p) < rate)
-    for r in hit:
-        on = np.flatnonzero(out[r])
-        u = rng.random()
-        if len(on) and u < 0.8:
-            i = int(rng.choice(on))
-            j = (i + int(rng.choice([-2, -1, 1, 2]))) % k if u < 0.7 else int(rng.integers(k))
-            out[r, i] = False
-            out[r, j] = True
-        elif u < 0.9 or len(on) <= 3:
-            out[r, int(rng.integers(k))] = True
-        else:
-            out[r, int(rng.choice(on))] = False
+    rows = np.flatnonzero(rng.random(p) < rate)
+    if len(rows) == 0:
+        return out
+    sub = out[rows]
+    cnt = sub.sum(1)
+    pick = np.argmax(rng.random((len(rows), k)) * sub, axis=1)  # a random set bit
+    u = rng.random(len(rows))
+    shift = np.array([-2, -1, 1, 2])[rng.integers(0, 4, len(rows))]
+    target = np.where(u < 0.7, (pick + shift) % k, rng.integers(0, k, len(rows)))
+    r = np.arange(len(rows))
+    move = (u < 0.8) & (cnt > 0)
+    add = ~move & ((u < 0.9) | (cnt <= 3))
+    remove = ~move & ~add
+    sub[r[move], pick[move]] = False
+    sub[r[move | add], target[move | add]] = True
+    sub[r[remove], pick[remove]] = False
+    out[rows] = sub
     return out
 
 

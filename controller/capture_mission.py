@@ -205,6 +205,8 @@ class CaptureMission:
             object_velocity=obj_vel,
             object_exempt=closing,
             closing=closing,
+            centres=poses[:, :2],
+            headings=poses[:, 2],
         )
         if fr.status != "solved":
             self.infeasible_events += 1

@@ -221,7 +221,13 @@ class ControllerNode:
         self._publish_states(now, view)
         if step is not None:
             self._done_pub.put(
-                wire.TickDone(t=now, seq=step, step=step, commands=self.counters.commands)
+                wire.TickDone(
+                    t=now,
+                    seq=step,
+                    step=step,
+                    commands=self.counters.commands,
+                    arrest=self.arrested,
+                )
             )
         self.last_output = out
         return out

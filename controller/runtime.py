@@ -223,16 +223,20 @@ class DryRun:
                     robot_bus, hub, agents, control_dt, cfg.sim.tick_timeout
                 )
                 ctl = ControllerLockstep(node, ctl_bus, wait_inputs=cfg.sim.tick_timeout)
+
+                def arrest() -> None:
+                    if not world.arrested:
+                        world.arrest()
+                        arrested_at.append(world.t)
+
+                coord.on_arrest = arrest
                 self._handshake(node, agents, coord)
                 ctl.thread.start()
                 try:
                     while coord.t <= self.max_time:
                         coord.tick()
-                        arrests = arrest_box.drain()
-                        if arrests and not world.arrested:
-                            world.arrest()
-                            arrested_at.append(world.t)
-                            spread = arrests[0].msg.data.get("arrival_spread_s")
+                        for item in arrest_box.drain():
+                            spread = item.msg.data.get("arrival_spread_s", spread)
                         self.verdict.update(world.check())
                         if ctl.error is not None:
                             raise RuntimeError("controller loop failed") from ctl.error
@@ -261,7 +265,9 @@ class DryRun:
                     "failed": bool(out.failed) if out else False,
                     "arrested": world.arrested,
                     "arrest_time_s": arrested_at[0] if arrested_at else None,
-                    "arrival_spread_s": spread,
+                    "arrival_spread_s": spread
+                    if spread is not None
+                    else getattr(self.mission, "summary", dict)().get("arrival_spread_s"),
                     "sim_time_s": round(coord.t, 4),
                     "ticks": coord.counters.ticks,
                     "node": dict(vars(node.counters)),

@@ -137,12 +137,16 @@ class SafetyFilter:
         object_velocity: FloatArray | None = None,
         object_exempt: NDArray[np.bool_] | None = None,
         closing: NDArray[np.bool_] | None = None,
+        centres: FloatArray | None = None,
+        headings: FloatArray | None = None,
     ) -> FilterResult:
         """Filter nominal world velocities (N, 2) of the filtered points (N, 2).
 
         ``object_polygon``: the object's outline in the world now; ``object_velocity``: its
         (vx, vy, wz); ``object_exempt``: robots allowed to touch it (closing in on their point);
         ``closing``: robots closing in (pairs of them keep ``contact_margin`` instead of margin).
+        ``centres`` and ``headings``: the robots' centres and headings (differential robots'
+        filtered points lie ahead of their centres); the object rows use them.
         """
         n, p = self.n, self.params
         pts = np.asarray(points, dtype=float)
@@ -166,21 +170,30 @@ class SafetyFilter:
         obs_vals = (g_obs if g_obs is not None else np.zeros((n, 2))).reshape(-1)
         h_obs = d_obs - rad - p.obstacle_margin
         lo[self._r_obs : self._r_obj] = np.where(h_obs < 1.0, -p.gamma * h_obs, -INF)
-        # object rows: ∇h·v_i ≥ ∇h·v_obj(at the nearest point) − γ h
+        # object rows: ∇h·ṗ_i ≥ ∇h·v_obj(at the nearest point) − γ h, on the robot's centre
+        # (a differential robot's centre moves with the look-ahead point's velocity projected
+        # on its heading, ṗ = h hᵀ ṗ', so the row's coefficients are (∇h·h) h). A robot
+        # closing in on its own contact point may touch the object (margin 0), not enter it.
         obj_vals = np.zeros((n, 2))
         if object_polygon is not None:
-            d_o, g_o, near = _polygon_distance_grad(pts, object_polygon, with_point=True)
-            obj_vals = g_o
+            centres = pts if centres is None else np.asarray(centres, dtype=float)
+            d_o, g_o, near = _polygon_distance_grad(centres, object_polygon, with_point=True)
+            coef = g_o.copy()
+            if headings is not None:
+                hv = np.stack([np.cos(headings), np.sin(headings)], 1)
+                diff = ~self.holonomic
+                coef[diff] = (np.sum(g_o * hv, axis=1)[:, None] * hv)[diff]
+            obj_vals = coef
             v_o = np.zeros((n, 2))
             if object_velocity is not None:
                 c = geometry.centroid(object_polygon)
                 w = object_velocity[2]
                 rel = near - c
                 v_o = object_velocity[:2] + w * np.stack([-rel[:, 1], rel[:, 0]], 1)
-            h_o = d_o - rad - p.margin
-            rhs = np.sum(g_o * v_o, axis=1) - p.gamma * h_o
             exempt = np.zeros(n, bool) if object_exempt is None else np.asarray(object_exempt)
-            lo[self._r_obj : self._r_wall] = np.where(exempt | (h_o > 1.5), -INF, rhs)
+            h_o = d_o - self.radii - np.where(exempt, 0.0, p.margin)
+            rhs = np.sum(g_o * v_o, axis=1) - p.gamma * h_o
+            lo[self._r_obj : self._r_wall] = np.where(h_o > 1.5, -INF, rhs)
         # walls: x − xmin − r − m ≥ 0 → vx ≥ −γ h, and so on
         (xmin, ymin), (xmax, ymax) = self.bounds
         m_w = rad + p.obstacle_margin

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from controller import wire
@@ -61,6 +62,8 @@ class LockstepCoordinator:
         }
         self._seq = 0
         self._answered = -1
+        self.arrest_requested = False
+        self.on_arrest: Callable[[], None] | None = None  # the dry run arrests its world
         self._commands_due = 0
 
     def publishers_for_handshake(self) -> list:
@@ -129,6 +132,7 @@ class LockstepCoordinator:
                 return False
             self._answered = max(self._answered, item.msg.step)
             self._commands_due = max(self._commands_due, item.msg.commands)
+            self.arrest_requested = self.arrest_requested or item.msg.arrest
             if self._answered >= step:
                 return self._wait_commands(deadline)
 
@@ -155,6 +159,8 @@ class LockstepCoordinator:
         if not ok:
             self.counters.missed += 1
             log.warning("controller missed tick %d (t=%.2f s)", self.step_index, now)
+        if self.arrest_requested and self.on_arrest is not None:
+            self.on_arrest()  # before the step: the object stops with the robots' last stop
         for agent in self.agents:
             agent.handle_inputs(now)
             agent.enforce(now)

@@ -14,7 +14,6 @@ from controller.missions import build_mission
 from controller.runtime import DryRun
 from tests.conftest import base_config_dict, deep_update, free_port
 
-
 RECT = [[0.0, 0.0], [0.9, 0.0], [0.9, 0.6], [0.0, 0.6]]
 L_SHAPE = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.4], [0.4, 0.4], [0.4, 1.0], [0.0, 1.0]]
 T_SHAPE = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.3], [0.65, 0.3], [0.65, 0.9], [0.35, 0.9],
