@@ -188,12 +188,14 @@ class CaptureMission:
             goal_v_c = obj_vel[:2] + obj_vel[2] * np.stack(
                 [-(contact_now[:, 1] - c[1]), contact_now[:, 0] - c[0]], 1
             )
+            # the closing speed (relative to the object) is capped, not the feed-forward: a
+            # robot behind a fast object must still gain on it
             err = contact_now - pos[idx]
-            v = goal_v_c + self.params.gain * err
+            v_rel = self.params.gain * err
             cap = self.close_speed * self.limits.max_speed[idx]
-            sp = np.linalg.norm(v, axis=1)
-            v *= np.where(sp > cap, cap / np.maximum(sp, 1e-12), 1.0)[:, None]
-            v_nom[idx] = v
+            sp = np.linalg.norm(v_rel, axis=1)
+            v_rel *= np.where(sp > cap, cap / np.maximum(sp, 1e-12), 1.0)[:, None]
+            v_nom[idx] = goal_v_c + v_rel
             newly = in_contact & np.isnan(self.first_contact[idx])
             self.first_contact[idx[newly]] = view.t
         # diff robots: the filter works on the look-ahead point

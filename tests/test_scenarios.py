@@ -36,7 +36,7 @@ def scenario(
     cfg["object"]["polygon"] = [list(map(float, p)) for p in polygon]
     cfg["object"]["start"] = list(start)
     cfg["object"]["motion"] = {**cfg["object"]["motion"], **motion}
-    cfg["obstacles"] = [{"polygon": o} for o in obstacles] or cfg["obstacles"]
+    cfg["obstacles"] = [{"polygon": o} for o in obstacles]  # the object's path stays clear
     for r, k in zip(cfg["robots"], kinds, strict=True):
         r["kind"] = "omni" if k == "o" else "diff"
     cfg = deep_update(cfg, {"sim": {"backend": backend, "seed": seed}, "capture": {"seed": seed}})
@@ -58,7 +58,7 @@ SCENARIOS = {
     "T-sine": (T_SHAPE, {"kind": "sine", "speed": 0.1, "amplitude": 0.5}, "oodood", (2.5, 2.5, 0.0), ()),
     "hexagon-line-diff": (HEXAGON, {"kind": "line", "speed": 0.08, "heading": 1.0}, "dddddd", (2.5, 2.5, 0.0), ()),
     "U-sine": (U_SHAPE, {"kind": "sine", "speed": 0.08}, "oooddd", (2.5, 3.0, 0.0), ()),
-    "L-rotated-line": (L_SHAPE, {"kind": "line", "speed": 0.12, "heading": -0.4}, "dodood", (3.0, 3.5, 2.0), ()),
+    "L-rotated-line": (L_SHAPE, {"kind": "line", "speed": 0.12, "heading": 0.5}, "dodood", (3.0, 3.5, 2.0), ()),
     "rect-obstacle": (RECT, {"kind": "sine", "speed": 0.05}, "oodood", (3.0, 3.2, 0.0), (WALL,)),
     "T-evade-diff": (T_SHAPE, {"kind": "evade", "max_speed": 0.2, "flee_radius": 1.2}, "dddood", (3.0, 2.5, 0.5), ()),
     "L-line-obstacle": (L_SHAPE, {"kind": "line", "speed": 0.08, "heading": 0.2}, "oooddd", (2.6, 3.0, 0.0), (WALL,)),
