@@ -1,22 +1,14 @@
-"""Projective path planning to moving capture points (Sharma et al. 2007, §3): pure, per tick.
+"""Projective path planning (Sharma, Saxena, Dutta 2007, §3), per tick, all robots at once.
 
-Every tick each robot has a goal (its capture point's image on the convex envelope, or the point
-itself when closing in). It turns its heading of motion toward the goal by at most
-``max_turn_deg`` (§3.2), projects its disc ahead by ``projection``·r along that direction (§3.3)
-and, if the projected disc meets the object or a static obstacle (the paper's pseudo-agents),
-applies Table I:
+Pure: arrays in, arrays out. Units: metres, seconds, radians. The paper moves a robot by a
+jump; here each rule yields a world-frame direction, turned into a velocity by the mission.
 
-- one edge hit: move along that edge, in the direction with positive dot product with the
-  heading;
-- two edges hit (a corner): move along the bisector of the two outward normals, away;
-- head-on (the projected centre inside the polygon): escape along the nearest edge's outward
-  normal at full speed.
-
-Robot–robot (§3.5): if the projected disc meets another robot's disc, rotate the projection by
-±α (the first sign from the seeded generator, then the other), widen α by ``alpha_growth`` and
-repeat until clear or α passes ``alpha_max_deg``; then the robot stops this tick. The paper
-moves a robot 2d–3d at once; a real robot cannot jump, so the result is a velocity (direction ×
-speed) for the safety filter and the kinematics. No I/O, no clock.
+Table I (the robot's disc projected ahead by ``projection``·r along its heading):
+- no hit: keep the heading;
+- one edge: align with that edge (the edge direction with positive dot product with the heading);
+- two edges (a corner): along the angular bisector of the two edge normals, away from the polygon;
+- head-on (the robot's centre inside the polygon's next position): escape along the outward
+  normal of the nearest edge at full speed.
 """
 
 from __future__ import annotations
@@ -24,261 +16,221 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from controller import geometry
 
-FloatArray = NDArray[np.float64]
+NO_HIT, EDGE, CORNER, HEAD_ON = "none", "edge", "corner", "head_on"
+
+
+def envelope(poly_world: np.ndarray, margin: float, samples: int = 16) -> np.ndarray:
+    """Convex hull of the polygon grown by ``margin`` (CCW; a disc sampled at the vertices,
+    scaled so the hull contains the true Minkowski sum)."""
+    ang = np.linspace(0, 2 * np.pi, samples, endpoint=False)
+    grow = margin / np.cos(np.pi / samples)
+    ring = grow * np.stack([np.cos(ang), np.sin(ang)], 1)
+    pts = (poly_world[:, None, :] + ring[None]).reshape(-1, 2)
+    return geometry.convex_hull(pts)
+
+
+def ray_to_convex(origins: np.ndarray, dirs: np.ndarray, hull: np.ndarray) -> np.ndarray:
+    """Where rays from points inside (or on) a convex CCW hull leave it: (M, 2)."""
+    a = hull
+    b = np.roll(hull, -1, axis=0)
+    e = b - a
+    nrm = np.stack([e[:, 1], -e[:, 0]], 1)  # outward for CCW
+    num = np.sum((a[None] - origins[:, None]) * nrm[None], axis=-1)  # (M, E)
+    den = dirs @ nrm.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(den > 1e-12, num / den, np.inf)
+    t = np.where(t < 0, np.inf, t)
+    tt = t.min(axis=1)
+    tt = np.where(np.isfinite(tt), tt, 0.0)
+    return origins + tt[:, None] * dirs
+
+
+def classify(
+    center: np.ndarray, heading: np.ndarray, radius: float, projection: float, poly: np.ndarray
+) -> tuple[str, np.ndarray]:
+    """The Table I case for one robot against one polygon, and the resulting unit direction.
+
+    ``heading`` is a unit world direction; the disc is projected to centre + projection·r·heading.
+    """
+    poly = geometry.ensure_ccw(poly)
+    a = poly
+    b = np.roll(poly, -1, axis=0)
+    e = b - a
+    el = np.maximum(np.linalg.norm(e, axis=1), 1e-12)
+    nrm = np.stack([e[:, 1], -e[:, 0]], 1) / el[:, None]
+    if geometry.points_in_polygon(center[None], poly)[0]:
+        d, _ = geometry.point_segment_distance(center[None], a, b)
+        k = int(np.argmin(d[0]))
+        return HEAD_ON, nrm[k]
+    ahead = center + projection * radius * heading
+    d, _ = geometry.point_segment_distance(ahead[None], a, b)
+    inside = geometry.points_in_polygon(ahead[None], poly)[0]
+    hit = np.flatnonzero(d[0] < radius)
+    if inside and len(hit) == 0:
+        hit = np.array([int(np.argmin(d[0]))])
+    if len(hit) == 0:
+        return NO_HIT, heading
+    if len(hit) == 1:
+        t = e[hit[0]] / el[hit[0]]
+        return EDGE, t if np.dot(t, heading) >= 0 else -t
+    # corner: two (or more) edges; bisector of the closest two edges' outward normals
+    order = hit[np.argsort(d[0][hit])][:2]
+    bis = nrm[order[0]] + nrm[order[1]]
+    s = np.linalg.norm(bis)
+    if s < 1e-9:
+        bis = nrm[order[0]]
+        s = 1.0
+    return CORNER, bis / s
+
+
+def turn_limited(current: np.ndarray, desired: np.ndarray, max_turn: float) -> np.ndarray:
+    """Unit directions (N, 2): ``current`` turned toward ``desired`` by at most ``max_turn`` rad."""
+    a0 = np.arctan2(current[:, 1], current[:, 0])
+    a1 = np.arctan2(desired[:, 1], desired[:, 0])
+    da = np.clip(geometry.wrap_angle(a1 - a0), -max_turn, max_turn)
+    a = a0 + da
+    return np.stack([np.cos(a), np.sin(a)], 1)
+
+
+def rotate(v: np.ndarray, ang: float) -> np.ndarray:
+    c, s = np.cos(ang), np.sin(ang)
+    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def robot_rotation(
+    i: int,
+    centers: np.ndarray,
+    radii: np.ndarray,
+    direction: np.ndarray,
+    projection: float,
+    alpha: float,
+    growth: float,
+    alpha_max: float,
+    rng: np.random.Generator,
+    ignore: np.ndarray | None = None,
+) -> np.ndarray | None:
+    """§3.5: rotate robot i's projection by ±alpha (first sign from ``rng``), widening by
+    ``growth`` until the projected disc clears every other robot; None if the bound is reached."""
+
+    def clear(dvec: np.ndarray) -> bool:
+        ahead = centers[i] + projection * radii[i] * dvec
+        d = np.linalg.norm(centers - ahead, axis=1)
+        ok = d >= radii + radii[i]
+        ok[i] = True
+        if ignore is not None:
+            ok |= ignore
+        return bool(np.all(ok))
+
+    if clear(direction):
+        return direction
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    a = alpha
+    while a <= alpha_max + 1e-9:
+        for s in (sign, -sign):
+            cand = rotate(direction, s * a)
+            if clear(cand):
+                return cand
+        a *= growth
+    return None
 
 
 @dataclass(frozen=True)
-class ApproachParams:
-    max_turn: float = np.radians(15.0)  # rad per tick
-    projection: float = 2.5  # × r
-    alpha: float = np.radians(15.0)
-    alpha_growth: float = 1.25
-    alpha_max: float = np.radians(180.0)
-    envelope_margin: float = 0.25  # m
-    contact_gap: float = 0.01  # m
-    gain: float = 2.0  # 1/s
-    clearance: float = 0.02  # m kept from polygons by the projection test
-    station_gap: float = 0.1  # m between two stations' discs, and from station to contact goal
-
-    @classmethod
-    def from_config(cls, a) -> ApproachParams:
-        return cls(
-            max_turn=np.radians(a.max_turn_deg),
-            projection=a.projection,
-            alpha=np.radians(a.alpha_deg),
-            alpha_growth=a.alpha_growth,
-            alpha_max=np.radians(a.alpha_max_deg),
-            envelope_margin=a.envelope_margin,
-            contact_gap=a.contact_gap,
-            gain=a.tracking_gain,
-        )
+class PlannerParams:
+    max_turn: float  # rad per tick
+    projection: float
+    alpha: float  # rad
+    alpha_growth: float
+    alpha_max: float  # rad
+    gain: float = 1.5  # 1/s, proportional on the distance to the goal
 
 
-# --------------------------------------------------------------------------- goals
-
-
-def envelope(polygon_world: FloatArray, margin: float) -> FloatArray:
-    """The convex envelope: the hull of the object's outline (the margin is applied to goals)."""
-    return geometry.convex_hull(polygon_world)
-
-
-def ray_exit(points: FloatArray, dirs: FloatArray, hull: FloatArray) -> FloatArray:
-    """Distance along each ray (point, unit direction) to where it leaves a convex polygon
-    (0 for a ray starting outside or on the boundary facing out)."""
-    a = hull
-    b = np.roll(hull, -1, axis=0)
-    e = b - a  # (E, 2)
-    # solve p + t d = a + s e for each ray and edge
-    den = dirs[:, None, 0] * e[None, :, 1] - dirs[:, None, 1] * e[None, :, 0]
-    ap = a[None] - points[:, None]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (ap[..., 0] * e[None, :, 1] - ap[..., 1] * e[None, :, 0]) / den
-        s = (ap[..., 0] * dirs[:, None, 1] - ap[..., 1] * dirs[:, None, 0]) / den
-    ok = (np.abs(den) > 1e-12) & (s >= -1e-9) & (s <= 1 + 1e-9) & (t >= -1e-9)
-    t = np.where(ok, t, 0.0)
-    return np.max(t, axis=1)
-
-
-def capture_goals(
-    points: FloatArray,
-    normals: FloatArray,
-    radii: FloatArray,
-    object_pose: FloatArray,
-    polygon: FloatArray,
-    params: ApproachParams,
-) -> tuple[FloatArray, FloatArray]:
-    """World-frame goals for robots at capture points (object-frame points and outward normals):
-    the envelope images (outside the convex hull by ``envelope_margin`` + r along the normal)
-    and the contact goals (r + ``contact_gap`` out along the normal)."""
-    p_w = geometry.transform(points, object_pose)
-    n_w = normals @ geometry.rot(float(object_pose[2])).T
-    hull = envelope(geometry.transform(polygon, object_pose), params.envelope_margin)
-    out = ray_exit(p_w, n_w, hull) + params.envelope_margin + radii
-    out = separate_stations(p_w, n_w, out, radii, params)
-    env = p_w + n_w * out[:, None]
-    contact = p_w + n_w * (radii + params.contact_gap)[:, None]
-    return env, contact
-
-
-def separate_stations(
-    p: FloatArray, n: FloatArray, out: FloatArray, radii: FloatArray, params: ApproachParams
-) -> FloatArray:
-    """Distances along the normals for the stations, pulled in where two stations would be
-    closer than their discs plus ``station_gap`` (points in a notch: their rays converge
-    outside it). Never closer to the object than the contact goal plus ``station_gap``."""
-    out = out.copy()
-    floor = radii + params.contact_gap + params.station_gap
-    m = len(p)
-    for _ in range(50):
-        st = p + n * out[:, None]
-        d = np.linalg.norm(st[:, None] - st[None], axis=-1)
-        need = radii[:, None] + radii[None] + params.station_gap
-        bad = (d < need) & ~np.eye(m, dtype=bool)
-        if not bad.any():
-            break
-        shrink = bad.any(axis=1) & (out > floor)
-        if not shrink.any():
-            break
-        out[shrink] = np.maximum(floor[shrink], out[shrink] - 0.02)
-    return out
-
-
-# --------------------------------------------------------------------------- Table I
-
-
-def table_one(
-    centre: FloatArray, radius: float, direction: FloatArray, polygon: FloatArray, clearance: float
-) -> tuple[str, FloatArray]:
-    """Table I for one projected disc against one polygon: the rule that fired ("free", "edge",
-    "corner", "head_on") and the new unit direction."""
-    a = polygon
-    b = np.roll(polygon, -1, axis=0)
-    d, t = geometry.point_segment_distance(centre[None], a, b)
-    d = d[0]
-    if geometry.points_in_polygon(centre[None], polygon)[0]:
-        k = int(np.argmin(d))
-        n = geometry.outward_normals(polygon)[k]
-        return "head_on", n
-    hit = np.flatnonzero(d < radius + clearance)
-    if len(hit) == 0:
-        return "free", direction
-    normals = geometry.outward_normals(polygon)
-    if len(hit) == 1:
-        e = b[hit[0]] - a[hit[0]]
-        e = e / np.linalg.norm(e)
-        return "edge", e if e @ direction >= 0 else -e
-    # a corner: the two nearest edges hit
-    k1, k2 = hit[np.argsort(d[hit])[:2]]
-    bis = normals[k1] + normals[k2]
-    nb = np.linalg.norm(bis)
-    if nb < 1e-9:
-        bis = normals[k1]
-        nb = 1.0
-    return "corner", bis / nb
-
-
-def turn_toward(current: FloatArray, desired: FloatArray, max_turn: float) -> FloatArray:
-    """Headings (rad) turned from ``current`` toward ``desired`` by at most ``max_turn``."""
-    err = geometry.wrap_angle(desired - current)
-    return current + np.clip(err, -max_turn, max_turn)
-
-
-def _unit(a: float) -> FloatArray:
-    return np.array([np.cos(a), np.sin(a)])
-
-
-@dataclass
-class StepResult:
-    velocity: FloatArray  # (N, 2) world velocity
-    heading: FloatArray  # (N,) heading of motion after the turn limit
-    rules: list[str]  # the rule that fired per robot
-
-
-def plan_step(
-    positions: FloatArray,
-    radii: FloatArray,
-    goals: FloatArray,
-    goal_velocity: FloatArray,
-    speed: FloatArray,
-    motion_heading: FloatArray,
-    obstacles: list[FloatArray],
-    active: NDArray[np.bool_],
-    params: ApproachParams,
+def plan_velocities(
+    centers: np.ndarray,
+    headings: np.ndarray,
+    radii: np.ndarray,
+    max_speed: np.ndarray,
+    goals: np.ndarray,
+    goal_velocity: np.ndarray,
+    polygons: list[np.ndarray],
+    avoid: np.ndarray,
+    active: np.ndarray,
+    params: PlannerParams,
     rng: np.random.Generator,
-    avoid_object: NDArray[np.bool_] | None = None,
-    object_polygon: FloatArray | None = None,
-) -> StepResult:
-    """One projective step for every active robot: world velocities toward the goals.
-
-    ``obstacles`` are polygons (static, world frame); ``object_polygon`` (the object at its
-    predicted pose) is avoided by the robots flagged in ``avoid_object``. ``goal_velocity`` is
-    fed forward (the goal moves with the object); ``motion_heading`` is each robot's previous
-    heading of motion (the turn limit's reference), updated in the result.
-    """
-    n = len(positions)
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """World velocities (N, 2) and new unit headings (N, 2) for every robot, and each robot's
+    Table I case. ``avoid`` (N, P) says which polygons a robot must respect (the object is
+    lifted for a robot closing in on its own contact point); inactive robots get zero."""
+    n = len(centers)
     vel = np.zeros((n, 2))
-    heading = motion_heading.copy()
-    rules = ["idle"] * n
-    avoid_object = np.zeros(n, bool) if avoid_object is None else avoid_object
-    for i in range(n):
-        if not active[i]:
-            continue
-        err = goals[i] - positions[i]
-        dist = float(np.linalg.norm(err))
-        want = float(np.arctan2(err[1], err[0])) if dist > 1e-9 else heading[i]
-        h = float(turn_toward(np.array(heading[i]), np.array(want), params.max_turn))
-        direction = _unit(h)
-        reach = min(params.projection * radii[i], dist)
-        polys = list(obstacles)
-        if avoid_object[i] and object_polygon is not None:
-            polys.append(object_polygon)
-        rule = "free"
-        v_scale = min(float(speed[i]), params.gain * dist)
-        for poly in polys:
-            ahead = positions[i] + reach * direction
-            r, nd = table_one(ahead, radii[i], direction, poly, params.clearance)
-            if r != "free":
-                rule, direction = r, nd
-                if r == "head_on":
-                    v_scale = float(speed[i])
-                break
-        # robot–robot: rotate the projection by ±alpha until clear
-        others = np.flatnonzero(np.arange(n) != i)
-        if len(others) and rule != "head_on":
-            direction, ok = _clear_of_robots(
-                positions[i], radii[i], reach, direction, positions[others], radii[others],
-                params, rng,
-            )  # fmt: skip
-            if not ok:
-                rules[i] = "blocked"
+    new_head = headings.copy()
+    cases = [NO_HIT] * n
+    err = goals - centers
+    dist = np.linalg.norm(err, axis=1)
+    want = err / np.maximum(dist, 1e-9)[:, None]
+    far = dist > 1e-3
+    turned = turn_limited(headings, np.where(far[:, None], want, headings), params.max_turn)
+    # when the goal is close, go straight (a tight turn circle would orbit it)
+    close = dist < 3 * radii * params.projection
+    dirs = np.where(close[:, None], want, turned)
+    speed_fb = np.minimum(params.gain * dist, max_speed)
+    reach = np.minimum(params.projection, dist / radii)
+    # vectorised pre-check: which robot/polygon pairs can trigger a Table I rule at all
+    ahead = centers + (reach * radii)[:, None] * dirs
+    near = np.zeros((n, len(polygons)), bool)
+    for k, poly in enumerate(polygons):
+        near[:, k] = (geometry.polygon_signed_distance(ahead, poly) < radii) | (
+            geometry.polygon_signed_distance(centers, poly) < 0
+        )
+    near &= avoid
+    for i in np.flatnonzero(active):
+        dvec = dirs[i]
+        case = NO_HIT
+        full = False
+        for k, poly in enumerate(polygons):
+            if not near[i, k]:
                 continue
-        if rule == "free" and dist > 1e-9:
-            # feed the goal's motion forward; the turn limit bounds the change of direction
-            v = direction * v_scale + goal_velocity[i]
-        else:
-            v = direction * max(v_scale, 0.3 * float(speed[i]))
-        sp = float(np.linalg.norm(v))
-        if sp > speed[i]:
-            v *= speed[i] / sp
+            c, dnew = classify(centers[i], dvec, radii[i], reach[i], poly)
+            if c != NO_HIT:
+                case, dvec = c, dnew
+                full = c == HEAD_ON
+                break
+        rot = robot_rotation(
+            i,
+            centers,
+            radii,
+            dvec,
+            reach[i],
+            params.alpha,
+            params.alpha_growth,
+            params.alpha_max,
+            rng,
+            ignore=~active,
+        )
+        cases[i] = case
+        if rot is None and not full:
+            vel[i] = 0.0
+            continue
+        if rot is not None:
+            dvec = rot
+        new_head[i] = dvec
+        sp = max_speed[i] if full else speed_fb[i]
+        v = sp * dvec
+        if case == NO_HIT:
+            v = v + goal_velocity[i]
+        s = np.linalg.norm(v)
+        if s > max_speed[i]:
+            v *= max_speed[i] / s
         vel[i] = v
-        if sp > 1e-9:
-            heading[i] = float(np.arctan2(v[1], v[0]))
-        rules[i] = rule
-    return StepResult(vel, heading, rules)
+    return vel, new_head, cases
 
 
-def _clear_of_robots(
-    p: FloatArray,
-    r: float,
-    reach: float,
-    direction: FloatArray,
-    others: FloatArray,
-    other_r: FloatArray,
-    params: ApproachParams,
-    rng: np.random.Generator,
-) -> tuple[FloatArray, bool]:
-    """§3.5: the projection rotated by ±α, α widened by the growth factor, until clear."""
-
-    def clear(d: FloatArray) -> bool:
-        ahead = p + reach * d
-        gap = np.linalg.norm(others - ahead, axis=1) - other_r - r
-        # only robots in front matter: ignore those we are already moving away from
-        front = (others - p) @ d > 0
-        return not np.any((gap < params.clearance) & front)
-
-    if clear(direction):
-        return direction, True
-    base = float(np.arctan2(direction[1], direction[0]))
-    alpha = params.alpha
-    first = 1.0 if rng.random() < 0.5 else -1.0
-    while alpha <= params.alpha_max:
-        for sgn in (first, -first):
-            d = _unit(base + sgn * alpha)
-            if clear(d):
-                return d, True
-        alpha *= params.alpha_growth
-    return direction, False
+def limit_accel(v_new: np.ndarray, v_old: np.ndarray, max_accel: np.ndarray, dt: float):
+    """Bound the change of world velocities (N, 2) to ``max_accel``·dt per tick."""
+    dv = v_new - v_old
+    s = np.linalg.norm(dv, axis=1)
+    cap = max_accel * dt
+    k = np.where(s > cap, cap / np.maximum(s, 1e-12), 1.0)
+    return v_old + dv * k[:, None]

@@ -1,246 +1,306 @@
-"""The capture mission: approach the moving object, close in together, arrest it (pure).
+"""CaptureMission: approach a moving object, close in on the capture points, arrest it (§3).
 
-Phases (Sharma et al. §3 with the issue's corrections):
+Pure per-tick mission: ``step(view) -> MissionOutput``. Phases: ``approach`` (chase each
+point's image on the convex envelope, then keep station there) -> ``close_in`` (all robots on
+the envelope: every one moves to its contact point, point + (r + gap)·n) -> ``arrested`` (every
+robot within ``contact_tolerance`` of its contact point; the arrest event carries the arrival
+spread) -> ``done`` after a short settle. Every command goes through the CBF safety filter.
 
-- ``approach``: every assigned robot chases its capture point's image on the convex envelope
-  (the object's predicted pose), by projective path planning; on reaching it, it matches the
-  object's velocity and keeps station.
-- ``close_in``: once every assigned robot is on station at the same time, all move in together
-  to their contact points (current pose, velocity fed forward).
-- ``arrested``: every assigned robot is within ``contact_tolerance`` of its contact point at
-  once: the ``arrest`` event (arrival spread = time between the first and the last robot's
-  first contact) and ``arrest=True``; the robots hold and the mission is done after
-  ``settle_time``.
-
-Every command passes the safety filter (``controller.safety``); unassigned robots stay put and
-are obstacles like any other robot. ``failed`` after ``approach.timeout`` seconds without an
-arrest. Time comes from the view; randomness from the generator passed in.
+Timing statistics need a clock; the mission never reads one itself: pass ``clock`` (e.g.
+``time.perf_counter`` from the composition root or a benchmark) to get them in ``summary()``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from controller import geometry
-from controller.approach import ApproachParams, capture_goals, plan_step
-from controller.config import FleetConfig
-from controller.mission import RobotLimits, world_to_body
+from controller.approach import (
+    PlannerParams,
+    envelope,
+    limit_accel,
+    plan_velocities,
+    ray_to_convex,
+)
+from controller.mission import RobotLimits, track_velocity, world_to_body
 from controller.node import FleetView, MissionOutput
-from controller.safety import SafetyFilter, SafetyParams
+from controller.safety import SafetyFilter
 
 
+@dataclass
 class CaptureMission:
-    def __init__(
-        self,
-        points: np.ndarray,
-        normals: np.ndarray,
-        assignment: np.ndarray,
-        cfg: FleetConfig,
-        rng: np.random.Generator,
-    ) -> None:
-        self.cfg = cfg
-        self.points = np.asarray(points, dtype=float)
-        self.normals = np.asarray(normals, dtype=float)
-        self.assignment = np.asarray(assignment, dtype=int)
-        if len(set(self.assignment.tolist())) != len(self.assignment):
-            raise ValueError("assignment: a robot is assigned twice")
-        self.rng = rng
-        self.n = len(cfg.robots)
-        self.params = ApproachParams.from_config(cfg.approach)
+    """Approach and arrest. ``points``/``normals`` (M, 2) in the object frame; ``assignment``
+    (M,) robot index per point. Robots without a point stay still (the filter still moves them
+    out of harm's way)."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    assignment: np.ndarray
+    cfg: Any
+    rng: np.random.Generator
+    clock: Callable[[], float] | None = None
+    contact_gap: float = 0.015
+    settle_s: float = 0.5
+    phase: str = "approach"
+    _times: dict[str, list[float]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        cfg = self.cfg
+        ap = cfg.approach
+        self.points = np.asarray(self.points, float)
+        nrm = np.asarray(self.normals, float)
+        self.normals = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+        self.assignment = np.asarray(self.assignment, int)
         self.limits = RobotLimits.from_config(cfg.robots)
-        self.radii = np.array([r.radius for r in cfg.robots])
-        self.polygon = cfg.object_polygon()
-        self.obstacles = cfg.obstacle_polygons()
+        self.n = len(cfg.robots)
+        self.radii = np.array([r.radius for r in cfg.robots], float)
+        self.max_accel = np.minimum(self.limits.max_accel, ap.max_accel)
+        self.dt = 1.0 / cfg.fleet.rate_hz
+        self.obstacles = [geometry.ensure_ccw(p) for p in cfg.obstacle_polygons()]
+        self.object_poly = geometry.ensure_ccw(cfg.object_polygon())
+        self.params = PlannerParams(
+            max_turn=np.deg2rad(ap.max_turn_deg),
+            projection=ap.projection,
+            alpha=np.deg2rad(ap.alpha_deg),
+            alpha_growth=ap.alpha_growth,
+            alpha_max=np.deg2rad(ap.alpha_max_deg),
+        )
         self.filter = SafetyFilter(
             self.radii,
-            self.limits.holonomic,
             self.limits.max_speed,
             cfg.bounds_array(),
-            self.obstacles,
-            SafetyParams.from_config(cfg),
+            len(self.obstacles) + 1,
+            margin=ap.safety_margin,
         )
         self.assigned = np.zeros(self.n, bool)
         self.assigned[self.assignment] = True
-        a = cfg.approach
-        self.contact_tol = a.contact_tolerance
-        self.envelope_tol = a.envelope_tolerance
-        self.timeout = a.timeout
-        self.settle = a.settle_time
-        self.close_speed = a.close_in_speed
-        self.lookahead = a.lookahead
-        self.phase = "approach"
         self.t0: float | None = None
-        self.first_contact = np.full(self.n, np.nan)
-        self.arrest_t: float | None = None
-        self.spread: float | None = None
         self.heading: np.ndarray | None = None
-        self.last_v = np.zeros((self.n, 2))
-        self.infeasible_events = 0
-        self.rules: dict[str, int] = {}
+        self.v_prev = np.zeros((self.n, 2))
+        self.contact_t = np.full(len(self.points), np.nan)
+        self.arrest_t: float | None = None
+        self.arrival_spread: float | None = None
+        self.waypoints: dict[int, list[np.ndarray]] = {}
+        self._routes_planned = False
+        self.events_count: dict[str, int] = {}
+        self.infeasible = 0
+        self.min_filter_status = "solved"
 
-    # -- helpers
-    def _filtered_points(self, poses: np.ndarray) -> np.ndarray:
-        la = np.where(self.limits.holonomic, 0.0, self.lookahead)
-        return poses[:, :2] + la[:, None] * np.stack([np.cos(poses[:, 2]), np.sin(poses[:, 2])], 1)
-
-    def _commands(self, poses: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:
-        """World velocities of the filtered points → body commands under the robots' limits."""
-        lim = self.limits
-        # acceleration limit on the world velocity
-        dv = v - self.last_v
-        step = lim.max_accel * dt
-        mag = np.linalg.norm(dv, axis=1)
-        k = np.where(mag > step, step / np.maximum(mag, 1e-12), 1.0)
-        v = self.last_v + dv * k[:, None]
-        self.last_v = v
-        th = poses[:, 2]
-        body = world_to_body(th, v)
-        cmds = np.zeros((self.n, 3))
-        omni = lim.holonomic
-        cmds[omni, :2] = body[omni]
-        # differential: the look-ahead point is holonomic: v = ṗ·h, ω = ṗ·h⊥ / ℓ
-        diff = ~omni
-        cmds[diff, 0] = body[diff, 0]
-        cmds[diff, 2] = body[diff, 1] / self.lookahead
-        # scale (v, ω) together, never clip one alone: the look-ahead point then still moves
-        # along the filtered direction, only slower, and every barrier condition with h ≥ 0
-        # still holds (∇h·kv ≥ −kγh ≥ −γh for 0 < k ≤ 1)
-        sp = np.linalg.norm(cmds[:, :2], axis=1)
-        k = np.where(sp > lim.max_speed, lim.max_speed / np.maximum(sp, 1e-12), 1.0)
-        wz = np.abs(cmds[:, 2])
-        k = np.minimum(
-            k, np.where(wz > lim.max_yaw_rate, lim.max_yaw_rate / np.maximum(wz, 1e-12), 1.0)
+    # --- geometry of the goals -------------------------------------------------------------
+    def goals(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """World capture points, normals, envelope images and contact targets (M, 2 each)."""
+        pts = geometry.transform(self.points, pose)
+        nrm = self.normals @ geometry.rot(float(pose[2])).T
+        env = envelope(
+            geometry.transform(self.object_poly, pose), self.cfg.approach.envelope_margin
         )
-        cmds *= k[:, None]
-        return cmds
+        img = ray_to_convex(pts, nrm, env)
+        r = self.radii[self.assignment]
+        contact = pts + (r + self.contact_gap)[:, None] * nrm
+        return pts, nrm, img, contact
 
-    # -- the tick
+    def _plan_routes(self, centers: np.ndarray, img: np.ndarray) -> None:
+        """RobotRoadmap routes for robots whose straight line to their image is blocked."""
+        from controller.route import RobotRoadmap
+
+        self._routes_planned = True
+        blocked = []
+        for m, i in enumerate(self.assignment):
+            for poly in self.obstacles:
+                grown = envelope(poly, self.radii[i] + 0.05, samples=8)
+                seg = np.linspace(centers[i], img[m], 50)
+                if geometry.points_in_polygon(seg, grown).any():
+                    blocked.append((m, i))
+                    break
+        if not blocked:
+            return
+        rr = float(self.radii.max()) + self.cfg.approach.safety_margin + 0.05
+        rm = RobotRoadmap.build(
+            self.cfg.bounds_array(), self.obstacles, rr, self.cfg.route.resolution
+        )
+        for m, i in blocked:
+            res = rm.plan(centers[i], img[m], heuristic="euclid", subgoal_spacing=0.6)
+            if res.status == "ok":
+                self.waypoints[i] = [w[:2] for w in res.subgoals[:-1]]
+
+    # --- the step ----------------------------------------------------------------------------
     def step(self, view: FleetView) -> MissionOutput:
-        zero = np.zeros((self.n, 3))
+        tic = self.clock() if self.clock else 0.0
+        n = self.n
         events: list[tuple[str, dict[str, Any]]] = []
+        if view.object_pose is None or view.estop:
+            self.v_prev[:] = 0.0
+            return MissionOutput(np.zeros((n, 3)), self.phase)
         if self.t0 is None:
             self.t0 = view.t
-            self.heading = view.poses[:, 2].copy()
-        dt = 1.0 / self.cfg.fleet.rate_hz
+            events.append(("phase", {"phase": self.phase, "t": view.t}))
+        ovel = np.zeros(3) if view.object_velocity is None else np.asarray(view.object_velocity)
+        # goals ride on the object's next pose (one tick ahead): a longer look-ahead would put
+        # the trailing robots' contact points inside the object as it is now
+        if view.object_velocity is not None:
+            pose = np.asarray(view.object_pose, float) + ovel * self.dt
+        elif view.object_prediction is not None:
+            pose = np.asarray(view.object_prediction, float)
+        else:
+            pose = np.asarray(view.object_pose, float)
+        centers = view.poses[:, :2]
+        if self.heading is None:
+            th = view.poses[:, 2]
+            self.heading = np.stack([np.cos(th), np.sin(th)], 1)
+        pts, nrm, img, contact = self.goals(pose)
+        if not self._routes_planned:
+            self._plan_routes(centers, img)
+        a = self.assignment
+        goal = centers.copy()
+        gvel = np.zeros((n, 2))
+        c = pose[:2]
+        tgt = img if self.phase == "approach" else contact
+        goal[a] = tgt
+        rel = tgt - c
+        gvel[a] = ovel[:2] + ovel[2] * np.stack([-rel[:, 1], rel[:, 0]], 1)
+        # waypoints around static obstacles
+        for i, wps in list(self.waypoints.items()):
+            while wps and np.linalg.norm(centers[i] - wps[0]) < 0.15:
+                wps.pop(0)
+            if wps:
+                goal[i] = wps[0]
+                gvel[i] = 0.0
+            else:
+                del self.waypoints[i]
+        dist = np.linalg.norm(centers[a] - tgt, axis=1)
+        ap = self.cfg.approach
+        obj_world = geometry.transform(self.object_poly, pose)
+        polys = self.obstacles + [obj_world]
+        avoid = np.ones((n, len(polys)), bool)
+        exempt = np.zeros((n, len(polys)), bool)
+        if self.phase != "approach":
+            avoid[a, -1] = False
+            exempt[a, -1] = True
+        active = self.assigned & ~view.stale & view.present
         if self.phase == "arrested":
-            done = view.t - (self.arrest_t or view.t) >= self.settle
-            self.last_v[:] = 0.0
-            return MissionOutput(zero, "arrested", done=done)
-        if view.object_pose is None:
-            return MissionOutput(zero, self.phase)
-        if view.t - self.t0 > self.timeout:
-            return MissionOutput(
-                zero, self.phase, [("failed", {"reason": "timeout", "after_s": self.timeout})],
-                failed=True,
-            )  # fmt: skip
-        poses = view.poses
-        live = view.present & ~view.stale
-        obj_now = view.object_pose
-        obj_vel = view.object_velocity if view.object_velocity is not None else np.zeros(3)
-        obj_pred = view.object_prediction if view.object_prediction is not None else obj_now
-        r_as = self.radii[self.assignment]
-        env_pred, _ = capture_goals(
-            self.points, self.normals, r_as, obj_pred, self.polygon, self.params
+            active[:] = False
+        t_plan = self.clock() if self.clock else 0.0
+        vel, head, _ = plan_velocities(
+            centers,
+            self.heading,
+            self.radii,
+            self.limits.max_speed,
+            goal,
+            gvel,
+            polys,
+            avoid,
+            active,
+            self.params,
+            self.rng,
         )
-        env_now, contact_now = capture_goals(
-            self.points, self.normals, r_as, obj_now, self.polygon, self.params
-        )
-        # velocity of each goal point (rigid motion of the object)
-        c = geometry.transform(geometry.centroid(self.polygon)[None], obj_now)[0]
-        goal_v_env = obj_vel[:2] + obj_vel[2] * np.stack(
-            [-(env_now[:, 1] - c[1]), env_now[:, 0] - c[0]], 1
-        )
-        pos = poses[:, :2]
-        idx = self.assignment
-        on_station = np.linalg.norm(pos[idx] - env_now, axis=1) < self.envelope_tol
-        in_contact = np.linalg.norm(pos[idx] - contact_now, axis=1) < self.contact_tol
-        if self.phase == "approach" and np.all(on_station) and np.all(live[idx]):
-            self.phase = "close_in"
-            events.append(("phase", {"phase": "close_in", "t": view.t}))
-        goals = pos.copy()
-        goal_v = np.zeros((self.n, 2))
-        speed = self.limits.max_speed.copy()
-        active = np.zeros(self.n, bool)
-        closing = np.zeros(self.n, bool)
-        object_world = geometry.transform(self.polygon, obj_now)
-        v_nom = np.zeros((self.n, 2))
-        if self.phase == "approach":
-            goals[idx] = env_pred
-            goal_v[idx] = goal_v_env
-            active[idx] = live[idx]
-            # robots on station keep it: track the envelope point with feed-forward
-            st = idx[on_station]
-            res = plan_step(
-                pos, self.radii, goals, goal_v, speed, self.heading, self.obstacles,
-                active & ~np.isin(np.arange(self.n), st), self.params, self.rng,
-                avoid_object=np.ones(self.n, bool),
-                object_polygon=geometry.transform(self.polygon, obj_pred),
-            )  # fmt: skip
-            v_nom = res.velocity
-            v_nom[st] = goal_v_env[on_station] + self.params.gain * (env_now[on_station] - pos[st])
-            self.heading = res.heading
-            for r in res.rules:
-                self.rules[r] = self.rules.get(r, 0) + 1
-        else:  # close_in: straight in along the normals, velocity fed forward
-            closing[idx] = True
-            goal_v_c = obj_vel[:2] + obj_vel[2] * np.stack(
-                [-(contact_now[:, 1] - c[1]), contact_now[:, 0] - c[0]], 1
-            )
-            # the closing speed (relative to the object) is capped, not the feed-forward: a
-            # robot behind a fast object must still gain on it
-            err = contact_now - pos[idx]
-            v_rel = self.params.gain * err
-            cap = self.close_speed * self.limits.max_speed[idx]
-            sp = np.linalg.norm(v_rel, axis=1)
-            v_rel *= np.where(sp > cap, cap / np.maximum(sp, 1e-12), 1.0)[:, None]
-            v_nom[idx] = goal_v_c + v_rel
-            newly = in_contact & np.isnan(self.first_contact[idx])
-            self.first_contact[idx[newly]] = view.t
-        # diff robots: the filter works on the look-ahead point
-        fr = self.filter.filter(
-            self._filtered_points(poses),
-            v_nom,
-            stale=~live,
-            object_polygon=object_world,
-            object_velocity=obj_vel,
-            object_exempt=closing,
-            closing=closing,
-            centres=poses[:, :2],
-            headings=poses[:, 2],
-        )
-        if fr.status != "solved":
-            self.infeasible_events += 1
-            events.append(("safety_stop", {"status": fr.status, "t": view.t}))
-        cmds = self._commands(poses, fr.velocities, dt)
-        cmds[~live] = 0.0
-        arrest = False
-        if self.phase == "close_in" and np.all(in_contact):
-            self.phase = "arrested"
-            self.arrest_t = view.t
-            self.spread = float(
-                np.nanmax(self.first_contact[idx]) - np.nanmin(self.first_contact[idx])
-            )
-            arrest = True
-            cmds[:] = 0.0
-            self.last_v[:] = 0.0
+        if self.phase == "arrested":
+            vel[a] = 0.0
+        self.heading = head
+        vel = limit_accel(vel, self.v_prev, self.max_accel, self.dt)
+        t_filter = self.clock() if self.clock else 0.0
+        stale = view.stale | ~view.present
+        res = self.filter.filter(centers, vel, polys, exempt=exempt, stale=stale)
+        t_end = self.clock() if self.clock else 0.0
+        if res.stopped.any():
+            self.infeasible += 1
             events.append(
-                ("arrest", {
-                    "t": view.t,
-                    "arrival_spread_s": self.spread,
-                    "robots": [view.ids[i] for i in idx],
-                    "contact_error_m": float(np.max(np.linalg.norm(pos[idx] - contact_now, 1))),
-                })
-            )  # fmt: skip
-        return MissionOutput(cmds, self.phase, events, arrest=arrest)
+                ("safety_stop", {"robots": [view.ids[i] for i in np.flatnonzero(res.stopped)]})
+            )
+        vel = res.velocities
+        self.v_prev = vel
+        cmds = track_reversible(view.poses, vel, self.limits)
+        # phase logic
+        arrest = False
+        done = failed = False
+        if self.phase == "approach":
+            if np.all(dist < ap.envelope_tolerance) and not self.waypoints:
+                self._set_phase("close_in", view.t, events)
+        elif self.phase == "close_in":
+            arrived = dist < ap.contact_tolerance
+            first = arrived & np.isnan(self.contact_t)
+            self.contact_t[first] = view.t
+            if np.all(arrived):
+                self.arrest_t = view.t
+                self.arrival_spread = float(np.nanmax(self.contact_t) - np.nanmin(self.contact_t))
+                self._set_phase("arrested", view.t, events)
+                arrest = True
+                events.append(
+                    (
+                        "arrest",
+                        {
+                            "t": view.t,
+                            "arrival_spread_s": self.arrival_spread,
+                            "contacts": [
+                                {"robot": view.ids[i], "point": [float(x) for x in p]}
+                                for i, p in zip(a, pts, strict=True)
+                            ],
+                        },
+                    )
+                )
+        elif self.phase == "arrested":
+            cmds[:] = 0.0
+            if self.arrest_t is not None and view.t - self.arrest_t >= self.settle_s:
+                done = True
+                self._set_phase("done", view.t, events)
+        if self.phase in ("approach", "close_in") and view.t - self.t0 > ap.timeout:
+            failed = True
+            self._set_phase("failed", view.t, events)
+        cmds[stale] = 0.0
+        if self.clock:
+            self._times.setdefault("plan_s", []).append(t_filter - t_plan)
+            self._times.setdefault("filter_s", []).append(t_end - t_filter)
+            self._times.setdefault("step_s", []).append(self.clock() - tic)
+        return MissionOutput(
+            cmds, self.phase, events=events, done=done, failed=failed, arrest=arrest
+        )
+
+    def _set_phase(self, phase: str, t: float, events: list) -> None:
+        self.phase = phase
+        events.append(("phase", {"phase": phase, "t": t}))
 
     def summary(self) -> dict[str, Any]:
-        return {
+        out: dict[str, Any] = {
             "phase": self.phase,
+            "arrival_spread_s": self.arrival_spread,
             "arrest_time_s": self.arrest_t,
-            "arrival_spread_s": self.spread,
-            "safety_infeasible": self.infeasible_events,
-            "rules": dict(self.rules),
-            "safety_solves": self.filter.solves,
+            "infeasible_filter_calls": self.infeasible,
         }
+        for k, v in self._times.items():
+            arr = np.asarray(v) * 1e3
+            out[k.replace("_s", "_ms")] = {
+                "median": float(np.median(arr)),
+                "p90": float(np.percentile(arr, 90)),
+                "max": float(arr.max()),
+                "calls": len(arr),
+            }
+        return out
+
+
+def track_reversible(
+    poses: np.ndarray, v_world: np.ndarray, limits: RobotLimits, heading_gain: float = 4.0
+) -> np.ndarray:
+    """Like :func:`controller.mission.track_velocity`, but a differential robot may drive
+    backwards: it aligns its axis (either way) with the desired velocity and drives with the
+    signed component along its heading. Station keeping then needs no U-turns."""
+    cmds = track_velocity(poses, v_world, limits)
+    diff = ~limits.holonomic
+    if not np.any(diff):
+        return cmds
+    th = poses[diff, 2]
+    v = v_world[diff]
+    speed = np.linalg.norm(v, axis=1)
+    body = world_to_body(th, v)
+    err = np.arctan2(body[:, 1], body[:, 0])
+    err = np.where(err > np.pi / 2, err - np.pi, np.where(err < -np.pi / 2, err + np.pi, err))
+    moving = speed > 0.01
+    wz = np.where(moving, heading_gain * err, 0.0)
+    fwd = body[:, 0] * np.abs(np.cos(err))
+    fwd = np.clip(fwd, -limits.max_speed[diff], limits.max_speed[diff])
+    cmds[diff, 0] = fwd
+    cmds[diff, 1] = 0.0
+    cmds[diff, 2] = np.clip(wz, -limits.max_yaw_rate[diff], limits.max_yaw_rate[diff])
+    return cmds

@@ -154,12 +154,6 @@ class ApproachSection:
     safety_margin: float = _rule(0.05, min=0, max=1)
     max_accel: float = _rule(1.0, gt=0, max=100)
     timeout: float = _rule(180.0, gt=0, max=1e5)
-    contact_gap: float = _rule(0.01, min=0, max=1)  # m between disc and edge at a contact goal
-    tracking_gain: float = _rule(2.0, gt=0, max=100)  # 1/s, position error to velocity
-    close_in_speed: float = _rule(0.5, gt=0, max=1)  # fraction of max_speed when closing in
-    barrier_gain: float = _rule(4.0, gt=0, max=1000)  # 1/s, the safety filter's gamma
-    lookahead: float = _rule(0.05, gt=0, max=1)  # m, differential robots' filtered point
-    settle_time: float = _rule(1.0, min=0, max=60)  # s held after the arrest before done
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -37,10 +38,16 @@ class CaptureJob:
     points at the object's current pose; robots left over stay where they are.
     """
 
-    def __init__(self, cfg: FleetConfig, rng: np.random.Generator | None = None) -> None:
+    def __init__(
+        self,
+        cfg: FleetConfig,
+        rng: np.random.Generator | None = None,
+        clock: Callable[[], float] | None = None,
+    ) -> None:
         from controller.capture import CaptureParams, plan_capture
 
         self.cfg = cfg
+        self.clock = clock
         self.rng = rng if rng is not None else np.random.default_rng(cfg.capture.seed)
         self.n = len(cfg.robots)
         self.plan = plan_capture(
@@ -78,7 +85,12 @@ class CaptureJob:
 
         self.assignment = self._assign(view)
         self.inner = CaptureMission(
-            self.plan.points, self.plan.push_normals, self.assignment, self.cfg, self.rng
+            self.plan.points,
+            self.plan.push_normals,
+            self.assignment,
+            self.cfg,
+            self.rng,
+            clock=self.clock,
         )
         data = {
             "points": self.plan.points.round(4).tolist(),
@@ -106,13 +118,31 @@ class CaptureJob:
         return out
 
 
-def build_mission(cfg: FleetConfig, kind: str = "capture"):
-    """The mission a config runs: ``capture`` (the whole job), ``stage`` (drive to a ring of
-    staging points around the object) or ``hold`` (everyone stopped)."""
+def build_mission(
+    cfg: FleetConfig,
+    kind: str = "capture",
+    capture: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    rng: np.random.Generator | None = None,
+    clock: Callable[[], float] | None = None,
+):
+    """The mission a config runs: ``capture`` (the whole job: GA plan, assignment, approach,
+    arrest), ``stage`` (drive to a ring of staging points around the object) or ``hold``
+    (everyone stopped).
+
+    ``capture`` = (points (M, 2), outward normals (M, 2), both in the object frame, robot index
+    per point (M,)) replaces the GA plan and the assignment (hand-made capture sets). ``rng``
+    defaults to one seeded from ``capture.seed``; ``clock`` only feeds timing statistics (the
+    composition root passes one; the mission never reads a clock of its own)."""
     if kind not in MISSION_KINDS:
         raise MissionError(f"unknown mission {kind!r}; expected one of {MISSION_KINDS}")
     if kind == "hold":
         return HoldMission(len(cfg.robots))
     if kind == "stage":
         return GotoMission(staging_targets(cfg), RobotLimits.from_config(cfg.robots))
-    return CaptureJob(cfg)
+    gen = rng if rng is not None else np.random.default_rng(cfg.capture.seed)
+    if capture is not None:
+        from controller.capture_mission import CaptureMission
+
+        points, normals, assignment = capture
+        return CaptureMission(points, normals, assignment, cfg, gen, clock=clock)
+    return CaptureJob(cfg, gen, clock)

@@ -1,22 +1,18 @@
-"""The safety filter: the last layer before commands are published, in every phase.
+"""Safety filter: a control-barrier-function QP (osqp) over all robots' world velocities.
 
-A quadratic program (osqp) changes the nominal world velocities as little as possible,
-``min Σ |v_i − v_i^nom|²``, subject to control barrier function constraints for single
-integrators (Ames et al.; Robotarium's barrier certificates):
+Decision variable u (2N,), world-frame velocities (m/s). Minimise |u - u_nom|^2 subject to:
 
-- robot–robot: ``h = |p_i − p_j| − (r_i + r_j + margin)``, ``∇h·(v_i − v_j) ≥ −γ h``;
-- robot–static obstacle (the nearest one) and robot–wall: ``∇h·v_i ≥ −γ h``;
-- robot–object: the same against the object's velocity at the nearest point, except for a robot
-  closing in on its own contact point;
-- speed: a box ``|v_x|, |v_y| ≤ v_max/√2`` per robot (a polygonal stand-in for the disc);
-- stale robots (no fresh pose) are pinned to zero and become static obstacles for the others.
+- robot-robot: 2 d_ij . (u_i - u_j) >= -gamma * h_ij, h_ij = |d_ij|^2 - (r_i + r_j + margin)^2;
+- robot-polygon (obstacles, the object, stale robots as discs): n . u_i >= -gamma * (dist - r -
+  margin), n the outward direction from the polygon's closest point;
+- world bounds and speed: a box on each component.
 
-Differential robots are filtered at a look-ahead point ``p + ℓ·(cos θ, sin θ)``, which is
-holonomic (``v = ṗ·h``, ``ω = ṗ·h⊥ / ℓ``); their discs are grown by ℓ.
-
-The sparsity pattern (every pair, one obstacle row, one object row and four wall rows per robot)
-is fixed for a fleet, so the osqp problem is set up once and only values change: each call is a
-warm-started update, not a rebuild. Pure: arrays in, arrays out.
+The sparsity pattern is built once for N robots and P polygons; each call only updates values
+(``Ax``, ``q``, ``l``, ``u``) and warm-starts. Differential robots are filtered as single
+integrators at their centre (the mission turns the filtered velocity into (v, wz), driving
+forwards or backwards along its axis); the look-ahead-point model for them is not done yet.
+If the QP is infeasible (or osqp fails), the robots whose constraints are already violated
+stop, the others keep their nominal velocity (speed-capped), and the status says so.
 """
 
 from __future__ import annotations
@@ -25,265 +21,181 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import osqp
-import scipy.sparse as sp
-from numpy.typing import NDArray
+from scipy import sparse
 
 from controller import geometry
 
-FloatArray = NDArray[np.float64]
 INF = 1e20
-
-
-@dataclass(frozen=True)
-class SafetyParams:
-    margin: float = 0.05  # m kept between discs (and to obstacles, walls, the object)
-    contact_margin: float = 0.0  # m between two robots both closing in on their contact points
-    gamma: float = 4.0  # 1/s barrier gain
-    lookahead: float = 0.05  # m, differential robots' filtered point
-    obstacle_margin: float = 0.05  # m to static obstacles and walls
-
-    @classmethod
-    def from_config(cls, cfg) -> SafetyParams:
-        a = cfg.approach
-        return cls(
-            margin=a.safety_margin,
-            contact_margin=min(a.safety_margin, 0.5 * cfg.capture.clearance),
-            gamma=a.barrier_gain,
-            lookahead=a.lookahead,
-            obstacle_margin=a.safety_margin,
-        )
 
 
 @dataclass
 class FilterResult:
-    velocities: FloatArray  # (N, 2) filtered world velocities of the filtered points
-    status: str  # "solved", "trivial", or osqp's status when infeasible
-    stopped: NDArray[np.bool_]  # robots stopped by the filter (infeasible)
-    active: int  # constraints at their bound
-    changed: float  # max |v − v_nom| (m/s)
+    """Filtered world velocities (N, 2), status, robots stopped because infeasible."""
+
+    velocities: np.ndarray
+    status: str
+    stopped: np.ndarray
+    changed: float
 
 
 @dataclass
 class SafetyFilter:
-    """One fleet's QP, set up on first use and updated in place every call."""
+    """Vectorised, warm-started CBF filter for N robots among ``n_polygons`` polygons."""
 
-    radii: FloatArray
-    holonomic: NDArray[np.bool_]
-    max_speed: FloatArray
-    bounds: FloatArray  # [[xmin, ymin], [xmax, ymax]]
-    obstacles: list[FloatArray]
-    params: SafetyParams = field(default_factory=SafetyParams)
+    radii: np.ndarray
+    max_speed: np.ndarray
+    bounds: np.ndarray  # [[xmin, ymin], [xmax, ymax]]
+    n_polygons: int
+    margin: float = 0.05
+    gamma: float = 4.0
+    warm: bool = True
+    _prob: osqp.OSQP | None = field(default=None, repr=False)
+    _perm: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        self.radii = np.asarray(self.radii, dtype=float)
-        self.n = len(self.radii)
-        n = self.n
-        self._grow = np.where(self.holonomic, 0.0, self.params.lookahead)
-        self._pi, self._pj = np.triu_indices(n, 1)
-        self.n_pairs = len(self._pi)
-        self._solver: osqp.OSQP | None = None
-        self.solves = 0
-        self.infeasible = 0
-        self.relaxed = 0
-        # row layout: pairs | obstacle | object | walls x-, x+, y-, y+ | velocity box (2N)
-        self._r_obs = self.n_pairs
-        self._r_obj = self._r_obs + n
-        self._r_wall = self._r_obj + n
-        self._r_box = self._r_wall + 4 * n
-        self.m = self._r_box + 2 * n
+        n = len(self.radii)
+        self.n = n
+        iu, ju = np.triu_indices(n, 1)
+        self.pi, self.pj = iu, ju
+        npair = len(iu)
+        # row layout: pairs, robot x polygon, box (2N)
         rows, cols = [], []
-        for k, (i, j) in enumerate(zip(self._pi, self._pj, strict=True)):
-            rows += [k, k, k, k]
-            cols += [2 * i, 2 * i + 1, 2 * j, 2 * j + 1]
-        for base in (self._r_obs, self._r_obj):
-            for i in range(n):
-                rows += [base + i, base + i]
-                cols += [2 * i, 2 * i + 1]
-        for i in range(n):
-            for w in range(4):
-                rows.append(self._r_wall + 4 * i + w)
-                cols.append(2 * i + (0 if w < 2 else 1))
-        for c in range(2 * n):
-            rows.append(self._r_box + c)
-            cols.append(c)
-        pattern = sp.csc_matrix(
-            (np.arange(1, len(rows) + 1, dtype=float), (rows, cols)), shape=(self.m, 2 * n)
+        r = np.arange(npair)
+        for k in range(2):
+            rows += [r, r]
+            cols += [2 * iu + k, 2 * ju + k]
+        rp = npair + np.arange(n * self.n_polygons)
+        ri = np.repeat(np.arange(n), self.n_polygons)
+        for k in range(2):
+            rows.append(rp)
+            cols.append(2 * ri + k)
+        rb = npair + n * self.n_polygons + np.arange(2 * n)
+        rows.append(rb)
+        cols.append(np.arange(2 * n))
+        self._rows = np.concatenate(rows)
+        self._cols = np.concatenate(cols)
+        self.m = npair + n * self.n_polygons + 2 * n
+        tag = sparse.csc_matrix(
+            (np.arange(1, len(self._rows) + 1, dtype=float), (self._rows, self._cols)),
+            shape=(self.m, 2 * n),
         )
-        # osqp wants the values in CSC order: keep the permutation from our order to CSC order
-        self._order = np.asarray(pattern.data, dtype=int) - 1
-        self._A = pattern
-        self._polys = [np.asarray(o, dtype=float) for o in self.obstacles]
+        self._perm = tag.data.astype(int) - 1  # csc data order -> our COO order
+        self._pattern = tag
+        self.ri = ri
 
-    # -- geometry rows
-    def _nearest_obstacle(self, pts: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Per point: signed distance to the nearest static obstacle and the unit gradient."""
-        n = len(pts)
-        best = np.full(n, INF)
-        grad = np.zeros((n, 2))
-        for poly in self._polys:
-            d, g = _polygon_distance_grad(pts, poly)
-            closer = d < best
-            best = np.where(closer, d, best)
-            grad[closer] = g[closer]
-        return best, grad
+    def _setup(self, ax: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+        a = self._pattern.copy()
+        a.data = ax[self._perm]
+        p = sparse.identity(2 * self.n, format="csc")
+        self._prob = osqp.OSQP()
+        self._prob.setup(
+            P=sparse.triu(p, format="csc"),
+            q=q,
+            A=a,
+            l=lo,
+            u=hi,
+            verbose=False,
+            polishing=False,
+            warm_starting=True,
+            eps_abs=1e-4,
+            eps_rel=1e-4,
+            max_iter=2000,
+        )
 
     def filter(
         self,
-        points: FloatArray,
-        v_nom: FloatArray,
-        *,
-        stale: NDArray[np.bool_] | None = None,
-        object_polygon: FloatArray | None = None,
-        object_velocity: FloatArray | None = None,
-        object_exempt: NDArray[np.bool_] | None = None,
-        closing: NDArray[np.bool_] | None = None,
-        centres: FloatArray | None = None,
-        headings: FloatArray | None = None,
+        positions: np.ndarray,
+        u_nom: np.ndarray,
+        polygons: list[np.ndarray],
+        exempt: np.ndarray | None = None,
+        stale: np.ndarray | None = None,
     ) -> FilterResult:
-        """Filter nominal world velocities (N, 2) of the filtered points (N, 2).
+        """Filter nominal world velocities (N, 2) at robot centres (N, 2).
 
-        ``object_polygon``: the object's outline in the world now; ``object_velocity``: its
-        (vx, vy, wz); ``object_exempt``: robots allowed to touch it (closing in on their point);
-        ``closing``: robots closing in (pairs of them keep ``contact_margin`` instead of margin).
-        ``centres`` and ``headings``: the robots' centres and headings (differential robots'
-        filtered points lie ahead of their centres); the object rows use them.
+        ``polygons`` (at most ``n_polygons``) are obstacles and the object, world frame;
+        ``exempt`` (N, P) bool lifts a robot-polygon constraint (a robot closing in on its own
+        contact point); ``stale`` robots are held at zero and the others avoid them.
         """
-        n, p = self.n, self.params
-        pts = np.asarray(points, dtype=float)
-        v_nom = np.asarray(v_nom, dtype=float).copy()
+        n, npoly = self.n, self.n_polygons
         stale = np.zeros(n, bool) if stale is None else np.asarray(stale, bool)
-        closing = np.zeros(n, bool) if closing is None else np.asarray(closing, bool)
-        rad = self.radii + self._grow
-        vals = np.empty(len(self._order))
-        lo = np.full(self.m, -INF)
-        hi = np.full(self.m, INF)
-        # pairs: 2 (pi − pj)·(vi − vj) / |.| ≥ −γ h
-        dp = pts[self._pi] - pts[self._pj]
-        dist = np.maximum(np.linalg.norm(dp, axis=1), 1e-9)
-        u = dp / dist[:, None]
-        both = closing[self._pi] & closing[self._pj]
-        h = dist - rad[self._pi] - rad[self._pj] - np.where(both, p.contact_margin, p.margin)
-        pair_vals = np.concatenate([u, -u], axis=1).reshape(-1)
-        lo[: self.n_pairs] = -p.gamma * h
-        # obstacle rows
-        d_obs, g_obs = self._nearest_obstacle(pts) if self._polys else (np.full(n, INF), None)
-        obs_vals = (g_obs if g_obs is not None else np.zeros((n, 2))).reshape(-1)
-        h_obs = d_obs - rad - p.obstacle_margin
-        lo[self._r_obs : self._r_obj] = np.where(h_obs < 1.0, -p.gamma * h_obs, -INF)
-        # object rows: ∇h·ṗ_i ≥ ∇h·v_obj(at the nearest point) − γ h, on the robot's centre
-        # (a differential robot's centre moves with the look-ahead point's velocity projected
-        # on its heading, ṗ = h hᵀ ṗ', so the row's coefficients are (∇h·h) h). A robot
-        # closing in on its own contact point may touch the object (margin 0), not enter it.
-        obj_vals = np.zeros((n, 2))
-        if object_polygon is not None:
-            centres = pts if centres is None else np.asarray(centres, dtype=float)
-            d_o, g_o, near = _polygon_distance_grad(centres, object_polygon, with_point=True)
-            coef = g_o.copy()
-            if headings is not None:
-                hv = np.stack([np.cos(headings), np.sin(headings)], 1)
-                diff = ~self.holonomic
-                coef[diff] = (np.sum(g_o * hv, axis=1)[:, None] * hv)[diff]
-            obj_vals = coef
-            v_o = np.zeros((n, 2))
-            if object_velocity is not None:
-                c = geometry.centroid(object_polygon)
-                w = object_velocity[2]
-                rel = near - c
-                v_o = object_velocity[:2] + w * np.stack([-rel[:, 1], rel[:, 0]], 1)
-            exempt = np.zeros(n, bool) if object_exempt is None else np.asarray(object_exempt)
-            h_o = d_o - self.radii - np.where(exempt, 0.0, p.margin)
-            rhs = np.sum(g_o * v_o, axis=1) - p.gamma * h_o
-            lo[self._r_obj : self._r_wall] = np.where(h_o > 1.5, -INF, rhs)
-        # walls: x − xmin − r − m ≥ 0 → vx ≥ −γ h, and so on
-        (xmin, ymin), (xmax, ymax) = self.bounds
-        m_w = rad + p.obstacle_margin
-        hw = np.stack(
-            [pts[:, 0] - xmin - m_w, xmax - pts[:, 0] - m_w, pts[:, 1] - ymin - m_w,
-             ymax - pts[:, 1] - m_w], 1,
-        )  # fmt: skip
-        sign = np.array([1.0, -1.0, 1.0, -1.0])
-        wall_vals = np.tile(sign, n)
-        lo[self._r_wall : self._r_box] = (-p.gamma * hw).reshape(-1)
-        # velocity box; stale robots pinned to zero
-        vb = np.repeat(self.max_speed / np.sqrt(2.0), 2)
-        vb[np.repeat(stale, 2)] = 0.0
-        lo[self._r_box :] = -vb
-        hi[self._r_box :] = vb
-        v_nom[stale] = 0.0
-        # a violated barrier (h < 0) asks for a recovery speed γ|h|: never more than the box
-        # allows, or one bad estimate makes the whole QP infeasible
-        cap = 0.9 * vb.reshape(n, 2).min(axis=1)
-        lo[self.n_pairs : self._r_box] = np.minimum(
-            lo[self.n_pairs : self._r_box],
-            np.concatenate([cap, cap, np.repeat(cap, 4)]),
-        )
-        lo[: self.n_pairs] = np.minimum(lo[: self.n_pairs], cap[self._pi] + cap[self._pj])
-        ours = np.concatenate(
-            [pair_vals, obs_vals, obj_vals.reshape(-1), wall_vals, np.ones(2 * n)]
-        )
-        vals[:] = ours[self._order]
-        q = -2.0 * v_nom.reshape(-1)
-        if self._solver is None:
-            self._A.data = vals.copy()
-            self._solver = osqp.OSQP()
-            self._solver.setup(
-                P=sp.eye(2 * n, format="csc") * 2.0, q=q, A=self._A, l=lo, u=hi,
-                verbose=False, warm_starting=True, polishing=False,
-                eps_abs=1e-5, eps_rel=1e-5, max_iter=4000,
-            )  # fmt: skip
+        u_nom = np.where(stale[:, None], 0.0, u_nom)
+        p = positions
+        # robot pairs
+        d = p[self.pi] - p[self.pj]
+        rs = self.radii[self.pi] + self.radii[self.pj] + self.margin
+        h = np.sum(d * d, axis=1) - rs**2
+        vals = [2 * d[:, 0], -2 * d[:, 0], 2 * d[:, 1], -2 * d[:, 1]]
+        lo_pair = -self.gamma * h
+        # polygons
+        nrm = np.zeros((n, npoly, 2))
+        lo_poly = np.full((n, npoly), -INF)
+        for k, poly in enumerate(polygons[:npoly]):
+            a = poly
+            b = np.roll(poly, -1, axis=0)
+            dist, closest = geometry.point_segment_distance(p, a, b)
+            j = np.argmin(dist, axis=1)
+            c = closest[np.arange(n), j]
+            vec = p - c
+            dd = np.maximum(np.linalg.norm(vec, axis=1), 1e-9)
+            inside = geometry.points_in_polygon(p, poly)
+            sd = np.where(inside, -dd, dd)
+            nv = vec / dd[:, None] * np.where(inside, -1.0, 1.0)[:, None]
+            nrm[:, k] = nv
+            lo_poly[:, k] = -self.gamma * (sd - self.radii - self.margin)
+        if exempt is not None:
+            lo_poly = np.where(exempt[:, :npoly], -INF, lo_poly)
+            nrm = np.where(exempt[:, :npoly, None], 0.0, nrm)
+        flat = nrm.reshape(-1, 2)
+        vals += [flat[:, 0], flat[:, 1]]
+        vals.append(np.ones(2 * n))
+        ax = np.concatenate(vals)
+        # box: speed and world bounds (stay in by gamma * distance to the wall)
+        vmax = np.repeat(self.max_speed / np.sqrt(2.0), 2)
+        lo_b = -vmax.copy()
+        hi_b = vmax.copy()
+        (x0, y0), (x1, y1) = self.bounds
+        rr = np.repeat(self.radii + self.margin, 2)
+        pf = p.reshape(-1)
+        lowwall = np.tile([x0, y0], n) + rr
+        highwall = np.tile([x1, y1], n) - rr
+        lo_b = np.maximum(lo_b, np.minimum(-self.gamma * (pf - lowwall), 0.0))
+        hi_b = np.minimum(hi_b, np.maximum(self.gamma * (highwall - pf), 0.0))
+        st = np.repeat(stale, 2)
+        lo_b[st] = 0.0
+        hi_b[st] = 0.0
+        # stale robots: others see them as fixed; the pair row stays (u_stale = 0)
+        lo = np.concatenate([lo_pair, lo_poly.reshape(-1), lo_b])
+        hi = np.concatenate([np.full(len(lo_pair) + n * npoly, INF), hi_b])
+        lo = np.minimum(lo, hi)
+        q = -u_nom.reshape(-1).astype(float)
+        if self._prob is None or not self.warm:
+            self._setup(ax, q, lo, hi)
         else:
-            self._solver.update(q=q, l=lo, u=hi, Ax=vals)
-        res = self._solver.solve(raise_error=False)
-        self.solves += 1
-        status = res.info.status
-        if res.info.status_val not in (1, 2):
-            # the object may corner a robot against a wall or a neighbour: let it be touched
-            # (it is pushed, not crushed) rather than stop the whole fleet
-            lo_soft = lo.copy()
-            lo_soft[self._r_obj : self._r_wall] = -INF
-            self._solver.update(l=lo_soft)
-            res = self._solver.solve(raise_error=False)
-            self.solves += 1
-            self.relaxed += 1
-        if res.info.status_val not in (1, 2) or res.x is None or np.any(~np.isfinite(res.x)):
-            # infeasible or failed: the robots whose constraints are violated at zero velocity
-            # stop, the rest keep the nominal command scaled down; the caller reports it
-            self.infeasible += 1
-            stopped = np.ones(n, bool)
-            return FilterResult(np.zeros((n, 2)), status, stopped, 0, float("nan"))
-        v = res.x.reshape(n, 2)
-        v[stale] = 0.0
-        active = int(np.count_nonzero(np.abs(self._A_times(vals, res.x) - lo) < 1e-4))
-        changed = float(np.max(np.linalg.norm(v - v_nom, axis=1))) if n else 0.0
-        return FilterResult(v, "solved", np.zeros(n, bool), active, changed)
+            self._prob.update(q=q, l=lo, u=hi, Ax=ax[self._perm])
+        res = self._prob.solve(raise_error=False)
+        status = str(res.info.status)
+        stopped = np.zeros(n, bool)
+        if res.x is None or not status.startswith("solved") or not np.all(np.isfinite(res.x)):
+            # infeasible: stop the robots whose constraints are violated by stopping less
+            stopped = self._concerned(lo_pair, lo_poly)
+            out = np.where(stopped[:, None], 0.0, u_nom)
+            out = self._scale_box(out)
+            return FilterResult(out, status, stopped, float(np.abs(out - u_nom).max()))
+        u = res.x.reshape(n, 2)
+        u = np.where(stale[:, None], 0.0, u)
+        return FilterResult(u, status, stopped, float(np.abs(u - u_nom).max()))
 
-    def _A_times(self, vals: FloatArray, x: FloatArray) -> FloatArray:
-        a = self._A.copy()
-        a.data = vals
-        return a @ x
+    def _concerned(self, lo_pair: np.ndarray, lo_poly: np.ndarray) -> np.ndarray:
+        bad = np.zeros(self.n, bool)
+        viol = lo_pair > 0
+        bad[self.pi[viol]] = True
+        bad[self.pj[viol]] = True
+        bad |= np.any(lo_poly > 0, axis=1)
+        if not bad.any():
+            bad[:] = True
+        return bad
 
-
-def _polygon_distance_grad(
-    pts: FloatArray, poly: FloatArray, with_point: bool = False
-) -> tuple[FloatArray, ...]:
-    """Signed distance from points to a polygon (negative inside), the unit outward gradient,
-    and (optionally) the nearest boundary point."""
-    poly = np.asarray(poly, dtype=float)
-    a = poly
-    b = np.roll(poly, -1, axis=0)
-    ab = b - a  # (E, 2)
-    ap = pts[:, None, :] - a[None]  # (N, E, 2)
-    t = np.clip(np.sum(ap * ab, -1) / np.maximum(np.sum(ab * ab, -1), 1e-18), 0.0, 1.0)
-    near = a[None] + t[..., None] * ab[None]
-    diff = pts[:, None, :] - near
-    d = np.linalg.norm(diff, axis=-1)
-    k = np.argmin(d, axis=1)
-    idx = np.arange(len(pts))
-    dist = d[idx, k]
-    vec = diff[idx, k] / np.maximum(dist, 1e-12)[:, None]
-    inside = geometry.points_in_polygon(pts, poly)
-    sd = np.where(inside, -dist, dist)
-    grad = np.where(inside[:, None], -vec, vec)
-    if with_point:
-        return sd, grad, near[idx, k]
-    return sd, grad
+    def _scale_box(self, u: np.ndarray) -> np.ndarray:
+        s = np.linalg.norm(u, axis=1)
+        k = np.where(s > self.max_speed, self.max_speed / np.maximum(s, 1e-12), 1.0)
+        return u * k[:, None]

@@ -1,0 +1,91 @@
+"""The whole job on GA capture plans: GA plan, assignment on first sight, approach, close-in,
+arrest, over zenoh with Kalman-filtered feedback, in the `ideal` world (fast) and in pybullet.
+(tests/test_scenarios.py runs the approach on hand-made capture sets.) Known weak spots, not in
+this suite: notched shapes (T, U) on a sine or evading path, and an obstacle beside a line path,
+where a closing robot can overlap the object by 2–15 cm; see the approach issue's notes.
+
+Every scenario must arrest the object with no robot-robot overlap, at most 1 cm of robot-object
+penetration and no obstacle contact.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controller.missions import build_mission
+from controller.runtime import DryRun
+from tests.conftest import base_config_dict, deep_update, free_port
+
+RECT = [[0.0, 0.0], [0.9, 0.0], [0.9, 0.6], [0.0, 0.6]]
+L_SHAPE = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.4], [0.4, 0.4], [0.4, 1.0], [0.0, 1.0]]
+T_SHAPE = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.3], [0.65, 0.3], [0.65, 0.9], [0.35, 0.9],
+           [0.35, 0.3], [0.0, 0.3]]  # fmt: skip
+HEXAGON = [[0.5 + 0.45 * np.cos(a), 0.5 + 0.45 * np.sin(a)] for a in np.arange(6) * np.pi / 3]
+U_SHAPE = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.8], [0.7, 0.8], [0.7, 0.3], [0.3, 0.3], [0.3, 0.8],
+           [0.0, 0.8]]  # fmt: skip
+
+
+def scenario(
+    polygon,
+    motion: dict,
+    kinds: str = "oodood",
+    start=(2.0, 3.0, 0.0),
+    obstacles=(),
+    seed: int = 1,
+    backend: str = "ideal",
+):
+    cfg = base_config_dict()
+    cfg["object"]["polygon"] = [list(map(float, p)) for p in polygon]
+    cfg["object"]["start"] = list(start)
+    cfg["object"]["motion"] = {**cfg["object"]["motion"], **motion}
+    cfg["obstacles"] = [{"polygon": o} for o in obstacles]  # the object's path stays clear
+    for r, k in zip(cfg["robots"], kinds, strict=True):
+        r["kind"] = "omni" if k == "o" else "diff"
+    cfg = deep_update(cfg, {"sim": {"backend": backend, "seed": seed}, "capture": {"seed": seed}})
+    port = free_port()
+    cfg["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
+    from controller.config import parse_config
+
+    return parse_config(cfg, f"scenario-{seed}")
+
+
+# an obstacle between the robots on the west wall and an object at (3, 3)
+WALL = [[1.6, 2.6], [1.9, 2.6], [1.9, 4.6], [1.6, 4.6]]
+
+SCENARIOS = {
+    "L-sine-default": (L_SHAPE, {"kind": "sine", "speed": 0.06}, "oodood", (2.0, 3.0, 0.0), ()),
+    "rect-line": (RECT, {"kind": "line", "speed": 0.1, "heading": 0.5}, "oodood", (2.5, 3.0, 0.3), ()),
+    "rect-line-fast": (RECT, {"kind": "line", "speed": 0.2, "heading": 0.0}, "oooooo", (2.0, 3.0, 0.0), ()),
+    "L-evade": (L_SHAPE, {"kind": "evade", "max_speed": 0.15, "flee_radius": 1.5}, "oodood", (3.0, 3.0, 0.0), ()),
+    "hexagon-line-diff": (HEXAGON, {"kind": "line", "speed": 0.08, "heading": 1.0}, "dddddd", (2.5, 2.5, 0.0), ()),
+    "L-rotated-line": (L_SHAPE, {"kind": "line", "speed": 0.12, "heading": 0.5}, "dodood", (3.0, 3.5, 2.0), ()),
+    "rect-obstacle": (RECT, {"kind": "sine", "speed": 0.05}, "oodood", (3.0, 3.2, 0.0), (WALL,)),
+}  # fmt: skip
+
+
+def check(res: dict) -> None:
+    assert res["arrested"], res
+    assert res["done"] and not res["failed"]
+    assert res["min_clearance_m"] >= 0.0
+    assert res["max_object_penetration_m"] <= 0.01
+    assert res["obstacle_contacts"] == []
+    assert res["arrival_spread_s"] is not None and res["arrival_spread_s"] >= 0
+    assert res["missed_ticks"] == 0 and res["bad_payloads"] == 0
+
+
+@pytest.mark.parametrize("name", sorted(SCENARIOS))
+def test_scenario_arrests_the_object(name, tmp_path):
+    poly, motion, kinds, start, obstacles = SCENARIOS[name]
+    cfg = scenario(poly, motion, kinds, start, obstacles, seed=sorted(SCENARIOS).index(name) + 1)
+    res = DryRun(cfg, build_mission(cfg), tmp_path / "run.mcap", max_time=150).run()
+    check(res)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["L-sine-default", "rect-line-fast"])
+def test_scenario_in_pybullet(name, tmp_path):
+    poly, motion, kinds, start, obstacles = SCENARIOS[name]
+    cfg = scenario(poly, motion, kinds, start, obstacles, seed=3, backend="pybullet")
+    res = DryRun(cfg, build_mission(cfg), tmp_path / "run.mcap", max_time=150).run()
+    check(res)
