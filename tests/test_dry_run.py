@@ -101,3 +101,16 @@ def test_mavlink_robots_run_the_same_job(tmp_path):
     recs = list(read_log(tmp_path / "m.mcap"))
     mav_poses = [r for r in recs if r.topic == "fleet/lab/robot/r1/pose"]
     assert len(mav_poses) > 100  # the MAVLink robot's poses crossed the bus
+
+
+def test_default_scenario_with_mavlink_robots_arrests_the_object(tmp_path):
+    """fleet.toml with r1 (PX4, omni) and r3 (ArduRover, diff) behind the MAVLink driver and
+    emulated vehicles: the capture job arrests the object as it does with sim drivers."""
+    from controller.missions import build_mission
+    from tests.test_mavlink import free_udp_port
+
+    cfg = make_config(mavlink_patch(free_udp_port(), free_udp_port()))
+    res = DryRun(cfg, build_mission(cfg), tmp_path / "cap.mcap", max_time=90.0).run()
+    assert res["arrested"] and res["done"] and not res["failed"], res
+    assert res["min_clearance_m"] >= 0 and res["max_object_penetration_m"] <= 0.01
+    assert res["obstacle_contacts"] == [] and res["missed_ticks"] == 0
