@@ -101,6 +101,7 @@ class CaptureMission:
         img = ray_to_convex(pts, nrm, env)
         r = self.radii[self.assignment]
         contact = pts + (r + self.contact_gap)[:, None] * nrm
+        img = separate_images(pts, nrm, img, r, self.contact_gap)
         return pts, nrm, img, contact
 
     def _plan_routes(self, centers: np.ndarray, img: np.ndarray) -> None:
@@ -203,7 +204,8 @@ class CaptureMission:
         vel = limit_accel(vel, self.v_prev, self.max_accel, self.dt)
         t_filter = self.clock() if self.clock else 0.0
         stale = view.stale | ~view.present
-        res = self.filter.filter(centers, vel, polys, exempt=exempt, stale=stale)
+        motion = [None] * len(self.obstacles) + [view.object_velocity]
+        res = self.filter.filter(centers, vel, polys, exempt=exempt, stale=stale, motion=motion)
         t_end = self.clock() if self.clock else 0.0
         if res.stopped.any():
             self.infeasible += 1
@@ -246,6 +248,7 @@ class CaptureMission:
             if self.arrest_t is not None and view.t - self.arrest_t >= self.settle_s:
                 done = True
                 self._set_phase("done", view.t, events)
+        done = done or self.phase == "done"  # stays done (a reader may miss one tick)
         if self.phase in ("approach", "close_in") and view.t - self.t0 > ap.timeout:
             failed = True
             self._set_phase("failed", view.t, events)
@@ -304,3 +307,30 @@ def track_reversible(
     cmds[diff, 1] = 0.0
     cmds[diff, 2] = np.clip(wz, -limits.max_yaw_rate[diff], limits.max_yaw_rate[diff])
     return cmds
+
+
+def separate_images(
+    pts: np.ndarray,
+    nrm: np.ndarray,
+    img: np.ndarray,
+    radii: np.ndarray,
+    contact_gap: float,
+    gap: float = 0.1,
+) -> np.ndarray:
+    """Envelope images pulled in along their normals where two would be closer than the two
+    discs plus ``gap``: points in a notch (an L's or a U's) have rays that converge outside
+    it. Never closer to the object than the contact target plus ``gap``."""
+    out = np.sum((img - pts) * nrm, axis=1)
+    floor = radii + contact_gap + gap
+    m = len(pts)
+    off = ~np.eye(m, dtype=bool)
+    need = radii[:, None] + radii[None] + gap
+    for _ in range(100):
+        st = pts + nrm * out[:, None]
+        d = np.linalg.norm(st[:, None] - st[None], axis=-1)
+        bad = (d < need) & off
+        shrink = bad.any(axis=1) & (out > floor)
+        if not shrink.any():
+            break
+        out[shrink] = np.maximum(floor[shrink], out[shrink] - 0.02)
+    return pts + nrm * out[:, None]

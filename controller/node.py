@@ -219,6 +219,7 @@ class ControllerNode:
                 what=kind,
             )
         self._publish_states(now, view)
+        self.last_output = out  # before TickDone: the sim reads it once the tick is answered
         if step is not None:
             self._done_pub.put(
                 wire.TickDone(

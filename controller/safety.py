@@ -109,12 +109,16 @@ class SafetyFilter:
         polygons: list[np.ndarray],
         exempt: np.ndarray | None = None,
         stale: np.ndarray | None = None,
+        motion: list | None = None,
     ) -> FilterResult:
         """Filter nominal world velocities (N, 2) at robot centres (N, 2).
 
         ``polygons`` (at most ``n_polygons``) are obstacles and the object, world frame;
-        ``exempt`` (N, P) bool lifts a robot-polygon constraint (a robot closing in on its own
-        contact point); ``stale`` robots are held at zero and the others avoid them.
+        ``exempt`` (N, P) bool relaxes a robot-polygon constraint to touching (a robot closing
+        in on its own contact point: margin 0, never inside); ``stale`` robots are held at zero
+        and the others avoid them. ``motion`` (one entry per polygon, None for static ones)
+        gives a moving polygon's (vx, vy, wz) about its centroid: its barrier then holds
+        relative to that motion.
         """
         n, npoly = self.n, self.n_polygons
         stale = np.zeros(n, bool) if stale is None else np.asarray(stale, bool)
@@ -141,10 +145,17 @@ class SafetyFilter:
             sd = np.where(inside, -dd, dd)
             nv = vec / dd[:, None] * np.where(inside, -1.0, 1.0)[:, None]
             nrm[:, k] = nv
-            lo_poly[:, k] = -self.gamma * (sd - self.radii - self.margin)
-        if exempt is not None:
-            lo_poly = np.where(exempt[:, :npoly], -INF, lo_poly)
-            nrm = np.where(exempt[:, :npoly, None], 0.0, nrm)
+            # an exempt robot (closing in on its own contact point) may touch the polygon but
+            # not enter it: margin 0 instead of the safety margin
+            margin = self.margin
+            if exempt is not None:
+                margin = np.where(exempt[:, k], 0.0, self.margin)
+            lo_poly[:, k] = -self.gamma * (sd - self.radii - margin)
+            if motion is not None and k < len(motion) and motion[k] is not None:
+                vx, vy, wz = (float(v) for v in motion[k])
+                rel = c - geometry.centroid(poly)
+                v_c = np.stack([vx - wz * rel[:, 1], vy + wz * rel[:, 0]], 1)
+                lo_poly[:, k] += np.sum(nv * v_c, axis=1)  # ∇h·(v_i − v_poly) ≥ −γh
         flat = nrm.reshape(-1, 2)
         vals += [flat[:, 0], flat[:, 1]]
         vals.append(np.ones(2 * n))
