@@ -101,7 +101,13 @@ class CaptureMission:
         img = ray_to_convex(pts, nrm, env)
         r = self.radii[self.assignment]
         contact = pts + (r + self.contact_gap)[:, None] * nrm
-        img = separate_images(pts, nrm, img, r, self.contact_gap)
+        # a ray out of a deep notch crosses the object's own arm before it leaves the hull:
+        # keep the image on the free part of the ray (the robot waits inside the notch)
+        world = geometry.transform(self.object_poly, pose)
+        free = ray_first_hit(pts, nrm, world) - r - 0.1
+        out = np.minimum(np.sum((img - pts) * nrm, axis=1), free)
+        out = np.maximum(out, r + self.contact_gap + 0.1)
+        img = separate_images(pts, nrm, pts + nrm * out[:, None], r, self.contact_gap)
         return pts, nrm, img, contact
 
     def _plan_routes(self, centers: np.ndarray, img: np.ndarray) -> None:
@@ -334,3 +340,17 @@ def separate_images(
             break
         out[shrink] = np.maximum(floor[shrink], out[shrink] - 0.02)
     return pts + nrm * out[:, None]
+
+
+def ray_first_hit(origins: np.ndarray, dirs: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Distance along each ray to its first crossing of a polygon edge, ignoring the edge the
+    ray starts on (inf when it never crosses)."""
+    a = poly
+    e = np.roll(poly, -1, axis=0) - a
+    den = dirs[:, None, 0] * e[None, :, 1] - dirs[:, None, 1] * e[None, :, 0]
+    ap = a[None] - origins[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (ap[..., 0] * e[None, :, 1] - ap[..., 1] * e[None, :, 0]) / den
+        u = (ap[..., 0] * dirs[:, None, 1] - ap[..., 1] * dirs[:, None, 0]) / den
+    hit = (np.abs(den) > 1e-12) & (u >= 0) & (u <= 1) & (t > 1e-6)
+    return np.where(hit, t, np.inf).min(axis=1)

@@ -1,8 +1,6 @@
 """The whole job on GA capture plans: GA plan, assignment on first sight, approach, close-in,
 arrest, over zenoh with Kalman-filtered feedback, in the `ideal` world (fast) and in pybullet.
-(tests/test_scenarios.py runs the approach on hand-made capture sets.) Known weak spots, not in
-this suite: the U-shaped object on a sine path (its deep notch: the approach stalls and robots
-reach the walls); see the approach issue's notes.
+(tests/test_scenarios.py runs the approach on hand-made capture sets.)
 
 Every scenario must arrest the object with no robot-robot overlap, at most 1 cm of robot-object
 penetration and no obstacle contact.
@@ -62,6 +60,7 @@ SCENARIOS = {
     "L-rotated-line": (L_SHAPE, {"kind": "line", "speed": 0.12, "heading": 0.5}, "dodood", (3.0, 3.5, 2.0), ()),
     "rect-obstacle": (RECT, {"kind": "sine", "speed": 0.05}, "oodood", (3.0, 3.2, 0.0), (WALL,)),
     "T-sine": (T_SHAPE, {"kind": "sine", "speed": 0.1, "amplitude": 0.5}, "oodood", (2.5, 2.5, 0.0), ()),
+    "U-sine": (U_SHAPE, {"kind": "sine", "speed": 0.08}, "oooddd", (2.5, 3.0, 0.0), ()),
     "T-evade-diff": (T_SHAPE, {"kind": "evade", "max_speed": 0.2, "flee_radius": 1.2}, "dddood", (3.0, 2.5, 0.5), ()),
     "L-line-obstacle": (L_SHAPE, {"kind": "line", "speed": 0.08, "heading": 0.2}, "oooddd", (2.6, 3.0, 0.0), (WALL,)),
 }  # fmt: skip
