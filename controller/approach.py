@@ -234,3 +234,46 @@ def limit_accel(v_new: np.ndarray, v_old: np.ndarray, max_accel: np.ndarray, dt:
     cap = max_accel * dt
     k = np.where(s > cap, cap / np.maximum(s, 1e-12), 1.0)
     return v_old + dv * k[:, None]
+
+
+STATION_GAP = 0.1  # m between two stations' discs, and between a station and the contact target
+
+
+def separate_stations(
+    pts: np.ndarray,
+    nrm: np.ndarray,
+    out: np.ndarray,
+    radii: np.ndarray,
+    contact_gap: float,
+    gap: float = STATION_GAP,
+) -> np.ndarray:
+    """Distances of the stations out along the normals, pulled in where two stations would be
+    closer than the two discs plus ``gap`` (points in an L's or a U's notch have rays that
+    converge outside it), and never closer to the object than the contact target plus ``gap``."""
+    floor = radii + contact_gap + gap
+    out = np.maximum(out, floor)
+    off = ~np.eye(len(pts), dtype=bool)
+    need = radii[:, None] + radii[None] + gap
+    for _ in range(100):
+        st = pts + nrm * out[:, None]
+        d = np.linalg.norm(st[:, None] - st[None], axis=-1)
+        shrink = ((d < need) & off).any(axis=1) & (out > floor)
+        if not shrink.any():
+            break
+        out[shrink] = np.maximum(floor[shrink], out[shrink] - 0.02)
+    return out
+
+
+def ray_first_hit(origins: np.ndarray, dirs: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Distance along each ray to its first crossing of a polygon edge, ignoring the edge the
+    ray starts on (inf when it never crosses): a ray out of a deep notch hits the object's own
+    arm before it leaves the convex envelope."""
+    a = poly
+    e = np.roll(poly, -1, axis=0) - a
+    den = dirs[:, None, 0] * e[None, :, 1] - dirs[:, None, 1] * e[None, :, 0]
+    ap = a[None] - origins[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (ap[..., 0] * e[None, :, 1] - ap[..., 1] * e[None, :, 0]) / den
+        u = (ap[..., 0] * dirs[:, None, 1] - ap[..., 1] * dirs[:, None, 0]) / den
+    hit = (np.abs(den) > 1e-12) & (u >= 0) & (u <= 1) & (t > 1e-6)
+    return np.where(hit, t, np.inf).min(axis=1)

@@ -559,15 +559,11 @@ def plan_push_arrangement(
 ) -> tuple[np.ndarray, float]:
     """Eq. 5 by the GA: the n nodes (indices into the candidates) pushing hardest along D."""
     prob = make_problem(polygon, robot_radius, params)
-    k = len(prob.cand.points)
 
     def fn(x: np.ndarray):
         return push_objective(prob.cand, direction, n, prob.conflict, x)
 
-    sub = Problem(**{**prob.__dict__})
-    pop = _initial(k, params.population, rng, lo=n, hi=n)
-    del pop
-    res = run_ga(sub, rng, objective=fn)
+    res = run_ga(prob, rng, objective=fn, init=(n, n))  # strings start with exactly n robots
     return np.flatnonzero(res.best), res.objective
 
 

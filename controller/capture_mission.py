@@ -20,11 +20,14 @@ import numpy as np
 
 from controller import geometry
 from controller.approach import (
+    STATION_GAP,
     PlannerParams,
     envelope,
     limit_accel,
     plan_velocities,
+    ray_first_hit,
     ray_to_convex,
+    separate_stations,
 )
 from controller.mission import RobotLimits, track_velocity, world_to_body
 from controller.node import FleetView, MissionOutput
@@ -104,10 +107,10 @@ class CaptureMission:
         # a ray out of a deep notch crosses the object's own arm before it leaves the hull:
         # keep the image on the free part of the ray (the robot waits inside the notch)
         world = geometry.transform(self.object_poly, pose)
-        free = ray_first_hit(pts, nrm, world) - r - 0.1
+        free = ray_first_hit(pts, nrm, world) - r - STATION_GAP
         out = np.minimum(np.sum((img - pts) * nrm, axis=1), free)
-        out = np.maximum(out, r + self.contact_gap + 0.1)
-        img = separate_images(pts, nrm, pts + nrm * out[:, None], r, self.contact_gap)
+        out = separate_stations(pts, nrm, out, r, self.contact_gap)
+        img = pts + nrm * out[:, None]
         return pts, nrm, img, contact
 
     def _plan_routes(self, centers: np.ndarray, img: np.ndarray) -> None:
@@ -313,44 +316,3 @@ def track_reversible(
     cmds[diff, 1] = 0.0
     cmds[diff, 2] = np.clip(wz, -limits.max_yaw_rate[diff], limits.max_yaw_rate[diff])
     return cmds
-
-
-def separate_images(
-    pts: np.ndarray,
-    nrm: np.ndarray,
-    img: np.ndarray,
-    radii: np.ndarray,
-    contact_gap: float,
-    gap: float = 0.1,
-) -> np.ndarray:
-    """Envelope images pulled in along their normals where two would be closer than the two
-    discs plus ``gap``: points in a notch (an L's or a U's) have rays that converge outside
-    it. Never closer to the object than the contact target plus ``gap``."""
-    out = np.sum((img - pts) * nrm, axis=1)
-    floor = radii + contact_gap + gap
-    m = len(pts)
-    off = ~np.eye(m, dtype=bool)
-    need = radii[:, None] + radii[None] + gap
-    for _ in range(100):
-        st = pts + nrm * out[:, None]
-        d = np.linalg.norm(st[:, None] - st[None], axis=-1)
-        bad = (d < need) & off
-        shrink = bad.any(axis=1) & (out > floor)
-        if not shrink.any():
-            break
-        out[shrink] = np.maximum(floor[shrink], out[shrink] - 0.02)
-    return pts + nrm * out[:, None]
-
-
-def ray_first_hit(origins: np.ndarray, dirs: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Distance along each ray to its first crossing of a polygon edge, ignoring the edge the
-    ray starts on (inf when it never crosses)."""
-    a = poly
-    e = np.roll(poly, -1, axis=0) - a
-    den = dirs[:, None, 0] * e[None, :, 1] - dirs[:, None, 1] * e[None, :, 0]
-    ap = a[None] - origins[:, None]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (ap[..., 0] * e[None, :, 1] - ap[..., 1] * e[None, :, 0]) / den
-        u = (ap[..., 0] * dirs[:, None, 1] - ap[..., 1] * dirs[:, None, 0]) / den
-    hit = (np.abs(den) > 1e-12) & (u >= 0) & (u <= 1) & (t > 1e-6)
-    return np.where(hit, t, np.inf).min(axis=1)

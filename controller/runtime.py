@@ -194,7 +194,6 @@ class DryRun:
         recorder = McapRecorder(self.out, cfg.fleet.name, cfg.log.flush_interval)
         recorder.metadata("fleet.config", config_metadata(cfg, f"run/{cfg.sim.backend}"))
         arrested_at: list[float] = []
-        spread: float | None = None
         result: dict[str, Any] = {}
         try:
             with (
@@ -216,9 +215,6 @@ class DryRun:
                     Agent(robot_bus, drv, AgentParams(r.id, cfg.fleet.name, cfg.fleet.cmd_ttl))
                     for r, drv in zip(cfg.robots, drivers, strict=True)
                 ]
-                arrest_box = robot_bus.subscribe(
-                    wire.key("plan", cfg.fleet.name, what="arrest"), wire.PlanEvent
-                )
                 coord = LockstepCoordinator(
                     robot_bus, hub, agents, control_dt, cfg.sim.tick_timeout
                 )
@@ -235,8 +231,6 @@ class DryRun:
                 try:
                     while coord.t <= self.max_time:
                         coord.tick()
-                        for item in arrest_box.drain():
-                            spread = item.msg.data.get("arrival_spread_s", spread)
                         self.verdict.update(world.check())
                         if ctl.error is not None:
                             raise RuntimeError("controller loop failed") from ctl.error
@@ -259,21 +253,20 @@ class DryRun:
                     e.stop()
                 self.verdict.missed_ticks = coord.counters.missed
                 out = node.last_output
+                summary = getattr(self.mission, "summary", dict)()
                 result = {
                     "phase": node.phase,
                     "done": bool(out.done) if out else False,
                     "failed": bool(out.failed) if out else False,
                     "arrested": world.arrested,
                     "arrest_time_s": arrested_at[0] if arrested_at else None,
-                    "arrival_spread_s": spread
-                    if spread is not None
-                    else getattr(self.mission, "summary", dict)().get("arrival_spread_s"),
+                    "arrival_spread_s": summary.get("arrival_spread_s"),
                     "sim_time_s": round(coord.t, 4),
                     "ticks": coord.counters.ticks,
                     "node": dict(vars(node.counters)),
                     "bad_payloads": ctl_bus.stats.total + robot_bus.stats.total,
                     "final_object_pose": [float(v) for v in world.object_pose()],
-                    "mission": getattr(self.mission, "summary", dict)(),
+                    "mission": summary,
                 }
         finally:
             world.close()

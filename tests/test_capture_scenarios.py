@@ -85,7 +85,7 @@ def test_scenario_arrests_the_object(name, tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["L-sine-default", "rect-line-fast"])
+@pytest.mark.parametrize("name", ["L-sine-default", "rect-line-fast", "T-evade-diff"])
 def test_scenario_in_pybullet(name, tmp_path):
     poly, motion, kinds, start, obstacles = SCENARIOS[name]
     cfg = scenario(poly, motion, kinds, start, obstacles, seed=3, backend="pybullet")
