@@ -25,8 +25,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from controller import wire  # noqa: E402
-from controller.bus import Bus  # noqa: E402
 from controller.config import ZenohSection  # noqa: E402
+from controller.io.bus import Bus
 
 FLEET = "bench"
 

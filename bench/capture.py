@@ -26,7 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from controller import geometry  # noqa: E402
-from controller.capture import (  # noqa: E402
+from controller.planning.capture import (
     PENALTY,
     CaptureParams,
     brute_force_capture,

@@ -33,8 +33,9 @@ from pymavlink import mavutil  # noqa: E402
 
 from controller.config import FleetConfig, parse_config  # noqa: E402
 from controller.wire import Twist2D  # noqa: E402
-from drivers import mavconv as mc  # noqa: E402
-from drivers.mavlink import LinkPool, MavlinkDriver  # noqa: E402
+from drivers.mavlink import convert as mc  # noqa: E402
+from drivers.mavlink.driver import MavlinkDriver
+from drivers.mavlink.link import LinkPool
 from sim_backend.ideal import IdealWorld  # noqa: E402
 from sim_backend.mavlink_vehicle import VehicleEmulator  # noqa: E402
 

@@ -22,10 +22,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from controller.commands.plan_route import load_route_map  # noqa: E402
 from controller.config import RouteSection  # noqa: E402
-from controller.cspace import build_object_cspace  # noqa: E402
-from controller.route import object_heuristic, plan_route  # noqa: E402
+from controller.planning.cspace import build_object_cspace
+from controller.planning.route import object_heuristic, plan_route
+from controller.planning.route_maps import load_route_map  # noqa: E402
 
 PAPER_T2 = {
     "euclid": [1.00, 1.36, 2.96, 4.09],

@@ -10,7 +10,7 @@ def make_world(cfg: FleetConfig, gui: bool = False) -> World:
     """A world for ``cfg``: ``"pybullet"`` (physics; ``gui`` opens a window) or ``"ideal"``."""
     backend = cfg.sim.backend
     if backend == "pybullet":
-        from sim_backend.world import PybulletWorld
+        from sim_backend.pybullet_world import PybulletWorld
 
         return PybulletWorld(cfg, gui=gui)
     if backend == "ideal":

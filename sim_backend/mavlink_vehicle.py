@@ -55,7 +55,7 @@ os.environ["MAVLINK20"] = "1"  # before pymavlink picks its dialect
 
 from pymavlink import mavutil  # noqa: E402
 
-from drivers import mavconv as mc  # noqa: E402
+from drivers.mavlink import convert as mc  # noqa: E402
 
 if TYPE_CHECKING:
     from controller.config import RobotConfig

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from controller.config import EstimationSection, MotionSection
-from controller.estimation import FleetEstimator
+from controller.estimation.fleet import FleetEstimator
 from sim_backend.motion import ObjectScript
 
 

@@ -12,8 +12,8 @@ import sys
 import time
 
 from controller import wire
-from controller.bus import Bus
 from controller.config import ZenohSection
+from controller.io.bus import Bus
 
 
 def main() -> int:

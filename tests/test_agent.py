@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from controller import wire
-from controller.bus import Bus
 from controller.config import ZenohSection
+from controller.io.bus import Bus
 from drivers.agent import Agent, AgentCore, AgentParams
 from drivers.base import Capabilities
 from drivers.sim import SimDriver

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller import approach, geometry
-from controller.approach import CORNER, EDGE, HEAD_ON, NO_HIT, classify
+from controller import geometry
+from controller.planning import approach
+from controller.planning.approach import CORNER, EDGE, HEAD_ON, NO_HIT, classify
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
@@ -119,9 +120,10 @@ def test_limit_accel():
 
 
 def test_build_mission_with_a_capture_set():
-    from controller.capture_mission import CaptureMission
-    from controller.mission import GotoMission
-    from controller.missions import CaptureJob, build_mission
+    from controller.mission.basic import GotoMission
+    from controller.mission.capture import CaptureMission
+    from controller.mission.factory import build_mission
+    from controller.mission.job import CaptureJob
     from tests.capture_sets import l_shape_points
     from tests.conftest import make_config
 

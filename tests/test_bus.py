@@ -8,8 +8,8 @@ import sys
 import threading
 
 from controller import wire
-from controller.bus import Bus
 from controller.config import ZenohSection
+from controller.io.bus import Bus
 from tests.conftest import ROOT
 
 

@@ -9,7 +9,8 @@ import pytest
 from scipy.optimize import nnls
 
 from controller import geometry
-from controller.capture import (
+from controller.cli import main
+from controller.planning.capture import (
     Candidates,
     CaptureParams,
     assign_robots,
@@ -22,7 +23,6 @@ from controller.capture import (
     plan_capture,
     plan_push_arrangement,
 )
-from controller.cli import main
 from tests.conftest import base_config_dict, write_toml
 
 RECT = np.array([[-1.0, -0.5], [1.0, -0.5], [1.0, 0.5], [-1.0, 0.5]])

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.missions import build_mission
-from controller.runtime import DryRun
+from controller.mission.factory import build_mission
+from controller.runtime.dry_run import DryRun
 from tests.conftest import base_config_dict, deep_update, free_port
 
 RECT = [[0.0, 0.0], [0.9, 0.0], [0.9, 0.6], [0.0, 0.6]]

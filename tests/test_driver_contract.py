@@ -56,7 +56,8 @@ def _sim_rig(backend: str, kind: str) -> Rig:
 
 def _mavlink_rig(kind: str) -> Rig:
     """An emulated MAVLink rover on loopback UDP: px4 (holonomic) for omni, ardurover for diff."""
-    from drivers.mavlink import LinkPool, MavlinkDriver
+    from drivers.mavlink.driver import MavlinkDriver
+    from drivers.mavlink.link import LinkPool
     from tests.test_mavlink import Lockstep, free_udp_port, robot
     from tests.test_mavlink import make_config as mav_config
 

@@ -6,9 +6,10 @@ import json
 
 import numpy as np
 
-from controller.mission import GotoMission, RobotLimits
-from controller.recorder import read_log
-from controller.runtime import DryRun
+from controller.io.recorder import read_log
+from controller.mission.basic import GotoMission
+from controller.mission.tracking import RobotLimits
+from controller.runtime.dry_run import DryRun
 from tests.conftest import make_config
 
 
@@ -106,7 +107,7 @@ def test_mavlink_robots_run_the_same_job(tmp_path):
 def test_default_scenario_with_mavlink_robots_arrests_the_object(tmp_path):
     """fleet.toml with r1 (PX4, omni) and r3 (ArduRover, diff) behind the MAVLink driver and
     emulated vehicles: the capture job arrests the object as it does with sim drivers."""
-    from controller.missions import build_mission
+    from controller.mission.factory import build_mission
     from tests.test_mavlink import free_udp_port
 
     cfg = make_config(mavlink_patch(free_udp_port(), free_udp_port()))

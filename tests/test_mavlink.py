@@ -24,9 +24,10 @@ from hypothesis import strategies as st
 
 from controller.config import FleetConfig, parse_config
 from controller.wire import Twist2D
-from drivers import mavconv as mc
 from drivers.base import ConnectTimeout, LinkLost, RobotDriver
-from drivers.mavlink import LinkPool, MavlinkDriver
+from drivers.mavlink import convert as mc
+from drivers.mavlink.driver import MavlinkDriver
+from drivers.mavlink.link import LinkPool
 from sim_backend.ideal import IdealWorld
 from sim_backend.mavlink_vehicle import VehicleEmulator, start_emulators, vehicle_url
 

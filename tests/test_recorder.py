@@ -11,9 +11,9 @@ import sys
 import time
 
 from controller import wire
-from controller.bus import Bus
 from controller.config import ZenohSection
-from controller.recorder import McapRecorder, read_log
+from controller.io.bus import Bus
+from controller.io.recorder import McapRecorder, read_log
 from tests.conftest import ROOT, base_config_dict, deep_update, write_toml
 from tests.test_bus import wait_for
 

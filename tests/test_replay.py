@@ -9,13 +9,16 @@ import numpy as np
 import pytest
 
 from controller import wire
-from controller.bus import Bus
 from controller.cli import main
-from controller.metrics import Track, min_clearance, object_penetration, tracking_error
-from controller.mission import GotoMission, RobotLimits
-from controller.recorder import McapRecorder, read_metadata
-from controller.replay import load_run, metrics_of, plot_run, republish
-from controller.runtime import DryRun
+from controller.io.bus import Bus
+from controller.io.recorder import McapRecorder, read_metadata
+from controller.mission.basic import GotoMission
+from controller.mission.tracking import RobotLimits
+from controller.replay.log import load_run, metrics_of
+from controller.replay.metrics import Track, min_clearance, object_penetration, tracking_error
+from controller.replay.republish import republish
+from controller.runtime.dry_run import DryRun
+from controller.viz import plot_run
 from tests.conftest import make_config
 
 

@@ -12,16 +12,18 @@ import shapely
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from controller import geometry, heuristics
+from controller import geometry
 from controller.cli import main
 from controller.config import RouteSection
-from controller.cspace import GridFrame, RobotCSpace, build_object_cspace, build_robot_cspace
-from controller.route import (
-    RobotRoadmap,
-    object_heuristic,
-    plan_robot_route,
-    plan_route,
+from controller.planning import heuristics
+from controller.planning.cspace import (
+    GridFrame,
+    RobotCSpace,
+    build_object_cspace,
+    build_robot_cspace,
 )
+from controller.planning.roadmap import RobotRoadmap, plan_robot_route
+from controller.planning.route import object_heuristic, plan_route
 
 L_SHAPE = np.array(
     [[-0.2, -0.15], [0.2, -0.15], [0.2, 0.0], [-0.05, 0.0], [-0.05, 0.15], [-0.2, 0.15]]
@@ -117,7 +119,7 @@ def test_heuristic_ordering_and_skeleton_is_a_thin_midline():
 def test_turn_bounds_match_a_brute_force_link_distance():
     from collections import deque
 
-    from controller.cspace import MOVES_8
+    from controller.planning.cspace import MOVES_8
 
     rng = np.random.default_rng(5)
     free = rng.random((9, 12)) > 0.25
@@ -417,7 +419,7 @@ def test_cli_plans_the_fleet_config_and_plots(tmp_path, capsys):
 
 
 def test_shipped_map_parses_with_four_goals():
-    from controller.commands.plan_route import load_route_map
+    from controller.planning.route_maps import load_route_map
 
     m = load_route_map("yamashita")
     assert [n for n, _ in m.goals] == ["Goal1", "Goal2", "Goal3", "Goal4"]

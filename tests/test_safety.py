@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller.safety import SafetyFilter
+from controller.planning.safety import SafetyFilter
 
 BOUNDS = np.array([[0.0, 0.0], [10.0, 10.0]])
 

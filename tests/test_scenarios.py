@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from controller import geometry
-from controller.capture_mission import CaptureMission
-from controller.runtime import DryRun
+from controller.mission.capture import CaptureMission
+from controller.runtime.dry_run import DryRun
 from tests.capture_sets import l_shape_points, nearest_assignment, rectangle_points
 from tests.conftest import make_config
 

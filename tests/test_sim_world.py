@@ -16,8 +16,8 @@ from controller.config import FleetConfig, parse_config
 from sim_backend.factory import make_world
 from sim_backend.ideal import IdealWorld
 from sim_backend.motion import ObjectScript
+from sim_backend.pybullet_world import PybulletWorld, convex_pieces
 from sim_backend.sensors import PoseSensor, make_sensors
-from sim_backend.world import PybulletWorld, convex_pieces
 
 G = 9.81
 L_SHAPE = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.4], [0.4, 0.4], [0.4, 1.0], [0.0, 1.0]]

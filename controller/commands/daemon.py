@@ -34,14 +34,14 @@ def add_arguments(parser, word: str) -> None:
 
 def run(args) -> int:
     from controller import wire
-    from controller.bus import Bus
     from controller.commands.record import default_log_path
     from controller.config import load_config
-    from controller.missions import MissionError, build_mission
-    from controller.node import ControllerNode
-    from controller.ratekeeper import Ratekeeper
-    from controller.recorder import McapRecorder, config_metadata
-    from controller.runtime import make_estimator
+    from controller.io.bus import Bus
+    from controller.io.ratekeeper import Ratekeeper
+    from controller.io.recorder import McapRecorder, config_metadata
+    from controller.mission.factory import MissionError, build_mission
+    from controller.runtime.node import ControllerNode
+    from controller.runtime.wiring import make_estimator
 
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name, "daemon")

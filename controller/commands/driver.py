@@ -25,7 +25,7 @@ def add_arguments(parser, word: str) -> None:
 
 def run(args) -> int:
     from controller.config import ConfigError, load_config
-    from controller.runtime import run_agent
+    from controller.runtime.agent_runner import run_agent
 
     cfg = load_config(args.config)
     if args.robot_id not in cfg.robot_ids:

@@ -25,9 +25,9 @@ def run(args) -> int:
 
     import numpy as np
 
-    from controller.capture import CaptureParams, plan_capture
     from controller.cli import emit_json
     from controller.config import load_config
+    from controller.planning.capture import CaptureParams, plan_capture
 
     cfg = load_config(args.config)
     params = CaptureParams.from_config(cfg.capture)

@@ -5,7 +5,7 @@
 
 Without ``--map`` the scenario is the config's world, obstacles, object start and goal, and the
 fleet's largest robot radius. ``--map`` plans on a route map instead (a name shipped in
-``controller/maps/``, e.g. ``yamashita``, or a path) toward its goal ``--goal`` (number or name).
+``controller/planning/maps/``, e.g. ``yamashita``, or a path) toward its goal ``--goal`` (number or name).
 The search parameters come from the config's ``[route]`` section (defaults when ``--map`` is used
 without ``--config``); ``--heuristic``, ``--wg`` and ``--wh`` override them.
 Exit status: 0 a route, 1 no path, 2 bad input.
@@ -14,7 +14,6 @@ Exit status: 0 a route, 1 no path, 2 bad input.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 from typing import Any
 
 from controller.commands import DEFAULT_CONFIG
@@ -45,39 +44,14 @@ def add_arguments(parser, word: str) -> None:
     parser.add_argument("--plot", default=None, help="write a figure (PNG)")
 
 
-def maps_dir() -> Path:
-    """Where the shipped route maps live."""
-    return Path(__file__).resolve().parent.parent / "maps"
-
-
-def load_route_map(name_or_path: str):
-    """Read a route map by shipped name or path (raises ValueError naming the file)."""
-    import tomllib
-
-    from controller.route import parse_route_map
-
-    p = Path(name_or_path)
-    if not p.suffix:
-        p = maps_dir() / f"{name_or_path}.toml"
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        known = sorted(q.stem for q in maps_dir().glob("*.toml"))
-        raise ValueError(
-            f"{p}: cannot read ({exc.strerror or exc}); shipped maps: {known}"
-        ) from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{p}: not valid TOML: {exc}") from exc
-    return parse_route_map(data, str(p))
-
-
 def run(args) -> int:
     import dataclasses
     import time
 
     from controller.cli import emit_json
     from controller.config import RouteSection, load_config
-    from controller.route import plan_route
+    from controller.planning.route import plan_route
+    from controller.planning.route_maps import load_route_map
 
     params = RouteSection()
     if args.config is not None or args.map is None:

@@ -31,9 +31,9 @@ def default_log_path(log_dir: str, fleet: str, kind: str = "run") -> Path:
 
 def run(args) -> int:
     from controller import wire
-    from controller.bus import Bus
     from controller.config import load_config
-    from controller.recorder import McapRecorder
+    from controller.io.bus import Bus
+    from controller.io.recorder import McapRecorder
 
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name, "record")

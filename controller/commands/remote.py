@@ -28,9 +28,9 @@ def add_arguments(parser, word: str) -> None:
 
 def run(args) -> int:
     from controller import wire
-    from controller.bus import Bus, BusError
     from controller.cli import emit_json
     from controller.config import load_config
+    from controller.io.bus import Bus, BusError
 
     cfg = load_config(args.config)
     word = args._words[-1]

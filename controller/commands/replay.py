@@ -41,7 +41,8 @@ def add_arguments(parser, word: str) -> None:
 
 def run(args) -> int:
     from controller.cli import emit_json
-    from controller.replay import load_run, metrics_of, plot_run
+    from controller.replay.log import load_run, metrics_of
+    from controller.viz import plot_run
 
     path = Path(args.log)
     if not path.is_file():
@@ -71,9 +72,9 @@ def run(args) -> int:
 
 
 def _republish(args, run_log) -> int:
-    from controller.bus import Bus
     from controller.config import load_config
-    from controller.replay import republish
+    from controller.io.bus import Bus
+    from controller.replay.republish import republish
 
     cfg = load_config(args.config) if args.config else run_log.config
     if cfg is None:

@@ -33,8 +33,8 @@ def run(args) -> int:
     from controller.cli import emit_json
     from controller.commands.record import default_log_path
     from controller.config import load_config
-    from controller.missions import MissionError, build_mission
-    from controller.runtime import DryRun
+    from controller.mission.factory import MissionError, build_mission
+    from controller.runtime.dry_run import DryRun
 
     cfg = load_config(args.config)
     if args.backend:

@@ -19,7 +19,9 @@ from typing import Any
 import numpy as np
 
 from controller import geometry
-from controller.approach import (
+from controller.mission.tracking import RobotLimits, track_reversible
+from controller.mission.types import FleetView, MissionOutput
+from controller.planning.approach import (
     STATION_GAP,
     PlannerParams,
     envelope,
@@ -29,9 +31,7 @@ from controller.approach import (
     ray_to_convex,
     separate_stations,
 )
-from controller.mission import RobotLimits, track_velocity, world_to_body
-from controller.node import FleetView, MissionOutput
-from controller.safety import SafetyFilter
+from controller.planning.safety import SafetyFilter
 
 
 @dataclass
@@ -115,7 +115,7 @@ class CaptureMission:
 
     def _plan_routes(self, centers: np.ndarray, img: np.ndarray) -> None:
         """RobotRoadmap routes for robots whose straight line to their image is blocked."""
-        from controller.route import RobotRoadmap
+        from controller.planning.roadmap import RobotRoadmap
 
         self._routes_planned = True
         blocked = []
@@ -290,29 +290,3 @@ class CaptureMission:
                 "calls": len(arr),
             }
         return out
-
-
-def track_reversible(
-    poses: np.ndarray, v_world: np.ndarray, limits: RobotLimits, heading_gain: float = 4.0
-) -> np.ndarray:
-    """Like :func:`controller.mission.track_velocity`, but a differential robot may drive
-    backwards: it aligns its axis (either way) with the desired velocity and drives with the
-    signed component along its heading. Station keeping then needs no U-turns."""
-    cmds = track_velocity(poses, v_world, limits)
-    diff = ~limits.holonomic
-    if not np.any(diff):
-        return cmds
-    th = poses[diff, 2]
-    v = v_world[diff]
-    speed = np.linalg.norm(v, axis=1)
-    body = world_to_body(th, v)
-    err = np.arctan2(body[:, 1], body[:, 0])
-    err = np.where(err > np.pi / 2, err - np.pi, np.where(err < -np.pi / 2, err + np.pi, err))
-    moving = speed > 0.01
-    wz = np.where(moving, heading_gain * err, 0.0)
-    fwd = body[:, 0] * np.abs(np.cos(err))
-    fwd = np.clip(fwd, -limits.max_speed[diff], limits.max_speed[diff])
-    cmds[diff, 0] = fwd
-    cmds[diff, 1] = 0.0
-    cmds[diff, 2] = np.clip(wz, -limits.max_yaw_rate[diff], limits.max_yaw_rate[diff])
-    return cmds

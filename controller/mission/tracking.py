@@ -12,7 +12,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller import geometry
-from controller.node import FleetView, MissionOutput
 
 
 @dataclass(frozen=True)
@@ -82,31 +81,27 @@ def track_velocity(
     return cmds
 
 
-@dataclass
-class GotoMission:
-    """Drive each robot to a fixed (x, y) target with a proportional law; done when all arrive."""
-
-    targets: np.ndarray  # (N, 2)
-    limits: RobotLimits
-    gain: float = 1.0
-    tolerance: float = 0.05
-
-    def step(self, view: FleetView) -> MissionOutput:
-        err = self.targets - view.poses[:, :2]
-        dist = np.linalg.norm(err, axis=1)
-        v = self.gain * err
-        cmds = track_velocity(view.poses, v, self.limits)
-        cmds[dist < self.tolerance] = 0.0
-        cmds[view.stale | ~view.present] = 0.0
-        done = bool(np.all(dist < self.tolerance))
-        return MissionOutput(commands=cmds, phase="goto" if not done else "done", done=done)
-
-
-@dataclass
-class HoldMission:
-    """Keep every robot stopped (bring-up checks: poses flow, estop works); never ends."""
-
-    n: int
-
-    def step(self, view: FleetView) -> MissionOutput:
-        return MissionOutput(commands=np.zeros((self.n, 3)), phase="hold")
+def track_reversible(
+    poses: np.ndarray, v_world: np.ndarray, limits: RobotLimits, heading_gain: float = 4.0
+) -> np.ndarray:
+    """Like :func:`controller.mission.track_velocity`, but a differential robot may drive
+    backwards: it aligns its axis (either way) with the desired velocity and drives with the
+    signed component along its heading. Station keeping then needs no U-turns."""
+    cmds = track_velocity(poses, v_world, limits)
+    diff = ~limits.holonomic
+    if not np.any(diff):
+        return cmds
+    th = poses[diff, 2]
+    v = v_world[diff]
+    speed = np.linalg.norm(v, axis=1)
+    body = world_to_body(th, v)
+    err = np.arctan2(body[:, 1], body[:, 0])
+    err = np.where(err > np.pi / 2, err - np.pi, np.where(err < -np.pi / 2, err + np.pi, err))
+    moving = speed > 0.01
+    wz = np.where(moving, heading_gain * err, 0.0)
+    fwd = body[:, 0] * np.abs(np.cos(err))
+    fwd = np.clip(fwd, -limits.max_speed[diff], limits.max_speed[diff])
+    cmds[diff, 0] = fwd
+    cmds[diff, 1] = 0.0
+    cmds[diff, 2] = np.clip(wz, -limits.max_yaw_rate[diff], limits.max_yaw_rate[diff])
+    return cmds

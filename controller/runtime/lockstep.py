@@ -17,11 +17,14 @@ and the source of time differ. Same seed, same truth trajectory.
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from controller import wire
+from controller.io.bus import Bus
+from controller.runtime.node import ControllerNode
 from drivers.agent import Agent
 from sim_backend.hub import SimHub
 
@@ -168,3 +171,44 @@ class LockstepCoordinator:
         self.counters.ticks += 1
         self.hub.advance_to(self.t)
         return ok
+
+
+class ControllerLockstep:
+    """The controller side of the lockstep: answers each SimTick with one node tick."""
+
+    def __init__(self, node: ControllerNode, bus: Bus, wait_inputs: float) -> None:
+        self.node = node
+        self.ticks = bus.subscribe_topic("sim_clock")
+        self.wait_inputs = wait_inputs
+        self.stop = threading.Event()
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, name="controller", daemon=True)
+        self.lag_waits = 0
+        self._deficit = 0  # measurements announced but never received (lost before matching)
+
+    def _run(self) -> None:
+        try:
+            while not self.stop.is_set():
+                item = self.ticks.get(timeout=0.1)
+                if item is None:
+                    continue
+                tick: wire.SimTick = item.msg
+                # handshake: every measurement published before the tick has been taken in
+                deadline = time.monotonic() + self.wait_inputs
+                while self.node.received + self._pending() + self._deficit < tick.seq:
+                    if time.monotonic() > deadline:
+                        self.lag_waits += 1
+                        have = self.node.received + self._pending() + self._deficit
+                        self._deficit += tick.seq - have
+                        log.warning(
+                            "tick %d: %d measurements never arrived", tick.step, tick.seq - have
+                        )
+                        break
+                    time.sleep(0.0005)
+                self.node.tick(tick.t, step=tick.step)
+        except BaseException as exc:  # noqa: BLE001 - surfaced by the runner
+            self.error = exc
+            log.exception("controller loop failed")
+
+    def _pending(self) -> int:
+        return self.node.pending_measurements()

@@ -9,49 +9,18 @@ lockstep clock. Nothing here reads the wall clock for control decisions; ``now``
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 
 from controller import wire
 from controller.config import FleetConfig
+from controller.mission.types import FleetView, Mission, MissionOutput
 
 log = logging.getLogger(__name__)
 
 SIGMA_CAP = 999.0  # m or rad: a sigma this large means "unknown" on the wire (limit 1e3)
-
-
-@dataclass(frozen=True)
-class FleetView:
-    """What the mission sees each tick: estimates as N×k arrays in config robot order (SI units)."""
-
-    t: float
-    ids: tuple[str, ...]
-    poses: np.ndarray  # (N, 3) x, y, theta
-    velocities: np.ndarray  # (N, 3) world vx, vy, wz
-    stale: np.ndarray  # (N,) bool
-    present: np.ndarray  # (N,) bool: liveliness token held and link ok
-    object_pose: np.ndarray | None  # (3,)
-    object_velocity: np.ndarray | None  # (3,)
-    object_prediction: np.ndarray | None  # (3,) pose a short horizon ahead
-    estop: bool
-
-
-@dataclass
-class MissionOutput:
-    """Body-frame commands (N, 3) for every robot, the phase, and events to publish."""
-
-    commands: np.ndarray
-    phase: str
-    events: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
-    done: bool = False
-    failed: bool = False
-    arrest: bool = False
-
-
-class Mission(Protocol):
-    def step(self, view: FleetView) -> MissionOutput: ...
 
 
 class Estimator(Protocol):

@@ -1,0 +1,322 @@
+"""``FleetEstimator``: one filter per robot plus one for the object, the runtime's view.
+
+Answers queries at a control tick by extrapolating copies (latency compensation); logs only
+on changes (a track starts or stops rejecting, re-acquires, turns stale or fresh).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from controller.config import EstimationSection
+from controller.estimation.models import ROBOT_MODELS, THETA, world_velocity
+from controller.estimation.track import STATUS_OUT_OF_ORDER, STATUS_REJECTED, TrackFilter
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class RobotEstimate:
+    """A robot's filtered state at time ``t`` (s): pose (m, m, rad), world velocities (m/s,
+    m/s, rad/s), 1-sigma uncertainties (sigma_xy: largest axis of the position ellipse, m;
+    sigma_theta: rad), and the filter's bookkeeping. Before the first measurement the pose and
+    velocities are NaN, the sigmas inf, ``initialized`` False and ``stale`` True."""
+
+    robot_id: str
+    t: float
+    x: float
+    y: float
+    theta: float
+    vx: float
+    vy: float
+    wz: float
+    sigma_xy: float
+    sigma_theta: float
+    stale: bool
+    rejected: int
+    out_of_order: int
+    initialized: bool
+    accepted: int = 0
+    reacquired: int = 0
+
+
+@dataclass(frozen=True)
+class ObjectEstimate:
+    """The object's filtered state at ``t`` (s); fields as in :class:`RobotEstimate`."""
+
+    t: float
+    x: float
+    y: float
+    theta: float
+    vx: float
+    vy: float
+    wz: float
+    sigma_xy: float
+    sigma_theta: float
+    stale: bool
+    arrested: bool
+    rejected: int
+    out_of_order: int
+    initialized: bool
+    accepted: int = 0
+    reacquired: int = 0
+
+
+def _sigmas(P: FloatArray) -> tuple[float, float]:
+    pxy = P[:2, :2]
+    tr = 0.5 * (pxy[0, 0] + pxy[1, 1])
+    det = pxy[0, 0] * pxy[1, 1] - pxy[0, 1] * pxy[1, 0]
+    lam = tr + math.sqrt(max(tr * tr - det, 0.0))
+    return math.sqrt(max(lam, 0.0)), math.sqrt(max(P[THETA, THETA], 0.0))
+
+
+_NAN_STATE = (math.nan,) * 6
+
+
+class FleetEstimator:
+    """One filter per robot plus one for the object; the runtime's view of the world.
+
+    Args:
+        robots: (robot_id, kind) pairs, kind "omni" or "diff"; the order of ``robot_arrays``.
+        params: the ``[estimation]`` config section.
+        stale_after: seconds without an accepted measurement before a track is stale
+            (``fleet.stale_after``).
+    """
+
+    def __init__(
+        self,
+        robots: Sequence[tuple[str, str]],
+        params: EstimationSection,
+        stale_after: float,
+    ):
+        if not stale_after > 0:
+            raise ValueError(f"stale_after must be > 0 s, got {stale_after!r}")
+        self.params = params
+        self.stale_after = float(stale_after)
+        self.ids: tuple[str, ...] = tuple(rid for rid, _ in robots)
+        self._tracks: dict[str, TrackFilter] = {}
+        for rid, kind in robots:
+            if kind not in ROBOT_MODELS:
+                raise ValueError(f"robot {rid!r}: unknown kind {kind!r}; expected {ROBOT_MODELS}")
+            if rid in self._tracks:
+                raise ValueError(f"robot {rid!r} listed twice")
+            self._tracks[rid] = TrackFilter(
+                kind, params.filter, params, params.process_accel**2, params.process_yaw_accel**2
+            )
+        self._object = self._make_object_track(arrested=False)
+        self._arrested = False
+        self._was_rejecting: dict[str, bool] = {}
+        self._was_stale: dict[str, bool] = {}
+
+    def _make_object_track(self, arrested: bool) -> TrackFilter:
+        p = self.params
+        acc = p.object_arrested_accel if arrested else p.object_process_accel
+        # Yaw noise scaled like the linear one relative to the robots' ratio.
+        yaw = acc * p.process_yaw_accel / p.process_accel
+        return TrackFilter("object", p.filter, p, acc**2, yaw**2)
+
+    def _track(self, robot_id: str) -> TrackFilter:
+        try:
+            return self._tracks[robot_id]
+        except KeyError:
+            raise KeyError(f"unknown robot id {robot_id!r}; known: {list(self.ids)}") from None
+
+    # ---- inputs
+
+    def command(self, robot_id: str, t: float, vx: float, vy: float, wz: float) -> None:
+        """Record the body-frame command (m/s, m/s, rad/s) sent to a robot at t (s).
+
+        A differential robot's vy is ignored (it cannot move sideways).
+        """
+        tr = self._track(robot_id)
+        u = (vx, vy, wz) if tr.model == "omni" else (vx, wz)
+        try:
+            tr.command(t, u)
+        except ValueError as e:
+            raise ValueError(f"robot {robot_id!r}: {e}") from None
+
+    def measure_robot(self, robot_id: str, t: float, x: float, y: float, theta: float) -> str:
+        """Feed a robot's pose measurement (m, m, rad) stamped t (s).
+
+        Returns "accepted", "rejected", "out_of_order" or "initialized".
+        """
+        tr = self._track(robot_id)
+        status = tr.measure(t, (x, y, theta))
+        self._note_gate(robot_id, tr, status)
+        return status
+
+    def measure_object(self, t: float, x: float, y: float, theta: float) -> str:
+        """Feed the object's pose measurement (m, m, rad) stamped t (s); returns a status."""
+        status = self._object.measure(t, (x, y, theta))
+        self._note_gate("object", self._object, status)
+        return status
+
+    def set_object_arrested(self, arrested: bool) -> None:
+        """Switch the object's model between live and arrested (keeps its state; see the
+        module docstring). Releasing it forgets the push reports."""
+        arrested = bool(arrested)
+        if arrested == self._arrested:
+            return
+        p = self.params
+        acc = p.object_arrested_accel if arrested else p.object_process_accel
+        self._object.q_lin = acc**2
+        self._object.q_yaw = (acc * p.process_yaw_accel / p.process_accel) ** 2
+        if not arrested:
+            self._object.clear_commands()
+        self._object._version += 1
+        self._arrested = arrested
+        log.info("object filter: %s model", "arrested" if arrested else "live")
+
+    def push_object(self, t: float, vx: float, vy: float, wz: float) -> None:
+        """Optional: the world-frame push velocity (m/s, m/s, rad/s) commanded for the arrested
+        object from time t (s) on. Ignored while the object is not arrested."""
+        if self._arrested:
+            self._object.command(t, (vx, vy, wz))
+
+    # ---- outputs
+
+    def robot_estimate(self, robot_id: str, now: float) -> RobotEstimate:
+        """A robot's estimate predicted to ``now`` (s) without moving its filter's timeline."""
+        tr = self._track(robot_id)
+        stale = tr.stale(now, self.stale_after)
+        self._note_stale(robot_id, stale)
+        if not tr.initialized:
+            return RobotEstimate(
+                robot_id, now, *_NAN_STATE, math.inf, math.inf, True, 0, tr.out_of_order, False
+            )
+        x, P = tr.state_at(now)
+        v = world_velocity(tr.model, x)
+        sxy, sth = _sigmas(P)
+        return RobotEstimate(
+            robot_id,
+            max(now, tr.t or now),
+            float(x[0]),
+            float(x[1]),
+            float(x[2]),
+            float(v[0]),
+            float(v[1]),
+            float(v[2]),
+            sxy,
+            sth,
+            stale,
+            tr.rejected,
+            tr.out_of_order,
+            True,
+            tr.accepted,
+            tr.reacquired,
+        )
+
+    def robot_arrays(self, now: float) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """Fleet state at ``now`` (s) in construction order: (N,3) poses (x, y, theta), (N,3)
+        world velocities (vx, vy, wz) and an (N,) stale mask. Uninitialised robots are NaN."""
+        n = len(self.ids)
+        poses = np.full((n, 3), np.nan)
+        vels = np.full((n, 3), np.nan)
+        stale = np.ones(n, dtype=bool)
+        for i, rid in enumerate(self.ids):
+            tr = self._tracks[rid]
+            stale[i] = tr.stale(now, self.stale_after)
+            self._note_stale(rid, bool(stale[i]))
+            if tr.initialized:
+                x, _ = tr.state_at(now)
+                poses[i] = x[:3]
+                vels[i] = world_velocity(tr.model, x)
+        return poses, vels, stale
+
+    def object_estimate(self, now: float) -> ObjectEstimate:
+        """The object's estimate predicted to ``now`` (s)."""
+        return self._object_at(now, now)
+
+    def predict_object(self, now: float, horizon: float) -> ObjectEstimate:
+        """The object's pose predicted ``horizon`` seconds after ``now`` (constant velocity);
+        ``stale`` is judged at ``now``."""
+        return self._object_at(now, now + max(0.0, horizon))
+
+    def _object_at(self, now: float, at: float) -> ObjectEstimate:
+        tr = self._object
+        stale = tr.stale(now, self.stale_after)
+        self._note_stale("object", stale)
+        if not tr.initialized:
+            return ObjectEstimate(
+                at,
+                *_NAN_STATE,
+                math.inf,
+                math.inf,
+                True,
+                self._arrested,
+                0,
+                tr.out_of_order,
+                False,
+            )
+        x, P = tr.state_at(at)
+        sxy, sth = _sigmas(P)
+        return ObjectEstimate(
+            max(at, tr.t or at),
+            *(float(v) for v in x[:6]),
+            sxy,
+            sth,
+            stale,
+            self._arrested,
+            tr.rejected,
+            tr.out_of_order,
+            True,
+            tr.accepted,
+            tr.reacquired,
+        )
+
+    # ---- change logging (never per tick)
+
+    def _note_gate(self, name: str, tr: TrackFilter, status: str) -> None:
+        if status == STATUS_OUT_OF_ORDER:
+            return
+        # An isolated outlier is only counted; REJECT_EPISODE in a row start a logged episode.
+        rejecting = status == STATUS_REJECTED and tr.consecutive_rejected >= REJECT_EPISODE
+        was = self._was_rejecting.get(name, False)
+        if was and status == STATUS_REJECTED:
+            return
+        if tr.just_reacquired:
+            log.warning(
+                "%s: re-acquired after %d consistent rejected measurements (d2=%.1f)",
+                name,
+                self.params.reacquire_after,
+                tr.last_d2,
+            )
+            self._was_rejecting[name] = False
+            return
+        if rejecting and not was:
+            log.warning(
+                "%s: %d measurements in a row rejected by the gate (d2=%.1f > %.1f), %d so far",
+                name,
+                tr.consecutive_rejected,
+                tr.last_d2,
+                tr.threshold,
+                tr.rejected,
+            )
+        elif was and not rejecting:
+            log.info("%s: measurements accepted again (%d rejected so far)", name, tr.rejected)
+        self._was_rejecting[name] = rejecting
+
+    def _note_stale(self, name: str, stale: bool) -> None:
+        was = self._was_stale.get(name)
+        if was is None:
+            self._was_stale[name] = stale
+            return
+        if stale != was:
+            if stale:
+                log.warning(
+                    "%s: pose stale (no accepted measurement for %.2f s)", name, self.stale_after
+                )
+            else:
+                log.info("%s: pose fresh", name)
+            self._was_stale[name] = stale
+
+
+REJECT_EPISODE = 3  # consecutive rejections logged as a rejection episode (isolated: counted)

@@ -1,0 +1,245 @@
+"""A single robot's global route on its disc C-space (the approach planner's detours).
+
+Weighted A* with pathmax (Yamashita et al. Eq. 1-2) over an 8-connected 2-D grid. Pure: arrays
+in, a :class:`controller.planning.route.RouteResult` out. Moves cost distance / ``speed`` (s).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from controller.planning import heuristics
+from controller.planning.cspace import MOVES_8, RobotCSpace, build_robot_cspace
+from controller.planning.route import (
+    INF,
+    FloatArray,
+    RouteResult,
+    _check_weights,
+    _lengths,
+    _no_path,
+    _subgoal_indices,
+)
+
+
+def _search_grid(
+    moves: list[tuple[int, float]],
+    h: list[float],
+    start: int,
+    goal: int,
+    wg: float,
+    wh: float,
+    pathmax: bool,
+    max_expanded: int,
+    trace: bool,
+) -> tuple[list[int] | None, float, int, int, list[float], bool]:
+    """Weighted A* with pathmax over padded flat cells of a 2-D grid (the robot's search).
+
+    ``h`` (s) is inf on occupied cells, so one lookup both tests a cell and scores it.
+    """
+    n = len(h)
+    gbest = [INF] * n
+    parent = [-1] * n
+    gbest[start] = 0.0
+    h0 = h[start]
+    heap: list[tuple[float, float, float, int]] = [(wh * h0, h0, 0.0, start)]
+    push, pop = heapq.heappush, heapq.heappop
+    ftrace: list[float] = []
+    expanded = 0
+    generated = 1
+    while heap:
+        f, _, g, s = pop(heap)
+        if g > gbest[s]:
+            continue
+        expanded += 1
+        if trace:
+            ftrace.append(f)
+        if s == goal:
+            path = [s]
+            while parent[path[-1]] >= 0:
+                path.append(parent[path[-1]])
+            return path[::-1], g, expanded, generated, ftrace, False
+        if expanded >= max_expanded:
+            return None, INF, expanded, generated, ftrace, True
+        for off, cost in moves:
+            t = s + off
+            h2 = h[t]
+            if h2 < INF:
+                g2 = g + cost
+                if g2 < gbest[t]:
+                    gbest[t] = g2
+                    parent[t] = s
+                    f2 = wg * g2 + wh * h2
+                    if pathmax and f2 < f:
+                        f2 = f
+                    push(heap, (f2, h2, g2, t))
+                    generated += 1
+    return None, INF, expanded, generated, ftrace, False
+
+
+class RobotRoadmap:
+    """A robot disc's 2-D C-space prepared once for many searches (the approach planner's use).
+
+    Holds the padded free mask and the move table; :meth:`plan` runs one search.
+    Heuristics: "euclid" (admissible), "wavefront" (exact, admissible), "skeleton" (not).
+    Moves cost distance / ``speed`` (s); there is no manipulation cost for a lone robot.
+    """
+
+    def __init__(self, cspace: RobotCSpace, speed: float = 1.0):
+        if not speed > 0:
+            raise ValueError(f"speed: expected > 0 m/s, got {speed!r}")
+        self.cspace = cspace
+        self.speed = float(speed)
+        fr = cspace.frame
+        self._w = fr.nx + 2
+        pad = np.zeros((fr.ny + 2, fr.nx + 2), dtype=np.uint8)
+        pad[1:-1, 1:-1] = ~cspace.occupied
+        self._free = pad.astype(bool)
+        self._moves = [
+            (int(dy * self._w + dx), fr.resolution * math.hypot(dx, dy) / self.speed)
+            for dx, dy in MOVES_8
+        ]
+
+    @staticmethod
+    def build(
+        bounds: ArrayLike,
+        obstacles: list[ArrayLike],
+        radius: float,
+        resolution: float,
+        speed: float = 1.0,
+    ) -> RobotRoadmap:
+        """Build the disc C-space (see :func:`controller.cspace.build_robot_cspace`) and wrap it."""
+        return RobotRoadmap(build_robot_cspace(bounds, obstacles, radius, resolution), speed)
+
+    def heuristic_table(self, kind: str, goal_cell: tuple[int, int]) -> FloatArray:
+        """Distance table (m) for a goal cell (iy, ix)."""
+        return heuristics.heuristic_table(
+            kind, ~self.cspace.occupied, goal_cell, self.cspace.frame.resolution
+        )
+
+    def plan(
+        self,
+        start_xy: ArrayLike,
+        goal_xy: ArrayLike,
+        *,
+        heuristic: str = "euclid",
+        wg: float = 1.0,
+        wh: float = 1.0,
+        h_table: FloatArray | None = None,
+        pathmax: bool = True,
+        max_expanded: int = 10_000_000,
+        trace: bool = False,
+        subgoal_spacing: float = 1.0,
+    ) -> RouteResult:
+        """Route from ``start_xy`` to ``goal_xy`` (m); waypoint headings follow the travel."""
+        _check_weights(float(wg), float(wh))
+        cs, fr = self.cspace, self.cspace.frame
+        s_xy = np.asarray(start_xy, dtype=float)[:2]
+        g_xy = np.asarray(goal_xy, dtype=float)[:2]
+        sc, gc = fr.cell_of(s_xy), fr.cell_of(g_xy)
+        for name, cell in (("start", sc), ("goal", gc)):
+            if cell is None:
+                return _no_path(f"{name} lies outside the world bounds", heuristic, wg, wh)
+            if cs.occupied[cell]:
+                return _no_path(
+                    f"{name} collides: the robot disc there hits an obstacle or a wall",
+                    heuristic,
+                    wg,
+                    wh,
+                )
+        assert sc is not None and gc is not None
+        if cs.labels[sc] != cs.labels[gc]:
+            return _no_path(
+                "goal unreachable: start and goal lie in different free regions",
+                heuristic,
+                wg,
+                wh,
+            )
+        w = self._w
+        if h_table is None:
+            h_table = self.heuristic_table(heuristic, gc)
+        hpad = np.full((fr.ny + 2, w), INF)
+        hpad[1:-1, 1:-1] = np.asarray(h_table, dtype=float) / self.speed
+        start = (sc[0] + 1) * w + sc[1] + 1
+        goal = (gc[0] + 1) * w + gc[1] + 1
+        hpad[~self._free] = INF
+        path, cost, expanded, generated, ftrace, limited = _search_grid(
+            self._moves,
+            hpad.ravel().tolist(),
+            start,
+            goal,
+            float(wg),
+            float(wh),
+            pathmax,
+            max_expanded,
+            trace,
+        )
+        ft = np.asarray(ftrace, dtype=float)
+        if path is None:
+            reason = (
+                f"expansion limit of {max_expanded} nodes reached"
+                if limited
+                else "search exhausted: goal unreachable"
+            )
+            return _no_path(
+                reason, heuristic, wg, wh, expanded=expanded, generated=generated, f_trace=ft
+            )
+        iy, ix = np.divmod(np.asarray(path, dtype=np.int64), w)
+        xy = np.stack(
+            [fr.x0 + (ix - 0.5) * fr.resolution, fr.y0 + (iy - 0.5) * fr.resolution], axis=1
+        )
+        xy[0] = s_xy
+        if len(xy) > 1:
+            xy[-1] = g_xy
+        else:
+            xy = np.vstack([s_xy, g_xy])
+        steps = np.diff(xy, axis=0)
+        heading = np.arctan2(steps[:, 1], steps[:, 0]) if len(steps) else np.zeros(0)
+        heading = np.r_[heading, heading[-1:]] if len(heading) else np.zeros(len(xy))
+        wp = np.column_stack([xy, heading])
+        dirs = np.diff(np.asarray(path, dtype=np.int64)).tolist()
+        modes = [-1] + dirs + ([dirs[-1]] if dirs else [])
+        modes = modes[: len(wp)]
+        idx = _subgoal_indices(xy, modes, subgoal_spacing)
+        length, _ = _lengths(wp)
+        return RouteResult(
+            status="ok",
+            waypoints=wp,
+            subgoals=wp[idx],
+            cost=float(cost),
+            length_m=length,
+            rotation_rad=0.0,
+            manipulations=0,
+            expanded=expanded,
+            generated=generated,
+            heuristic=heuristic,
+            wg=float(wg),
+            wh=float(wh),
+            f_trace=ft,
+        )
+
+
+def plan_robot_route(
+    bounds: ArrayLike,
+    obstacles: list[ArrayLike],
+    radius: float,
+    start_xy: ArrayLike,
+    goal_xy: ArrayLike,
+    resolution: float,
+    *,
+    heuristic: str = "euclid",
+    wg: float = 1.0,
+    wh: float = 1.0,
+    speed: float = 1.0,
+    roadmap: RobotRoadmap | None = None,
+) -> RouteResult:
+    """One robot's route (m) around static obstacles on its disc C-space; cost in seconds.
+
+    Pass ``roadmap`` (a :class:`RobotRoadmap`) to reuse a C-space across calls; otherwise one is
+    built from bounds, obstacles, radius (m) and resolution (m).
+    """
+    rm = roadmap or RobotRoadmap.build(bounds, obstacles, radius, resolution, speed)
+    return rm.plan(start_xy, goal_xy, heuristic=heuristic, wg=wg, wh=wh)

@@ -1,0 +1,45 @@
+"""Play a log back on the bus: the original keys and payloads, spaced as they were logged."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from controller.replay.log import read_log
+
+
+def republish(
+    path: str | Path,
+    bus: Any,
+    speed: float = 1.0,
+    topics: list[str] | None = None,
+    wait_matching: float = 0.0,
+) -> int:
+    """Publish a log's messages again on ``bus`` (raw payloads, original keys), spaced as they
+    were logged divided by ``speed`` (0: as fast as possible). With ``wait_matching`` > 0, first
+    wait up to that many seconds until every key has a subscriber. Returns the count published."""
+    keys = topics if topics is not None else sorted({r.topic for r in read_log(path)})
+    pubs = {k: bus.session.declare_publisher(k) for k in keys}
+    try:
+        deadline = time.monotonic() + wait_matching
+        while wait_matching > 0 and time.monotonic() < deadline:
+            if all(p.matching_status.matching for p in pubs.values()):
+                break
+            time.sleep(0.01)
+        sent = 0
+        t0_log: int | None = None
+        t0 = time.monotonic()
+        for rec in read_log(path, keys):
+            if t0_log is None:
+                t0_log = rec.log_time_ns
+            if speed > 0:
+                delay = t0 + (rec.log_time_ns - t0_log) / 1e9 / speed - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            pubs[rec.topic].put(rec.data)
+            sent += 1
+        return sent
+    finally:
+        for p in pubs.values():
+            p.undeclare()

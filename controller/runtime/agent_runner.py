@@ -1,0 +1,102 @@
+"""``fleet driver``: one robot's agent on the wall clock (the robot side of the lab)."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+
+from controller.config import FleetConfig
+from controller.io.bus import Bus
+from controller.runtime.wiring import capabilities, make_hub
+from drivers.agent import Agent, AgentParams
+from drivers.sim import SimDriver
+from sim_backend.hub import SimHub
+
+log = logging.getLogger(__name__)
+
+
+def _open_until(stop: threading.Event, cfg: FleetConfig, who: str) -> Bus | None:
+    """A robot-side session to the daemon's endpoints, retried until it opens or ``stop``."""
+    from controller.io.bus import BusError
+
+    logged = False
+    while not stop.is_set():
+        try:
+            return Bus(
+                cfg.zenoh,
+                cfg.fleet.name,
+                listen=[],
+                connect=list(cfg.zenoh.listen),
+                lease_s=cfg.fleet.liveliness_lease,
+            )
+        except BusError as exc:
+            if not logged:
+                log.warning("%s: waiting for the bus: %s", who, exc)
+                logged = True
+            stop.wait(1.0)
+    return None
+
+
+def run_agent(
+    cfg: FleetConfig,
+    robot_id: str,
+    stop: threading.Event,
+    duration: float = 0.0,
+    connect_timeout: float = 10.0,
+) -> tuple[int, str]:
+    """``fleet driver``: one robot's agent on the wall clock. Returns (exit status, message).
+
+    A ``mavlink`` robot connects to its vehicle at its url; a ``sim`` robot runs alone in a
+    real-time stand-in world of its own. Exit 1 when the robot does not answer or its link is
+    lost (the robot is stopped first).
+    """
+    import dataclasses
+
+    from controller.io.ratekeeper import Ratekeeper
+    from drivers.base import DriverError
+    from drivers.mavlink.driver import MavlinkDriver
+
+    robot = cfg.robot(robot_id)
+    hub: SimHub | None = None
+    # Stamps are wall-clock seconds (time.time): the daemon may run on another computer, and
+    # NTP keeps lab machines within milliseconds; monotonic clocks are not comparable across them.
+    wall0 = time.time()
+    if robot.driver == "mavlink":
+        driver = MavlinkDriver(robot, clock=time.time)
+    else:
+        solo = dataclasses.replace(cfg, robots=(robot,))
+        hub = make_hub(solo)
+        noise = cfg.sim.pose_noise
+        driver = SimDriver(
+            hub, robot.id, capabilities(robot), noise.xy, noise.theta, time_offset=wall0
+        )
+    try:
+        driver.connect(timeout=connect_timeout)
+    except DriverError as exc:
+        return 1, str(exc)
+    code, message = 0, ""
+    try:
+        bus = _open_until(stop, cfg, robot_id)
+        if bus is None:
+            return 0, ""
+        with bus:
+            agent = Agent(bus, driver, AgentParams(robot.id, cfg.fleet.name, cfg.fleet.cmd_ttl))
+            rk = Ratekeeper(max(cfg.fleet.rate_hz, 20.0))
+            log.info("robot %s: agent up (%s driver)", robot.id, robot.driver)
+            while not stop.is_set():
+                rk.keep_time()
+                now = time.time()
+                if hub is not None:
+                    hub.advance_to(now - wall0)
+                agent.step(now)
+                if not agent.link_ok:
+                    code, message = 1, "link lost: robot stopped"
+                    break
+                if duration and now - wall0 >= duration:
+                    break
+    finally:
+        driver.close()
+        if hub is not None:
+            hub.world.close()
+    return code, message
