@@ -27,8 +27,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from controller import geometry  # noqa: E402
-from controller.planning.approach import PlannerParams, plan_velocities
-from controller.planning.safety import SafetyFilter
+from controller.planning.approach import PlannerParams, plan_velocities  # noqa: E402
+from controller.planning.safety import SafetyFilter  # noqa: E402
 
 BOUNDS = np.array([[0.0, 0.0], [12.8, 12.8]])
 OBSTACLES = [

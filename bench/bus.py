@@ -26,7 +26,7 @@ sys.path.insert(0, str(ROOT))
 
 from controller import wire  # noqa: E402
 from controller.config import ZenohSection  # noqa: E402
-from controller.io.bus import Bus
+from controller.io.bus import Bus  # noqa: E402
 
 FLEET = "bench"
 

@@ -23,8 +23,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from controller.config import RouteSection  # noqa: E402
-from controller.planning.cspace import build_object_cspace
-from controller.planning.route import object_heuristic, plan_route
+from controller.planning.cspace import build_object_cspace  # noqa: E402
+from controller.planning.route import object_heuristic, plan_route  # noqa: E402
 from controller.planning.route_maps import load_route_map  # noqa: E402
 
 PAPER_T2 = {

@@ -5,20 +5,20 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
+import matplotlib
 
-from controller import geometry
-from controller.replay import metrics
-from controller.replay.log import RunLog, _track
+matplotlib.use("Agg")  # files only: no display needed
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from controller import geometry  # noqa: E402
+from controller.replay import metrics  # noqa: E402
+from controller.replay.log import RunLog, _track  # noqa: E402
 
 
 def plot_run(run: RunLog, out_dir: str | Path) -> list[Path]:
     """PNG plots of a run: trajectories (with obstacles and object outlines), robot clearance
     and estimation error over time. Returns the files written."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -91,3 +91,50 @@ def plot_run(run: RunLog, out_dir: str | Path) -> list[Path]:
         fig.savefig(written[-1], dpi=110, bbox_inches="tight")
         plt.close(fig)
     return written
+
+
+def plot_capture_plan(path: str, polygon, plan) -> None:
+    """The capture plan: candidates, chosen points, robots and push normals; GA history."""
+    poly = geometry.ensure_ccw(polygon)
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 5))
+    ax.fill(poly[:, 0], poly[:, 1], color="0.85", ec="k")
+    ax.plot(plan.candidates[:, 0], plan.candidates[:, 1], ".", color="0.5", ms=4)
+    c = geometry.centroid(poly)
+    ax.plot(*c, "k+")
+    for p, n in zip(plan.points, plan.push_normals, strict=True):
+        ax.add_patch(plt.Circle(p + 0.1 * n, 0.1, fill=False, color="tab:blue"))
+        ax.annotate("", xy=p, xytext=p + 0.25 * n, arrowprops={"arrowstyle": "->", "color": "r"})
+    ax.set_aspect("equal")
+    ax.set_title(f"{plan.robots_needed} robots, closure {plan.form_closure}")
+    h = np.asarray(plan.history)
+    ax2.plot(np.where(h > -1e19, h, np.nan))
+    ax2.set_xlabel("generation")
+    ax2.set_ylabel("best objective")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+def plot_route(path: str, bounds, obstacles, footprint, start, goal, res) -> None:
+    """The object route: room, obstacles, start and goal footprints, waypoints and subgoals."""
+    fig, ax = plt.subplots(figsize=(7, 7))
+    b = np.asarray(bounds, dtype=float).reshape(2, 2)
+    ax.plot(b[[0, 1, 1, 0, 0], 0], b[[0, 0, 1, 1, 0], 1], "k-", lw=1)
+    for o in obstacles:
+        o = np.asarray(o)
+        ax.fill(o[:, 0], o[:, 1], color="0.4")
+    for pose, colour in ((start, "tab:green"), (goal, "tab:red")):
+        q = geometry.transform(footprint, pose)
+        ax.fill(q[:, 0], q[:, 1], color=colour, alpha=0.5)
+    if res.ok:
+        wp = res.waypoints
+        ax.plot(wp[:, 0], wp[:, 1], "-", color="tab:blue", lw=1.5, label="route")
+        for sg in res.subgoals:
+            q = geometry.transform(footprint, sg)
+            ax.plot(
+                np.r_[q[:, 0], q[0, 0]], np.r_[q[:, 1], q[0, 1]], "-", color="tab:orange", lw=0.8
+            )
+        ax.legend(loc="upper right")
+    ax.set_aspect("equal")
+    ax.set_title(f"{res.status}: {res.heuristic}, wg={res.wg}, wh={res.wh}, N_open={res.expanded}")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)

@@ -70,33 +70,7 @@ def run(args) -> int:
         for p, n in zip(plan.points, plan.push_normals, strict=True):
             print(f"  point ({p[0]:.3f}, {p[1]:.3f}) normal ({n[0]:.2f}, {n[1]:.2f})")
     if args.plot:
-        _plot(args.plot, cfg.object_polygon(), plan)
+        from controller.viz import plot_capture_plan
+
+        plot_capture_plan(args.plot, cfg.object_polygon(), plan)
     return status
-
-
-def _plot(path: str, polygon, plan) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from controller import geometry
-
-    poly = geometry.ensure_ccw(polygon)
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 5))
-    ax.fill(poly[:, 0], poly[:, 1], color="0.85", ec="k")
-    ax.plot(plan.candidates[:, 0], plan.candidates[:, 1], ".", color="0.5", ms=4)
-    c = geometry.centroid(poly)
-    ax.plot(*c, "k+")
-    for p, n in zip(plan.points, plan.push_normals, strict=True):
-        ax.add_patch(plt.Circle(p + 0.1 * n, 0.1, fill=False, color="tab:blue"))
-        ax.annotate("", xy=p, xytext=p + 0.25 * n, arrowprops={"arrowstyle": "->", "color": "r"})
-    ax.set_aspect("equal")
-    ax.set_title(f"{plan.robots_needed} robots, closure {plan.form_closure}")
-    h = np.asarray(plan.history)
-    ax2.plot(np.where(h > -1e19, h, np.nan))
-    ax2.set_xlabel("generation")
-    ax2.set_ylabel("best objective")
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)

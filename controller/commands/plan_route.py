@@ -5,7 +5,8 @@
 
 Without ``--map`` the scenario is the config's world, obstacles, object start and goal, and the
 fleet's largest robot radius. ``--map`` plans on a route map instead (a name shipped in
-``controller/planning/maps/``, e.g. ``yamashita``, or a path) toward its goal ``--goal`` (number or name).
+``controller/planning/maps/``, e.g. ``yamashita``, or a path) toward its goal ``--goal`` (number
+or name).
 The search parameters come from the config's ``[route]`` section (defaults when ``--map`` is used
 without ``--config``); ``--heuristic``, ``--wg`` and ``--wh`` override them.
 Exit status: 0 a route, 1 no path, 2 bad input.
@@ -101,38 +102,7 @@ def run(args) -> int:
     if not res.ok:
         print(f"fleet plan route: no path: {res.reason}", file=sys.stderr)
     if args.plot:
-        _plot(args.plot, bounds, obstacles, footprint, start, goal, res)
+        from controller.viz import plot_route
+
+        plot_route(args.plot, bounds, obstacles, footprint, start, goal, res)
     return 0 if res.ok else 1
-
-
-def _plot(path: str, bounds, obstacles, footprint, start, goal, res) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from controller import geometry
-
-    fig, ax = plt.subplots(figsize=(7, 7))
-    b = np.asarray(bounds, dtype=float).reshape(2, 2)
-    ax.plot(b[[0, 1, 1, 0, 0], 0], b[[0, 0, 1, 1, 0], 1], "k-", lw=1)
-    for o in obstacles:
-        o = np.asarray(o)
-        ax.fill(o[:, 0], o[:, 1], color="0.4")
-    for pose, colour in ((start, "tab:green"), (goal, "tab:red")):
-        q = geometry.transform(footprint, pose)
-        ax.fill(q[:, 0], q[:, 1], color=colour, alpha=0.5)
-    if res.ok:
-        wp = res.waypoints
-        ax.plot(wp[:, 0], wp[:, 1], "-", color="tab:blue", lw=1.5, label="route")
-        for sg in res.subgoals:
-            q = geometry.transform(footprint, sg)
-            ax.plot(
-                np.r_[q[:, 0], q[0, 0]], np.r_[q[:, 1], q[0, 1]], "-", color="tab:orange", lw=0.8
-            )
-        ax.legend(loc="upper right")
-    ax.set_aspect("equal")
-    ax.set_title(f"{res.status}: {res.heuristic}, wg={res.wg}, wh={res.wh}, N_open={res.expanded}")
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)

@@ -24,16 +24,11 @@ def add_arguments(parser, word: str) -> None:
     )
 
 
-def default_log_path(log_dir: str, fleet: str, kind: str = "run") -> Path:
-    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-    return Path(log_dir) / f"{fleet}-{kind}-{stamp}.mcap"
-
-
 def run(args) -> int:
     from controller import wire
     from controller.config import load_config
     from controller.io.bus import Bus
-    from controller.io.recorder import McapRecorder
+    from controller.io.recorder import McapRecorder, default_log_path
 
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name, "record")

@@ -16,8 +16,6 @@ from pathlib import Path
 
 from controller.commands import DEFAULT_CONFIG
 
-NOT_REPLAYED = ("/cmd", "/estop", "/sim/clock", "/sim/done")
-
 
 def add_arguments(parser, word: str) -> None:
     parser.add_argument("log", help="MCAP file of a run")
@@ -41,7 +39,7 @@ def add_arguments(parser, word: str) -> None:
 
 def run(args) -> int:
     from controller.cli import emit_json
-    from controller.replay.log import load_run, metrics_of
+    from controller.replay.log import load_run, metrics_of, print_summary
     from controller.viz import plot_run
 
     path = Path(args.log)
@@ -63,52 +61,13 @@ def run(args) -> int:
     if args.plots:
         result["plots"] = [str(p) for p in plot_run(run_log, args.plots)]
     if args.republish:
-        result["republished"] = _republish(args, run_log)
+        from controller.replay.republish import republish_run
+
+        result["republished"] = republish_run(
+            args.log, run_log, args.config, args.speed, args.with_commands, DEFAULT_CONFIG
+        )
     if args.json:
         emit_json(result)
     else:
-        _print(result)
+        print_summary(result)
     return 0
-
-
-def _republish(args, run_log) -> int:
-    from controller.config import load_config
-    from controller.io.bus import Bus
-    from controller.replay.republish import republish
-
-    cfg = load_config(args.config) if args.config else run_log.config
-    if cfg is None:
-        cfg = load_config(DEFAULT_CONFIG)
-    keys = sorted(k for k in run_log.topics if args.with_commands or not k.endswith(NOT_REPLAYED))
-    print(f"fleet replay: republishing {len(keys)} keys on {cfg.zenoh.listen}", file=sys.stderr)
-    with Bus(cfg.zenoh, cfg.fleet.name) as bus:
-        return republish(args.log, bus, args.speed, keys)
-
-
-def _print(r: dict) -> None:
-    print(f"{r['log']}: {'complete' if r['complete'] else 'cut short (crash?)'}, {r['mode']}")
-    print(
-        f"  {r['messages']} messages over {r['duration_s']:.1f} s, {r['undecodable']} undecodable"
-    )
-    for rid, m in r["robots"].items():
-        err = m["estimate_error"]
-        e = f", estimate RMSE {err['rmse_m'] * 100:.1f} cm" if err else ""
-        print(
-            f"  {rid}: {m['poses']} poses ({m['pose_rate_hz']:.1f} Hz), {m['commands']} commands "
-            f"({m['command_rate_hz']:.1f} Hz), path {m['path_length_m']:.2f} m{e}"
-        )
-    o = r["object"]
-    print(f"  object: path {o['path_length_m']:.2f} m, final {o['final_pose']}")
-    for p in r["phases"]:
-        print(f"  phase {p['phase']} from t={p['t']:.2f}")
-    for k in (
-        "arrested",
-        "arrest_time_s",
-        "arrival_spread_s",
-        "min_clearance_m",
-        "max_object_penetration_m",
-        "link_lost",
-    ):
-        print(f"  {k}: {r[k]}")
-    for p in r.get("plots", []):
-        print(f"  plot: {p}")

@@ -31,10 +31,10 @@ def run(args) -> int:
     import time
 
     from controller.cli import emit_json
-    from controller.commands.record import default_log_path
     from controller.config import load_config
+    from controller.io.recorder import default_log_path
     from controller.mission.factory import MissionError, build_mission
-    from controller.runtime.dry_run import DryRun
+    from controller.runtime.dry_run import DryRun, verdict_ok
 
     cfg = load_config(args.config)
     if args.backend:
@@ -67,13 +67,3 @@ def run(args) -> int:
         ):
             print(f"{k:>26}: {summary.get(k)}")
     return 0 if ok else 1
-
-
-def verdict_ok(summary: dict) -> bool:
-    """The hardware contract: no collisions, no obstacle contact, no deep penetration."""
-    clear = summary.get("min_clearance_m")
-    return (
-        (clear is None or clear >= 0.0)
-        and summary["max_object_penetration_m"] <= 0.01
-        and not summary["obstacle_contacts"]
-    )

@@ -222,3 +222,8 @@ def log_is_complete(path: str | Path) -> bool:
             return False
         f.seek(-8, 2)
         return f.read(8) == b"\x89MCAP0\r\n"
+
+
+def default_log_path(log_dir: str, fleet: str, kind: str = "run") -> Path:
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    return Path(log_dir) / f"{fleet}-{kind}-{stamp}.mcap"

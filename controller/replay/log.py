@@ -194,3 +194,33 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
             depth, _ = metrics.object_penetration(tr_h, r_h, obj, poly)
             out["max_object_penetration_m"] = depth
     return out
+
+
+def print_summary(r: dict) -> None:
+    """The ``fleet replay`` summary as text on stdout."""
+    print(f"{r['log']}: {'complete' if r['complete'] else 'cut short (crash?)'}, {r['mode']}")
+    print(
+        f"  {r['messages']} messages over {r['duration_s']:.1f} s, {r['undecodable']} undecodable"
+    )
+    for rid, m in r["robots"].items():
+        err = m["estimate_error"]
+        e = f", estimate RMSE {err['rmse_m'] * 100:.1f} cm" if err else ""
+        print(
+            f"  {rid}: {m['poses']} poses ({m['pose_rate_hz']:.1f} Hz), {m['commands']} commands "
+            f"({m['command_rate_hz']:.1f} Hz), path {m['path_length_m']:.2f} m{e}"
+        )
+    o = r["object"]
+    print(f"  object: path {o['path_length_m']:.2f} m, final {o['final_pose']}")
+    for p in r["phases"]:
+        print(f"  phase {p['phase']} from t={p['t']:.2f}")
+    for k in (
+        "arrested",
+        "arrest_time_s",
+        "arrival_spread_s",
+        "min_clearance_m",
+        "max_object_penetration_m",
+        "link_lost",
+    ):
+        print(f"  {k}: {r[k]}")
+    for p in r.get("plots", []):
+        print(f"  plot: {p}")

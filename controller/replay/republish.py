@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
+from controller.config import load_config
+from controller.io.bus import Bus
 from controller.replay.log import read_log
 
 
@@ -43,3 +46,25 @@ def republish(
     finally:
         for p in pubs.values():
             p.undeclare()
+
+
+NOT_REPLAYED = ("/cmd", "/estop", "/sim/clock", "/sim/done")
+
+
+def republish_run(
+    log_path: str | Path,
+    run_log: Any,
+    config_path: str | None,
+    speed: float,
+    with_commands: bool,
+    default_config: str,
+) -> int:
+    """``fleet replay --republish``: the log's keys on the recorded config's bus (or
+    ``config_path``'s), without commands and e-stops unless ``with_commands``."""
+    cfg = load_config(config_path) if config_path else run_log.config
+    if cfg is None:
+        cfg = load_config(default_config)
+    keys = sorted(k for k in run_log.topics if with_commands or not k.endswith(NOT_REPLAYED))
+    print(f"fleet replay: republishing {len(keys)} keys on {cfg.zenoh.listen}", file=sys.stderr)
+    with Bus(cfg.zenoh, cfg.fleet.name) as bus:
+        return republish(log_path, bus, speed, keys)

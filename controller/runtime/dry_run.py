@@ -182,3 +182,13 @@ class DryRun:
                     f"{up} of {len(agents)} robots came up; unmatched keys: {unmatched}"
                 )
             time.sleep(0.01)
+
+
+def verdict_ok(summary: dict) -> bool:
+    """The hardware contract: no collisions, no obstacle contact, no deep penetration."""
+    clear = summary.get("min_clearance_m")
+    return (
+        (clear is None or clear >= 0.0)
+        and summary["max_object_penetration_m"] <= 0.01
+        and not summary["obstacle_contacts"]
+    )

@@ -32,7 +32,7 @@ from controller.estimation.models import (
     weighted_mean,
 )
 from controller.estimation.track import TrackFilter
-from tests.estimation_tracks import (
+from tests.support.estimation_tracks import (
     measure,
     rmse,
     run_robot,

@@ -124,8 +124,8 @@ def test_build_mission_with_a_capture_set():
     from controller.mission.capture import CaptureMission
     from controller.mission.factory import build_mission
     from controller.mission.job import CaptureJob
-    from tests.capture_sets import l_shape_points
-    from tests.conftest import make_config
+    from tests.support.capture_sets import l_shape_points
+    from tests.support.config import make_config
 
     cfg = make_config({"sim": {"backend": "ideal"}})
     pts, nrm = l_shape_points()

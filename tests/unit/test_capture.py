@@ -23,7 +23,7 @@ from controller.planning.capture import (
     plan_capture,
     plan_push_arrangement,
 )
-from tests.conftest import base_config_dict, write_toml
+from tests.support.config import base_config_dict, write_toml
 
 RECT = np.array([[-1.0, -0.5], [1.0, -0.5], [1.0, 0.5], [-1.0, 0.5]])
 L_SHAPE = np.array([[0, 0], [1, 0], [1, 0.4], [0.4, 0.4], [0.4, 1], [0, 1]], dtype=float)

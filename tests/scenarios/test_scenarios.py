@@ -16,8 +16,8 @@ import pytest
 from controller import geometry
 from controller.mission.capture import CaptureMission
 from controller.runtime.dry_run import DryRun
-from tests.capture_sets import l_shape_points, nearest_assignment, rectangle_points
-from tests.conftest import make_config
+from tests.support.capture_sets import l_shape_points, nearest_assignment, rectangle_points
+from tests.support.config import make_config
 
 L_POLY = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.4], [0.4, 0.4], [0.4, 1.0], [0.0, 1.0]]
 RECT_POLY = [[0.0, 0.0], [0.8, 0.0], [0.8, 0.5], [0.0, 0.5]]

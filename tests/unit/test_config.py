@@ -11,7 +11,7 @@ import pytest
 from controller import geometry
 from controller.cli import main
 from controller.config import ConfigError, load_config, parse_config
-from tests.conftest import FLEET_TOML, ROOT, base_config_dict, deep_update, write_toml
+from tests.support.config import FLEET_TOML, ROOT, base_config_dict, deep_update, write_toml
 
 
 def test_shipped_config_is_valid_and_realistic():

@@ -14,8 +14,8 @@ from controller import wire
 from controller.config import ZenohSection
 from controller.io.bus import Bus
 from controller.io.recorder import McapRecorder, read_log
-from tests.conftest import ROOT, base_config_dict, deep_update, write_toml
-from tests.test_bus import wait_for
+from tests.support.config import ROOT, base_config_dict, deep_update, write_toml
+from tests.support.wait import wait_for
 
 
 def test_recorder_writes_channels_schemas_and_times(tmp_path):

@@ -13,16 +13,13 @@ from __future__ import annotations
 
 import math
 import os
-import socket
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controller.config import FleetConfig, parse_config
 from controller.wire import Twist2D
 from drivers.base import ConnectTimeout, LinkLost, RobotDriver
 from drivers.mavlink import convert as mc
@@ -30,11 +27,10 @@ from drivers.mavlink.driver import MavlinkDriver
 from drivers.mavlink.link import LinkPool
 from sim_backend.ideal import IdealWorld
 from sim_backend.mavlink_vehicle import VehicleEmulator, start_emulators, vehicle_url
+from tests.support.mavlink_rig import H, Lockstep, free_udp_port, make_config, robot
 
 os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil  # noqa: E402
-
-H = 0.01  # s, lockstep step (the ideal world's timestep)
 
 # --------------------------------------------------------------------------- contract checks
 
@@ -135,70 +131,6 @@ def contract_close_idempotent(driver: RobotDriver, advance: Callable[[float], No
 
 
 # --------------------------------------------------------------------------- harness
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def make_config(robots: list[dict[str, Any]]) -> FleetConfig:
-    return parse_config(
-        {
-            "fleet": {"name": "t"},
-            "object": {
-                "polygon": [[0, 0], [0.5, 0], [0.5, 0.5], [0, 0.5]],
-                "start": [8.0, 8.0, 0.0],
-                "goal": [9.0, 9.0, 0.0],
-                "motion": {"kind": "static"},
-            },
-            "sim": {"backend": "ideal", "timestep": 0.01},
-            "robots": robots,
-        }
-    )
-
-
-def robot(rid: str, profile: str, port: int, system_id: int, theta: float = 0.6,
-          **extra: Any) -> dict[str, Any]:  # fmt: skip
-    return {
-        "id": rid,
-        "kind": "diff" if profile == "ardurover" else "omni",
-        "start": [2.0 + system_id, 3.0, theta],
-        "driver": "mavlink",
-        "url": f"udpin:127.0.0.1:{port}",
-        "system_id": system_id,
-        "profile": profile,
-        **extra,
-    }
-
-
-class Lockstep:
-    """Fake clock + world + emulators advanced together in H steps."""
-
-    def __init__(self, cfg: FleetConfig):
-        self.t = 0.0
-        self.world = IdealWorld(cfg)
-        self.emulators: list[VehicleEmulator] = []
-
-    def clock(self) -> float:
-        return self.t
-
-    def emulator(self, cfg, **kw: Any) -> VehicleEmulator:
-        e = VehicleEmulator(self.world, cfg, clock=self.clock, **kw)
-        self.emulators.append(e)
-        return e
-
-    def advance(self, dt: float) -> None:
-        for _ in range(max(1, round(dt / H))):
-            self.t += H
-            self.world.step(H)
-            for e in self.emulators:
-                e.pump(self.t)
-
-    def close(self) -> None:
-        for e in self.emulators:
-            e.stop()
 
 
 @pytest.fixture

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 
 from controller.cli import main
-from tests.conftest import base_config_dict, free_port, write_toml
+from tests.support.config import base_config_dict, free_port, write_toml
 
 FIELDS = (
     "status", "phase", "arrested", "arrest_time_s", "arrival_spread_s", "min_clearance_m",

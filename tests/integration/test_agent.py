@@ -13,8 +13,8 @@ from drivers.base import Capabilities
 from drivers.sim import SimDriver
 from sim_backend.hub import PerfectSensor, SimHub
 from sim_backend.ideal import IdealWorld
-from tests.conftest import make_config
-from tests.test_bus import wait_for
+from tests.support.config import make_config
+from tests.support.wait import wait_for
 
 TICK = 0.05
 

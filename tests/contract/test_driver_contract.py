@@ -18,7 +18,7 @@ from controller.wire import Twist2D
 from drivers.base import Capabilities, ConnectTimeout, LinkHealth, RobotDriver
 from drivers.sim import SimDriver
 from sim_backend.hub import PerfectSensor, SimHub
-from tests.conftest import make_config
+from tests.support.config import make_config
 
 
 @dataclass
@@ -58,8 +58,8 @@ def _mavlink_rig(kind: str) -> Rig:
     """An emulated MAVLink rover on loopback UDP: px4 (holonomic) for omni, ardurover for diff."""
     from drivers.mavlink.driver import MavlinkDriver
     from drivers.mavlink.link import LinkPool
-    from tests.test_mavlink import Lockstep, free_udp_port, robot
-    from tests.test_mavlink import make_config as mav_config
+    from tests.support.mavlink_rig import Lockstep, free_udp_port, robot
+    from tests.support.mavlink_rig import make_config as mav_config
 
     profile = "px4" if kind == "omni" else "ardurover"
     cfg = mav_config([robot("r1", profile, free_udp_port(), 1, theta=0.3)])

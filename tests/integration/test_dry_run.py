@@ -10,7 +10,7 @@ from controller.io.recorder import read_log
 from controller.mission.basic import GotoMission
 from controller.mission.tracking import RobotLimits
 from controller.runtime.dry_run import DryRun
-from tests.conftest import make_config
+from tests.support.config import make_config
 
 
 def truth_track(path):
@@ -86,13 +86,13 @@ def mavlink_patch(port_a: int, port_b: int) -> dict:
 
 
 def base_robots() -> list[dict]:
-    from tests.conftest import base_config_dict
+    from tests.support.config import base_config_dict
 
     return base_config_dict()["robots"]
 
 
 def test_mavlink_robots_run_the_same_job(tmp_path):
-    from tests.test_mavlink import free_udp_port
+    from tests.support.mavlink_rig import free_udp_port
 
     cfg = make_config(mavlink_patch(free_udp_port(), free_udp_port()))
     assert [r.driver for r in cfg.robots][:3] == ["mavlink", "sim", "mavlink"]
@@ -108,7 +108,7 @@ def test_default_scenario_with_mavlink_robots_arrests_the_object(tmp_path):
     """fleet.toml with r1 (PX4, omni) and r3 (ArduRover, diff) behind the MAVLink driver and
     emulated vehicles: the capture job arrests the object as it does with sim drivers."""
     from controller.mission.factory import build_mission
-    from tests.test_mavlink import free_udp_port
+    from tests.support.mavlink_rig import free_udp_port
 
     cfg = make_config(mavlink_patch(free_udp_port(), free_udp_port()))
     res = DryRun(cfg, build_mission(cfg), tmp_path / "cap.mcap", max_time=90.0).run()

@@ -19,7 +19,7 @@ from controller.replay.metrics import Track, min_clearance, object_penetration, 
 from controller.replay.republish import republish
 from controller.runtime.dry_run import DryRun
 from controller.viz import plot_run
-from tests.conftest import make_config
+from tests.support.config import make_config
 
 
 @pytest.fixture(scope="module")

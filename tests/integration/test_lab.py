@@ -12,7 +12,7 @@ import time
 import pytest
 
 from controller.io.recorder import read_log
-from tests.conftest import ROOT, base_config_dict, write_toml
+from tests.support.config import ROOT, base_config_dict, write_toml
 
 
 def fleet(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
@@ -112,7 +112,7 @@ def test_status_without_daemon_exits_1(lab_config):
 
 
 def test_driver_for_unanswering_mavlink_robot_exits_1(tmp_path, port):
-    from tests.test_mavlink import free_udp_port
+    from tests.support.mavlink_rig import free_udp_port
 
     cfg = base_config_dict()
     cfg["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}

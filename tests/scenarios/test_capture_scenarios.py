@@ -13,7 +13,7 @@ import pytest
 
 from controller.mission.factory import build_mission
 from controller.runtime.dry_run import DryRun
-from tests.conftest import base_config_dict, deep_update, free_port
+from tests.support.config import base_config_dict, deep_update, free_port
 
 RECT = [[0.0, 0.0], [0.9, 0.0], [0.9, 0.6], [0.0, 0.6]]
 L_SHAPE = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.4], [0.4, 0.4], [0.4, 1.0], [0.0, 1.0]]

@@ -10,18 +10,8 @@ import threading
 from controller import wire
 from controller.config import ZenohSection
 from controller.io.bus import Bus
-from tests.conftest import ROOT
-
-
-def wait_for(cond, timeout: float, what: str) -> None:
-    """Poll a condition (a handshake), failing after ``timeout`` seconds."""
-    ev = threading.Event()
-    waited = 0.0
-    while not cond():
-        if waited >= timeout:
-            raise AssertionError(f"timed out waiting for {what}")
-        ev.wait(0.02)
-        waited += 0.02
+from tests.support.config import ROOT
+from tests.support.wait import wait_for
 
 
 def test_two_processes_exchange_commands_and_poses(port):
@@ -34,7 +24,14 @@ def test_two_processes_exchange_commands_and_poses(port):
         cmd = bus.publisher("robot_cmd", command=True, id="r9")
         env = dict(os.environ, PYTHONPATH=str(ROOT))
         child = subprocess.Popen(
-            [sys.executable, str(ROOT / "tests" / "peer_echo.py"), ep, "t2", "r9", str(n)],
+            [
+                sys.executable,
+                str(ROOT / "tests" / "support" / "peer_echo.py"),
+                ep,
+                "t2",
+                "r9",
+                str(n),
+            ],
             env=env,
         )
         try:

@@ -1,0 +1,183 @@
+"""Layering, checked by folder (ARCHITECTURE.md, "Packages and their seams").
+
+- ``controller/planning``, ``controller/estimation``, ``controller/mission`` are pure: besides the
+  standard library (no clock, threads, sockets, processes or global randomness) they import only
+  numpy, scipy, osqp, filterpy, shapely, each other, and ``controller.config``,
+  ``controller.geometry`` and ``controller.wire``;
+- ``controller/io`` is the only importer of zenoh and mcap; ``controller/viz.py`` the only
+  importer of matplotlib;
+- ``controller/runtime`` is the only part of ``controller/`` that imports ``drivers`` or
+  ``sim_backend``;
+- ``drivers/`` imports nothing of ``controller/`` but the wire contract (``controller.wire``);
+- ``sim_backend/`` knows nothing of the bus (no zenoh, no ``controller.io`` or
+  ``controller.wire``) and nothing of the drivers, with one listed exception: the MAVLink
+  vehicle emulator shares the NED conversions of ``drivers/mavlink/convert.py``;
+- ``controller/commands`` modules parse and delegate: they define ``add_arguments`` and ``run``
+  and nothing else.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+from tests.support.config import ROOT
+
+PURE_FOLDERS = ("planning", "estimation", "mission")
+PURE_THIRD_PARTY = {"numpy", "scipy", "osqp", "filterpy", "shapely"}
+PURE_OURS = ("controller.config", "controller.geometry", "controller.wire")
+FORBIDDEN_STDLIB = {
+    "time",
+    "datetime",
+    "threading",
+    "multiprocessing",
+    "socket",
+    "subprocess",
+    "asyncio",
+    "random",
+    "signal",
+    "select",
+}
+# sim_backend → drivers: the one listed exception (the emulator shares the NED conversions)
+SIM_BACKEND_MAY_IMPORT = {
+    "sim_backend/mavlink_vehicle.py": {"drivers.mavlink.convert", "drivers.mavlink"},
+}
+
+
+def _type_checking_blocks(tree: ast.AST) -> set[int]:
+    """ids of nodes inside ``if TYPE_CHECKING:`` (type-only imports are no runtime coupling)."""
+    skip: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            for child in node.body:
+                skip.update(id(n) for n in ast.walk(child))
+    return skip
+
+
+def imports_of(path: Path) -> set[str]:
+    """Every module a file imports at run time (``from a import b`` gives ``a`` and ``a.b``)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    skip = _type_checking_blocks(tree)
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.add(node.module)
+            out.update(f"{node.module}.{a.name}" for a in node.names)
+    return out
+
+
+def top(names: set[str]) -> set[str]:
+    return {n.split(".")[0] for n in names}
+
+
+def files(folder: str) -> list[Path]:
+    return sorted((ROOT / folder).rglob("*.py"))
+
+
+def rel(p: Path) -> str:
+    return str(p.relative_to(ROOT))
+
+
+def pure_violations(path: Path) -> list[str]:
+    """Imports of a pure-core module that break the rule."""
+    import sys
+
+    bad = []
+    for name in sorted(imports_of(path)):
+        root = name.split(".")[0]
+        if root == "controller":
+            ok = name == "controller" or name.startswith(
+                tuple(f"controller.{f}" for f in PURE_FOLDERS) + PURE_OURS
+            )
+            # ``from controller import geometry`` gives controller.geometry: covered above
+            if not ok:
+                bad.append(name)
+        elif root in FORBIDDEN_STDLIB:
+            bad.append(name)
+        elif root in sys.stdlib_module_names or root == "__future__":
+            continue
+        elif root not in PURE_THIRD_PARTY:
+            bad.append(name)
+    return bad
+
+
+PURE = [p for f in PURE_FOLDERS for p in files(f"controller/{f}")]
+
+
+@pytest.mark.parametrize("path", PURE, ids=rel)
+def test_pure_core_imports_only_the_allowed(path):
+    bad = pure_violations(path)
+    assert not bad, f"{rel(path)} imports {bad}: the planning core must stay pure"
+
+
+@pytest.mark.parametrize("path", files("controller"), ids=rel)
+def test_only_io_imports_zenoh_and_mcap(path):
+    if rel(path).startswith("controller/io/"):
+        return
+    bad = top(imports_of(path)) & {"zenoh", "mcap"}
+    assert not bad, f"{rel(path)} imports {sorted(bad)}: only controller/io/ may"
+
+
+@pytest.mark.parametrize("path", files("controller"), ids=rel)
+def test_only_viz_imports_matplotlib(path):
+    if rel(path) == "controller/viz.py":
+        return
+    assert "matplotlib" not in top(imports_of(path)), f"{rel(path)} imports matplotlib"
+
+
+@pytest.mark.parametrize("path", files("controller"), ids=rel)
+def test_only_runtime_imports_the_robot_side(path):
+    if rel(path).startswith("controller/runtime/"):
+        return
+    bad = top(imports_of(path)) & {"drivers", "sim_backend"}
+    assert not bad, f"{rel(path)} imports {sorted(bad)} outside controller/runtime/"
+
+
+@pytest.mark.parametrize("path", files("drivers"), ids=rel)
+def test_drivers_import_only_the_wire_contract(path):
+    ours = {n for n in imports_of(path) if n.split(".")[0] == "controller"}
+    allowed = {"controller", "controller.wire"} | {
+        n for n in ours if n.startswith("controller.wire.")
+    }
+    assert ours <= allowed, f"{rel(path)} imports {sorted(ours - allowed)} of controller/"
+
+
+@pytest.mark.parametrize("path", files("sim_backend"), ids=rel)
+def test_sim_backend_knows_nothing_of_the_bus_or_drivers(path):
+    names = imports_of(path)
+    assert "zenoh" not in top(names)
+    assert not any(n.startswith(("controller.io", "controller.wire")) for n in names)
+    drivers = {n for n in names if n.split(".")[0] == "drivers"}
+    allowed = SIM_BACKEND_MAY_IMPORT.get(rel(path), set())
+    extra = {n for n in drivers if not any(n == a or n.startswith(a + ".") for a in allowed)}
+    assert not extra, f"{rel(path)} imports {sorted(extra)} of drivers/"
+
+
+@pytest.mark.parametrize(
+    "path", [p for p in files("controller/commands") if p.name != "__init__.py"], ids=rel
+)
+def test_commands_parse_and_delegate(path):
+    tree = ast.parse(path.read_text())
+    defs = {n.name for n in tree.body if isinstance(n, ast.FunctionDef | ast.ClassDef)}
+    assert defs <= {"add_arguments", "run"}, f"{rel(path)} defines {sorted(defs)}"
+
+
+def test_the_checker_catches_violations(tmp_path):
+    bad = tmp_path / "planner.py"
+    bad.write_text(
+        "import numpy as np\nfrom zenoh import Config\nimport time\n"
+        "from controller.io.bus import Bus\nimport math\n"
+    )
+    assert pure_violations(bad) == [
+        "controller.io.bus",
+        "controller.io.bus.Bus",
+        "time",
+        "zenoh",
+        "zenoh.Config",
+    ]
