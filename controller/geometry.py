@@ -8,15 +8,25 @@ from p[i] to p[i+1] is the edge direction turned clockwise by 90 degrees.
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
+TWO_PI = 2.0 * math.pi
 
 
-def wrap_angle(a: ArrayLike) -> FloatArray | float:
-    """Wrap angle(s) in radians to [-pi, pi)."""
-    out = (np.asarray(a, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+def wrap_angle(a: Any) -> Any:
+    """Wrap angle(s) in radians to [-pi, pi): the project's one angle wrap.
+
+    A Python or numpy scalar gives a float (fast path: the filters call this per step); an array
+    gives an array of the same shape. Re-exported by ``controller.wire`` for the robot side.
+    """
+    if isinstance(a, float | int):
+        return (a + math.pi) % TWO_PI - math.pi
+    out = (np.asarray(a, dtype=float) + math.pi) % TWO_PI - math.pi
     return float(out) if out.ndim == 0 else out
 
 

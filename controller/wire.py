@@ -19,6 +19,8 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from controller.geometry import wrap_angle  # noqa: F401 - the one angle wrap, for the robot side
+
 # Magnitude bounds: a value beyond these is not a plausible lab quantity.
 MAX_ABS_POSITION = 1.0e4  # m
 MAX_ABS_SPEED = 1.0e2  # m/s or rad/s
@@ -143,10 +145,13 @@ class FleetStatus(Message):
 
 @dataclass(frozen=True, kw_only=True)
 class SimTick(Message):
-    """Lockstep clock: the sim announces tick ``step`` at sim time ``t``."""
+    """Lockstep clock: the sim announces tick ``step`` at sim time ``t``; ``measurements`` is how
+    many pose measurements (robots and object) it has published in all before this tick, so the
+    controller can wait until it has taken in every one of them."""
 
     step: int = field(default=0, metadata={"min": 0})
     dt: float = field(default=0.05, metadata={"limit": 10.0, "min": 0.0})
+    measurements: int = field(default=0, metadata={"min": 0})
 
     TYPE: ClassVar[str] = "fleet.SimTick"
 
@@ -330,11 +335,14 @@ def json_schema(cls: type[Message]) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------- topic registry
 
+_PLACEHOLDERS = ("id", "what", "role")
+
 
 @dataclass(frozen=True)
 class Topic:
-    """One bus key: its template (``{fleet}``, ``{id}``, ``{what}`` placeholders), message type,
-    expected rate (Hz, 0 for events) and whether the recorder logs it."""
+    """One bus key: its template (``{fleet}``, ``{id}``, ``{what}``, ``{role}`` placeholders),
+    message type, expected rate (Hz, 0 for events: ``fleet replay`` compares the logged rate with
+    it) and whether the recorder logs it."""
 
     name: str
     template: str
@@ -347,7 +355,7 @@ class Topic:
 
     def wildcard(self, fleet: str) -> str:
         """The key expression matching every instance of this topic in a fleet."""
-        parts = {p: "*" for p in ("id", "what") if "{" + p + "}" in self.template}
+        parts = {p: "*" for p in _PLACEHOLDERS if "{" + p + "}" in self.template}
         return self.template.format(fleet=fleet, **parts)
 
 
@@ -372,6 +380,23 @@ TOPICS: dict[str, Topic] = {
 }
 
 
+@dataclass(frozen=True)
+class KeyParts:
+    """A concrete key taken apart: its topic, fleet and placeholder values (e.g. ``id``)."""
+
+    topic: Topic
+    fleet: str
+    parts: dict[str, str]
+
+    @property
+    def id(self) -> str:
+        return self.parts.get("id", "")
+
+    @property
+    def what(self) -> str:
+        return self.parts.get("what", "")
+
+
 def key(topic: str, fleet: str, **parts: str) -> str:
     """The concrete key of a registered topic, e.g. ``key("robot_cmd", "lab", id="r1")``."""
     return TOPICS[topic].key(fleet, **parts)
@@ -379,20 +404,42 @@ def key(topic: str, fleet: str, **parts: str) -> str:
 
 def alive_key(fleet: str, role: str, ident: str) -> str:
     """Liveliness token key for a robot agent or the controller."""
-    return TOPICS["alive"].template.format(fleet=fleet, role=role, id=ident)
+    return TOPICS["alive"].key(fleet, role=role, id=ident)
 
 
 def fleet_prefix(fleet: str) -> str:
+    """The key expression of everything a fleet puts on the bus."""
     return f"fleet/{fleet}/**"
 
 
-def topic_for_key(fleet: str, k: str) -> Topic | None:
-    """The registered topic a concrete key belongs to (None if it is not ours)."""
-    parts = k.split("/")
+def _match(template: str, k: list[str]) -> dict[str, str] | None:
+    tparts = template.split("/")
+    if len(tparts) != len(k):
+        return None
+    out: dict[str, str] = {}
+    for a, b in zip(tparts, k, strict=True):
+        if a.startswith("{") and a.endswith("}"):
+            if not b:
+                return None
+            out[a[1:-1]] = b
+        elif a != b:
+            return None
+    return out
+
+
+def parse_key(k: str, fleet: str | None = None) -> KeyParts | None:
+    """Take a concrete key apart through the registry (None if it is not one of ours, or not of
+    ``fleet`` when given): ``parse_key("fleet/lab/robot/r1/pose").id == "r1"``."""
+    segs = k.split("/")
     for t in TOPICS.values():
-        tparts = t.template.format(fleet=fleet, id="\0", what="\0", role="\0").split("/")
-        if len(tparts) != len(parts):
-            continue
-        if all(a == "\0" or a == b for a, b in zip(tparts, parts, strict=True)):
-            return t
+        got = _match(t.template, segs)
+        if got is not None and (fleet is None or got["fleet"] == fleet):
+            f = got.pop("fleet")
+            return KeyParts(t, f, got)
     return None
+
+
+def topic_for_key(fleet: str, k: str) -> Topic | None:
+    """The registered topic a concrete key of ``fleet`` belongs to (None if it is not ours)."""
+    parsed = parse_key(k, fleet)
+    return None if parsed is None else parsed.topic

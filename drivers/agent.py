@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 from dataclasses import dataclass, field
 
 from controller import wire
@@ -107,13 +108,20 @@ class AgentCore:
 class Agent:
     """One robot's agent on the bus. Call ``step(now)`` at the control rate (or each sim tick)."""
 
-    def __init__(self, bus, driver: RobotDriver, params: AgentParams) -> None:
+    def __init__(
+        self,
+        bus,
+        driver: RobotDriver,
+        params: AgentParams,
+        commands_arrived: threading.Condition | None = None,
+    ) -> None:
+        """``commands_arrived`` is notified when a command arrives (the lockstep waits on it)."""
         self.bus = bus
         self.driver = driver
         self.params = params
         self.core = AgentCore(driver.capabilities, params.cmd_ttl)
         rid = params.robot_id
-        self._cmds = bus.subscribe_topic("robot_cmd", id=rid)
+        self._cmds = bus.subscribe_topic("robot_cmd", waker=commands_arrived, id=rid)
         self._estops = bus.subscribe_topic("estop")
         self._pose_pub = bus.publisher("robot_pose", id=rid)
         self._event_pub = bus.publisher("robot_event", id=rid)

@@ -70,7 +70,7 @@ class IdealWorld:
                 v = self._script.target_velocity(self._t, self._obj, self._pose[:, :2])
                 self._obj_vel = v
                 self._obj = self._obj + v * self.dt
-                self._obj[2] = math.remainder(self._obj[2], 2 * math.pi)
+                self._obj[2] = geometry.wrap_angle(self._obj[2])
             else:
                 self._obj_vel = np.zeros(3)
             self._t += self.dt

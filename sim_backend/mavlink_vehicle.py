@@ -55,6 +55,7 @@ os.environ["MAVLINK20"] = "1"  # before pymavlink picks its dialect
 
 from pymavlink import mavutil  # noqa: E402
 
+from controller.geometry import wrap_angle  # noqa: E402
 from drivers.mavlink import convert as mc  # noqa: E402
 
 if TYPE_CHECKING:
@@ -348,7 +349,7 @@ class VehicleEmulator:
             heading = math.atan2(m.vy, m.vx)
             if m.coordinate_frame != mc.FRAME_LOCAL_NED:
                 heading += self._yaw_ned()
-            self._target = ("heading", speed, mc.wrap_angle(heading), now)
+            self._target = ("heading", speed, wrap_angle(heading), now)
 
     def _on_command(self, m: Any, now: float) -> int:
         cmd = m.command
@@ -423,7 +424,7 @@ class VehicleEmulator:
                 elif tgt[0] == "rate":
                     vx, wz = tgt[1], -tgt[2]
                 else:
-                    err = mc.wrap_angle(tgt[2] - self._yaw_ned())
+                    err = wrap_angle(tgt[2] - self._yaw_ned())
                     wz = -HEADING_GAIN * err  # NED error clockwise -> CCW rate
                     vx = tgt[1] * max(0.0, math.cos(err))
         else:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.config import MotionSection
+from controller.geometry import wrap_angle
 
 
 @dataclass(frozen=True)
@@ -57,10 +58,10 @@ class ObjectScript:
                 away = d[i] / dist[i]
                 urgency = 1.0 - dist[i] / m.flee_radius
                 v = away * (m.speed + (m.max_speed - m.speed) * urgency)
-                wz = -self.pull_gain * math.remainder(pose[2] - self.start[2], 2 * math.pi)
+                wz = -self.pull_gain * wrap_angle(pose[2] - self.start[2])
                 return np.array([v[0], v[1], wz])
             u, _ = self._axes()
-            wz = -self.pull_gain * math.remainder(pose[2] - self.start[2], 2 * math.pi)
+            wz = -self.pull_gain * wrap_angle(pose[2] - self.start[2])
             return np.array([*(m.speed * u), wz])
         ref, vel = self.reference(t)
         err = ref[:2] - np.asarray(pose[:2])
@@ -69,5 +70,5 @@ class ObjectScript:
         norm = float(np.linalg.norm(pull))
         if norm > cap:
             pull *= cap / norm
-        wz = -self.pull_gain * math.remainder(pose[2] - ref[2], 2 * math.pi)
+        wz = -self.pull_gain * wrap_angle(pose[2] - ref[2])
         return np.array([vel[0] + pull[0], vel[1] + pull[1], wz])

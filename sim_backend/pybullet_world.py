@@ -45,6 +45,7 @@ import shapely
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.geometry import wrap_angle
 from sim_backend.base import WorldCheck
 from sim_backend.ideal import check_discs
 from sim_backend.motion import ObjectScript
@@ -456,7 +457,7 @@ class PybulletWorld:
                 f, vf = js[3][0], js[3][1]
                 cs, sn = math.cos(th), math.sin(th)
                 px, py = x + cs * f, y + sn * f
-                self._pose[i] = (px, py, math.remainder(th, 2 * math.pi))
+                self._pose[i] = (px, py, wrap_angle(th))
                 self._vel[i] = (vx + cs * vf, vy + sn * vf, wz)
                 self._offset[i] = f
                 if rebase and abs(f) > self.rebase_distance:
@@ -468,7 +469,7 @@ class PybulletWorld:
             else:
                 js = pb.getJointStates(body, [0, 1, 2], physicsClientId=c)
                 th = js[2][0]
-                self._pose[i] = (js[0][0], js[1][0], math.remainder(th, 2 * math.pi))
+                self._pose[i] = (js[0][0], js[1][0], wrap_angle(th))
                 self._vel[i] = (js[0][1], js[1][1], js[2][1])
                 if rebase and abs(th - self._aimed[i]) > self.reaim_angle:
                     self._apply_command(i)

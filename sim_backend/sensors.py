@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.config import FleetConfig
+from controller.geometry import wrap_angle
 
 Measurement = tuple[float, float, float, float]  # (t s, x m, y m, theta rad)
 
@@ -99,7 +100,7 @@ class PoseSensor:
             y += self.outlier_magnitude * math.sin(a)
             th += min(math.pi, self.outlier_magnitude) * (2.0 * u_turn - 1.0)
         self.emitted += 1
-        return [(float(t), x, y, math.remainder(th, 2.0 * math.pi))]
+        return [(float(t), x, y, wrap_angle(th))]
 
 
 @dataclass(frozen=True)

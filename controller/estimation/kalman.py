@@ -18,7 +18,6 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
 from controller.estimation.models import (
-    _TWO_PI,
     MEAS_DIM,
     THETA,
     motion,
@@ -27,6 +26,7 @@ from controller.estimation.models import (
     residual,
     weighted_mean,
 )
+from controller.geometry import wrap_angle
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ def unscented_transform_wrapped(
     sg = np.asarray(sigmas, dtype=float)
     x = weighted_mean(sg, Wm)
     y = sg - x
-    y[:, THETA] = (y[:, THETA] + math.pi) % _TWO_PI - math.pi
+    y[:, THETA] = wrap_angle(y[:, THETA])
     P = (y.T * np.asarray(Wc)) @ y
     if noise_cov is not None:
         P = P + noise_cov
@@ -213,7 +213,7 @@ class PoseSigmaPoints(MerweScaledSigmaPoints):
         sig[0] = xv
         sig[1 : self.n + 1] = xv + U
         sig[self.n + 1 :] = xv - U
-        sig[:, THETA] = (sig[:, THETA] + math.pi) % _TWO_PI - math.pi
+        sig[:, THETA] = wrap_angle(sig[:, THETA])
         return sig
 
 
@@ -236,9 +236,9 @@ class _PoseUKF(UnscentedKalmanFilter):
 
     def cross_variance(self, x: Any, z: Any, sigmas_f: Any, sigmas_h: Any) -> FloatArray:
         dx = np.asarray(sigmas_f) - x
-        dx[:, THETA] = (dx[:, THETA] + math.pi) % _TWO_PI - math.pi
+        dx[:, THETA] = wrap_angle(dx[:, THETA])
         dz = np.asarray(sigmas_h) - z
-        dz[:, THETA] = (dz[:, THETA] + math.pi) % _TWO_PI - math.pi
+        dz[:, THETA] = wrap_angle(dz[:, THETA])
         return (dx.T * self.Wc) @ dz
 
 

@@ -12,10 +12,11 @@ Pure functions: arrays in, arrays out.
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from controller.geometry import wrap_angle
 
 FloatArray = NDArray[np.float64]
 ROBOT_MODELS = ("omni", "diff")
@@ -26,18 +27,6 @@ YAW_RATE_INDEX = {"omni": 5, "diff": 4, "object": 5}
 MEAS_DIM = 3
 THETA = 2
 MAX_SUBSTEP = 0.05  # s, longest step of the motion integration (a dropout is cut into these)
-_TWO_PI = 2.0 * math.pi
-
-
-def wrap(a: Any) -> Any:
-    """Wrap an angle or an array of angles (rad) into [-pi, pi)."""
-    if np.isscalar(a):
-        return _wrap(float(a))  # type: ignore[arg-type]
-    return (np.asarray(a, dtype=float) + math.pi) % _TWO_PI - math.pi
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % _TWO_PI - math.pi
 
 
 def residual(a: ArrayLike, b: ArrayLike) -> FloatArray:
@@ -46,7 +35,7 @@ def residual(a: ArrayLike, b: ArrayLike) -> FloatArray:
     Used as filterpy's ``residual_x``, ``residual_z`` and the EKF's ``residual``.
     """
     d = np.subtract(a, b, dtype=float)
-    d[THETA] = (d[THETA] + math.pi) % _TWO_PI - math.pi
+    d[THETA] = wrap_angle(d[THETA])
     return d
 
 
@@ -96,7 +85,7 @@ def motion(
         if u is None:  # constant velocity
             s[0] += dt * s[3]
             s[1] += dt * s[4]
-            s[2] = _wrap(s[2] + dt * s[5])
+            s[2] = wrap_angle(s[2] + dt * s[5])
             if F is not None:
                 F[0, 3] = F[1, 4] = F[2, 5] = dt
             return np.array(s), F
@@ -111,7 +100,7 @@ def motion(
             if F is not None:
                 F[k, 3 + k] = dt * beta
                 F[3 + k, 3 + k] = a
-        s[2] = _wrap(s[2])
+        s[2] = wrap_angle(s[2])
         return np.array(s), F
     omni = model == "omni"
     if not omni and model != "diff":
@@ -141,7 +130,7 @@ def motion(
         dpy = h * (sn * ua + c * va)
         s[0] += dpx
         s[1] += dpy
-        s[2] = _wrap(th + wa * h)
+        s[2] = wrap_angle(th + wa * h)
         s[3] = a * u0 + (1.0 - a) * cu
         if omni:
             s[4] = a * v0 + (1.0 - a) * cv
@@ -185,7 +174,7 @@ def motion_batch(
             c = np.asarray(u, dtype=float)
             S[:, :3] += dt * (beta * S[:, 3:6] + (1.0 - beta) * c)
             S[:, 3:6] = a * S[:, 3:6] + (1.0 - a) * c
-        S[:, 2] = (S[:, 2] + math.pi) % _TWO_PI - math.pi
+        S[:, 2] = wrap_angle(S[:, 2])
         return S
     omni = model == "omni"
     if not omni and model != "diff":
@@ -213,7 +202,7 @@ def motion_batch(
         c, sn = np.cos(thm), np.sin(thm)
         S[:, 0] += h * (c * ua - sn * va)
         S[:, 1] += h * (sn * ua + c * va)
-        S[:, 2] = (S[:, 2] + wa * h + math.pi) % _TWO_PI - math.pi
+        S[:, 2] = wrap_angle(S[:, 2] + wa * h)
         S[:, 3] = a * u0 + (1.0 - a) * cu
         if omni:
             S[:, 4] = a * v0 + (1.0 - a) * cv

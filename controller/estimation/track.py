@@ -43,12 +43,12 @@ from controller.estimation.models import (
     STATE_DIM,
     THETA,
     YAW_RATE_INDEX,
-    _wrap,
     motion,
     process_noise,
     residual,
     weighted_mean,
 )
+from controller.geometry import wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -221,7 +221,7 @@ class TrackFilter:
     def _initialize(self, t: float, z: FloatArray) -> None:
         x0 = np.zeros(self.n)
         x0[:MEAS_DIM] = z
-        x0[THETA] = _wrap(float(z[THETA]))
+        x0[THETA] = wrap_angle(float(z[THETA]))
         u = self._command_at(t)
         if u is not None and self.model != "object":
             x0[3:] = u  # start from the commanded velocity
@@ -247,7 +247,7 @@ class TrackFilter:
             t0, z0 = self._run[-1]
             dt = t - t0
             dxy = math.hypot(z[0] - z0[0], z[1] - z0[1])
-            dth = abs(_wrap(float(z[THETA] - z0[THETA])))
+            dth = abs(wrap_angle(float(z[THETA] - z0[THETA])))
             rx, rth = math.sqrt(self.R[0, 0]), math.sqrt(self.R[THETA, THETA])
             ok_xy = dxy <= 4.0 * math.sqrt(2.0) * rx + 3.0 * self.init_sigma_speed * dt
             ok_th = dth <= 4.0 * math.sqrt(2.0) * rth + 3.0 * self.init_sigma_yaw_rate * dt
@@ -293,7 +293,7 @@ class TrackFilter:
             self.rejected += 1  # garbage never touches the filter
             self.invalid += 1
             return STATUS_REJECTED
-        zv[THETA] = _wrap(float(zv[THETA]))
+        zv[THETA] = wrap_angle(float(zv[THETA]))
         if self.t is None:
             self._initialize(t, zv)
             self._prune_commands()
@@ -325,7 +325,7 @@ class TrackFilter:
         if self.filter_name == "ekf":
             H = self._H
             self.kf.update(zv.reshape(-1, 1), lambda _x: H, _hx, R=self.R, residual=residual)
-            self.kf.x[THETA, 0] = _wrap(float(self.kf.x[THETA, 0]))
+            self.kf.x[THETA, 0] = wrap_angle(float(self.kf.x[THETA, 0]))
         else:
             x_prior, P_prior = self.kf.x.copy(), self.kf.P.copy()
             self.kf.update(zv, R=self.R)
@@ -333,7 +333,7 @@ class TrackFilter:
                 # wrapped heading sigma points spoiled the cross-covariance; the measurement is
                 # linear (H = [I3 0]), so the Kalman update on the same prior is exact
                 self.kf.x, self.kf.P = linear_update(x_prior, P_prior, zv, self.R, self._H)
-            self.kf.x[THETA] = _wrap(float(self.kf.x[THETA]))
+            self.kf.x[THETA] = wrap_angle(float(self.kf.x[THETA]))
         self.kf.P = _sym(self.kf.P)
         self.accepted += 1
         self.consecutive_rejected = 0

@@ -96,17 +96,25 @@ class DecodeStats:
 
 
 class Inbox:
-    """A thread-safe queue of ``Received`` samples, filled by zenoh callbacks."""
+    """A thread-safe queue of ``Received`` samples, filled by zenoh callbacks.
 
-    def __init__(self, maxsize: int = 0) -> None:
+    ``waker``, when given, is notified after every arrival: a consumer that waits for several
+    inboxes at once (the lockstep handshake) blocks on it instead of polling.
+    """
+
+    def __init__(self, maxsize: int = 0, waker: threading.Condition | None = None) -> None:
         self._q: queue.Queue[Received] = queue.Queue(maxsize)
         self.overflow = 0
+        self._waker = waker
 
     def put(self, item: Received) -> None:
         try:
             self._q.put_nowait(item)
         except queue.Full:
             self.overflow += 1
+        if self._waker is not None:
+            with self._waker:
+                self._waker.notify_all()
 
     def drain(self) -> list[Received]:
         """Everything queued so far, oldest first; never blocks."""
@@ -271,8 +279,18 @@ class Bus:
         self._handles.append(sub)
         return box
 
-    def subscribe_topic(self, topic: str, inbox: Inbox | None = None, **parts: str) -> Inbox:
+    def subscribe_topic(
+        self,
+        topic: str,
+        inbox: Inbox | None = None,
+        waker: threading.Condition | None = None,
+        **parts: str,
+    ) -> Inbox:
+        """Decode a registered topic (one key with ``parts``, else every instance) into an inbox
+        (a new one notifying ``waker`` unless ``inbox`` is given)."""
         t = wire.TOPICS[topic]
+        if inbox is None:
+            inbox = Inbox(waker=waker)
         k = t.key(self.fleet, **parts) if parts else t.wildcard(self.fleet)
         return self.subscribe(k, t.msg, inbox)
 

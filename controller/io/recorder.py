@@ -79,6 +79,9 @@ class McapRecorder:
         self._closed = False
 
     def on_sample(self, key: str, payload: bytes, recv_time: float) -> None:
+        topic = wire.topic_for_key(self.fleet, key)
+        if topic is not None and not topic.logged:
+            return  # the registry says so (status replies, liveliness)
         self._q.put((key, payload, recv_time))
 
     def record(self, key: str, msg: wire.Message, recv_time: float | None = None) -> None:

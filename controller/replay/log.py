@@ -64,9 +64,9 @@ def load_run(path: str | Path) -> RunLog:
         else:
             run.fleet = run.config.fleet.name
     for rec in read_log(path):
-        parts = rec.topic.split("/")
-        if run.fleet is None and len(parts) > 2 and parts[0] == "fleet":
-            run.fleet = parts[1]
+        parsed = wire.parse_key(rec.topic, run.fleet)
+        if run.fleet is None and parsed is not None:
+            run.fleet = parsed.fleet
         run.topics[rec.topic] += 1
         try:
             msg = rec.message()
@@ -76,36 +76,45 @@ def load_run(path: str | Path) -> RunLog:
         if msg is None:
             continue
         run.stamps[rec.topic].append(msg.t)
-        _sort(run, parts[2:], msg)
+        if parsed is not None:
+            _sort(run, parsed, msg)
     return run
 
 
-def _sort(run: RunLog, rest: list[str], msg: Any) -> None:
-    """File one decoded message by its key (after ``fleet/<name>/``)."""
-    match rest:
-        case ["robot", rid, "pose"]:
-            run.measured[rid].append((msg.t, msg.x, msg.y, msg.theta))
-        case ["robot", rid, "state"]:
-            run.estimated[rid].append((msg.t, msg.x, msg.y, msg.theta))
+def _sort(run: RunLog, key: wire.KeyParts, msg: Any) -> None:
+    """File one decoded message by its registered topic."""
+    rid = key.id
+    row = (msg.t, getattr(msg, "x", 0.0), getattr(msg, "y", 0.0), getattr(msg, "theta", 0.0))
+    match key.topic.name:
+        case "robot_pose":
+            run.measured[rid].append(row)
+        case "robot_state":
+            run.estimated[rid].append(row)
             run.stale[rid] += bool(msg.stale)
-        case ["robot", rid, "cmd"]:
+        case "robot_cmd":
             run.commands[rid].append((msg.t, msg.vx, msg.vy, msg.wz))
-        case ["robot", rid, "event"]:
+        case "robot_event":
             run.robot_events.append({"t": msg.t, "robot": rid, "kind": msg.kind, "data": msg.data})
-        case ["object", "pose"]:
-            run.object_measured.append((msg.t, msg.x, msg.y, msg.theta))
-        case ["object", "state"]:
-            run.object_estimated.append((msg.t, msg.x, msg.y, msg.theta))
-        case ["sim", "truth", "robot", rid]:
-            run.truth[rid].append((msg.t, msg.x, msg.y, msg.theta))
-        case ["sim", "truth", "object"]:
-            run.object_truth.append((msg.t, msg.x, msg.y, msg.theta))
-        case ["plan", what]:
-            run.events.append({"t": msg.t, "kind": what, "phase": msg.phase, "data": msg.data})
-        case ["estop"]:
+        case "object_pose":
+            run.object_measured.append(row)
+        case "object_state":
+            run.object_estimated.append(row)
+        case "truth_robot":
+            run.truth[rid].append(row)
+        case "truth_object":
+            run.object_truth.append(row)
+        case "plan":
+            run.events.append({"t": msg.t, "kind": key.what, "phase": msg.phase, "data": msg.data})
+        case "estop":
             run.estops.append({"t": msg.t, "engaged": msg.engaged, "source": msg.source})
-        case _:
-            pass
+
+
+def _topic_figures(run: RunLog, key: str, count: int) -> dict[str, Any]:
+    """Count and rate of one key, with the registry's expected rate (None for events)."""
+    rate = round(metrics.rate_hz(sorted(run.stamps.get(key, []))), 3)
+    parsed = wire.parse_key(key, run.fleet)
+    expected = parsed.topic.rate_hz if parsed is not None and parsed.topic.rate_hz > 0 else None
+    return {"count": count, "rate_hz": rate, "expected_rate_hz": expected}
 
 
 def _track(rows: list) -> metrics.Track:
@@ -155,10 +164,7 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         "undecodable": run.undecodable,
         "start_s": min(all_t) if all_t else None,
         "duration_s": (max(all_t) - min(all_t)) if all_t else 0.0,
-        "topics": {
-            k: {"count": n, "rate_hz": round(metrics.rate_hz(sorted(run.stamps.get(k, []))), 3)}
-            for k, n in sorted(run.topics.items())
-        },
+        "topics": {k: _topic_figures(run, k, n) for k, n in sorted(run.topics.items())},
         "robots": robots,
         "object": {
             "poses": len(omeas),

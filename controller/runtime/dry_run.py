@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -89,12 +90,18 @@ class DryRun:
                     cfg, ctl_bus, self.mission, make_estimator(cfg), lossless_commands=True
                 )
                 drivers, emulators = make_sim_drivers(cfg, hub)
+                commands_arrived = threading.Condition()
                 agents = [
-                    Agent(robot_bus, drv, AgentParams(r.id, cfg.fleet.name, cfg.fleet.cmd_ttl))
+                    Agent(
+                        robot_bus,
+                        drv,
+                        AgentParams(r.id, cfg.fleet.name, cfg.fleet.cmd_ttl),
+                        commands_arrived,
+                    )
                     for r, drv in zip(cfg.robots, drivers, strict=True)
                 ]
                 coord = LockstepCoordinator(
-                    robot_bus, hub, agents, control_dt, cfg.sim.tick_timeout
+                    robot_bus, hub, agents, control_dt, cfg.sim.tick_timeout, commands_arrived
                 )
                 ctl = ControllerLockstep(node, ctl_bus, wait_inputs=cfg.sim.tick_timeout)
 

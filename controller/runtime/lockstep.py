@@ -4,14 +4,18 @@ The sim is the clock. Each control tick k at sim time t_k:
 
 1. every agent forwards its robot's pose measurements (stamped with their own sim times) and the
    object's measurements and ground truth go out on their keys;
-2. the coordinator publishes ``SimTick(step=k, t=t_k, seq=<measurements published so far>)``;
+2. the coordinator publishes ``SimTick(step=k, t=t_k, measurements=<published so far>)``; the
+   controller waits (on a condition its inboxes notify, never polling) until it has taken in that
+   many, then ticks;
 3. it waits (at most ``tick_timeout`` s of wall time) for the controller's ``TickDone(step=k)``,
-   which the controller sends after publishing every command for tick k;
+   which the controller sends after publishing every command for tick k, and then until the
+   agents hold every command it announced (a condition their command inboxes notify);
 4. every agent applies the commands it received (watchdog and e-stop at sim time t_k);
 5. the world steps to t_{k+1}.
 
 Every command and pose crosses the bus exactly as in the lab: only the adapter behind the agents
-and the source of time differ. Same seed, same truth trajectory.
+and the source of time differ. Same seed, same truth trajectory. Both halves of the protocol live
+here: ``LockstepCoordinator`` (the sim side) and ``ControllerLockstep`` (the controller side).
 """
 
 from __future__ import annotations
@@ -48,7 +52,10 @@ class LockstepCoordinator:
         agents: list[Agent],
         control_dt: float,
         tick_timeout: float,
+        commands_arrived: threading.Condition,
     ) -> None:
+        """``commands_arrived`` is the condition the agents' command inboxes notify."""
+        self.commands_arrived = commands_arrived
         self.bus = bus
         self.hub = hub
         self.agents = agents
@@ -139,16 +146,21 @@ class LockstepCoordinator:
             if self._answered >= step:
                 return self._wait_commands(deadline)
 
+    def _seen(self) -> int:
+        return sum(a.commands_seen() for a in self.agents)
+
     def _wait_commands(self, deadline: float) -> bool:
         """Wait until the agents hold every command the controller says it published."""
-        while sum(a.commands_seen() for a in self.agents) < self._commands_due:
-            if time.monotonic() > deadline:
-                seen = sum(a.commands_seen() for a in self.agents)
-                log.warning("%d commands never arrived", self._commands_due - seen)
-                self._commands_due = seen  # resynchronise: do not wait for them again
-                return False
-            time.sleep(0.0002)
-        return True
+        with self.commands_arrived:
+            ok = self.commands_arrived.wait_for(
+                lambda: self._seen() >= self._commands_due,
+                timeout=max(0.0, deadline - time.monotonic()),
+            )
+        if not ok:
+            seen = self._seen()
+            log.warning("%d commands never arrived", self._commands_due - seen)
+            self._commands_due = seen  # resynchronise: do not wait for them again
+        return ok
 
     def tick(self) -> bool:
         """One lockstep tick; returns whether the controller answered in time."""
@@ -156,7 +168,13 @@ class LockstepCoordinator:
         self.publish_measurements()
         self.publish_truth(now)
         self._clock.put(
-            wire.SimTick(t=now, seq=self.counters.measurements, step=self.step_index, dt=self.dt)
+            wire.SimTick(
+                t=now,
+                seq=self.step_index,
+                step=self.step_index,
+                dt=self.dt,
+                measurements=self.counters.measurements,
+            )
         )
         ok = self.wait_done(self.step_index)
         if not ok:
@@ -193,22 +211,23 @@ class ControllerLockstep:
                 if item is None:
                     continue
                 tick: wire.SimTick = item.msg
-                # handshake: every measurement published before the tick has been taken in
-                deadline = time.monotonic() + self.wait_inputs
-                while self.node.received + self._pending() + self._deficit < tick.seq:
-                    if time.monotonic() > deadline:
-                        self.lag_waits += 1
-                        have = self.node.received + self._pending() + self._deficit
-                        self._deficit += tick.seq - have
-                        log.warning(
-                            "tick %d: %d measurements never arrived", tick.step, tick.seq - have
-                        )
-                        break
-                    time.sleep(0.0005)
+                self._wait_inputs(tick)
                 self.node.tick(tick.t, step=tick.step)
         except BaseException as exc:  # noqa: BLE001 - surfaced by the runner
             self.error = exc
             log.exception("controller loop failed")
 
-    def _pending(self) -> int:
-        return self.node.pending_measurements()
+    def _have(self) -> int:
+        return self.node.received + self.node.pending_measurements() + self._deficit
+
+    def _wait_inputs(self, tick: wire.SimTick) -> None:
+        """Handshake: every measurement published before the tick has arrived (taken in or
+        queued); measurements lost on the way are written off after ``wait_inputs`` seconds."""
+        cond = self.node.inputs_arrived
+        with cond:
+            ok = cond.wait_for(lambda: self._have() >= tick.measurements, timeout=self.wait_inputs)
+        if not ok:
+            self.lag_waits += 1
+            missing = tick.measurements - self._have()
+            self._deficit += missing
+            log.warning("tick %d: %d measurements never arrived", tick.step, missing)

@@ -9,6 +9,7 @@ lockstep clock. Nothing here reads the wall clock for control decisions; ``now``
 from __future__ import annotations
 
 import logging
+import threading
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -71,8 +72,9 @@ class ControllerNode:
         self.last_output: MissionOutput | None = None
         self.last_tick = 0.0
         self._seq = 0
-        self._poses = bus.subscribe_topic("robot_pose")
-        self._object = bus.subscribe_topic("object_pose")
+        self.inputs_arrived = threading.Condition()  # notified on every pose (lockstep waits)
+        self._poses = bus.subscribe_topic("robot_pose", waker=self.inputs_arrived)
+        self._object = bus.subscribe_topic("object_pose", waker=self.inputs_arrived)
         self._estops = bus.subscribe_topic("estop")
         self._robot_events = bus.subscribe_topic("robot_event")
         lossless = lossless_commands
@@ -111,13 +113,13 @@ class ControllerNode:
                 )
             self.estop = item.msg.engaged
         for item in self._robot_events.drain():
-            rid = item.key.split("/")[-2]
+            rid = self._robot_id(item.key)
             if item.msg.kind == "link_lost" and rid in self.index:
                 self.link_lost[self.index[rid]] = True
                 self.counters.link_events += 1
                 log.error("robot %s reports a lost link: %s", rid, item.msg.data.get("detail"))
         for item in self._poses.drain():
-            rid = item.key.split("/")[-2]
+            rid = self._robot_id(item.key)
             if rid not in self.index:
                 continue
             m = item.msg
@@ -129,6 +131,10 @@ class ControllerNode:
             m = item.msg
             self.est.measure_object(m.t, m.x, m.y, m.theta)
             self.counters.object_poses += 1
+
+    def _robot_id(self, key: str) -> str:
+        parsed = wire.parse_key(key, self.cfg.fleet.name)
+        return "" if parsed is None else parsed.id
 
     def publishers_for_handshake(self) -> list:
         """Publishers whose subscribers must be matched before the first tick."""

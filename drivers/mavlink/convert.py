@@ -20,12 +20,9 @@ from __future__ import annotations
 
 import math
 
+from controller.wire import wrap_angle
+
 # --------------------------------------------------------------------------- conversions
-
-
-def wrap_angle(a: float) -> float:
-    """Angle (rad) wrapped to [-pi, pi]."""
-    return math.remainder(a, 2.0 * math.pi)
 
 
 def enu_to_ned_pose(x: float, y: float, theta: float) -> tuple[float, float, float]:
