@@ -198,6 +198,46 @@ def discs_hit_polygon(centers: ArrayLike, radius: ArrayLike, poly: ArrayLike) ->
     return polygon_signed_distance(centers, poly) < np.asarray(radius, dtype=float)
 
 
+def disc_gaps(xy: ArrayLike, radii: ArrayLike) -> FloatArray:
+    """Gaps between discs, ``|p_i − p_j| − r_i − r_j`` (m), for centres (..., N, 2) and radii
+    (N,): an (..., N, N) array with +inf on the diagonal (a disc has no gap to itself)."""
+    p = np.asarray(xy, dtype=float)
+    r = np.asarray(radii, dtype=float)
+    d = np.linalg.norm(p[..., :, None, :] - p[..., None, :, :], axis=-1)
+    gap = d - r[:, None] - r[None, :]
+    n = p.shape[-2]
+    gap[..., np.arange(n), np.arange(n)] = np.inf
+    return gap
+
+
+def min_disc_gap(xy: ArrayLike, radii: ArrayLike) -> FloatArray | float:
+    """The smallest gap between any two discs (m), per leading index; inf for fewer than two."""
+    gap = disc_gaps(xy, radii)
+    out = gap.min(axis=(-2, -1)) if gap.shape[-1] else np.full(gap.shape[:-2], np.inf)
+    return float(out) if np.ndim(out) == 0 else out
+
+
+def discs_touch_static(
+    xy: ArrayLike,
+    radius: ArrayLike,
+    obstacles: list[ArrayLike],
+    bounds: ArrayLike | None,
+    slack: float = 1e-3,
+) -> NDArray[np.bool_]:
+    """Which discs (centres (N, 2), radii (N,)) overlap a static obstacle polygon or cross the
+    room's walls (``bounds`` [[xmin, ymin], [xmax, ymax]], None: no walls) by more than ``slack``
+    metres (a resting contact is not a hit)."""
+    p = np.atleast_2d(np.asarray(xy, dtype=float))
+    r = np.broadcast_to(np.asarray(radius, dtype=float), (len(p),)) - slack
+    hit = np.zeros(len(p), dtype=bool)
+    for o in obstacles:
+        hit |= polygon_signed_distance(p, o) < r
+    if bounds is not None:
+        (x0, y0), (x1, y1) = np.asarray(bounds, dtype=float)
+        hit |= (p[:, 0] < x0 + r) | (p[:, 0] > x1 - r) | (p[:, 1] < y0 + r) | (p[:, 1] > y1 - r)
+    return hit
+
+
 def convex_hull(points: ArrayLike) -> FloatArray:
     """Counter-clockwise convex hull (monotone chain) of points (m, 2)."""
     pts = np.unique(np.asarray(points, dtype=float), axis=0)

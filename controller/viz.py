@@ -63,13 +63,8 @@ def plot_run(run: RunLog, out_dir: str | Path) -> list[Path]:
         )
         grid = metrics.common_grid(tracks_h)
         if len(grid) and len(tracks_h) > 1:
-            xy = np.stack([tr.at(grid)[:, :2] for tr in tracks_h], axis=1)
-            d = np.linalg.norm(xy[:, :, None] - xy[:, None, :], axis=-1)
-            gap = d - radii[None, :, None] - radii[None, None, :]
-            n = len(tracks_h)
-            gap[:, np.arange(n), np.arange(n)] = np.inf
             fig, ax = plt.subplots(figsize=(7, 3))
-            ax.plot(grid, gap.min(axis=(1, 2)))
+            ax.plot(grid, metrics.clearance_series(tracks_h, radii, grid))
             ax.axhline(0, color="r", lw=0.8)
             ax.set_xlabel("t (s)")
             ax.set_ylabel("min robot gap (m)")

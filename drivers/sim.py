@@ -44,8 +44,7 @@ class SimDriver:
             raise LinkLost(f"robot {self.robot_id}: {self._lost}")
         if not self._connected:
             raise LinkLost(f"robot {self.robot_id}: not connected")
-        vy = cmd.vy if self.capabilities.holonomic else 0.0
-        self.hub.world.set_command(self.robot_id, cmd.vx, vy, cmd.wz)
+        self.hub.world.set_command(self.robot_id, cmd.vx, cmd.vy, cmd.wz)
 
     def poll(self) -> list[PoseMeasurement]:
         if self._lost or not self._connected:

@@ -7,8 +7,6 @@ Fast and exact, for logic tests of the controller (crazyswarm2's "ideal tracker"
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from controller import geometry
@@ -25,7 +23,7 @@ class IdealWorld:
         self.dt = cfg.sim.timestep
         self._t = 0.0
         self._ids = cfg.robot_ids
-        self._kinds = {r.id: r.kind for r in cfg.robots}
+        self._holonomic = np.array([r.kind == "omni" for r in cfg.robots], dtype=float)
         self._radius = np.array([r.radius for r in cfg.robots])
         self._pose = np.array([r.start for r in cfg.robots], dtype=float)
         self._vel = np.zeros((len(self._ids), 3))
@@ -51,18 +49,16 @@ class IdealWorld:
         return self._arrested
 
     def set_command(self, robot_id: str, vx: float, vy: float, wz: float) -> None:
-        i = self._index[robot_id]
-        if self._kinds[robot_id] == "diff":
-            vy = 0.0
-        self._cmd[i] = (vx, vy, wz)
+        self._cmd[self._index[robot_id]] = (vx, vy, wz)
 
     def step(self, duration: float) -> None:
         n = max(1, int(round(duration / self.dt)))
         for _ in range(n):
             th = self._pose[:, 2]
             c, s = np.cos(th), np.sin(th)
-            vx = c * self._cmd[:, 0] - s * self._cmd[:, 1]
-            vy = s * self._cmd[:, 0] + c * self._cmd[:, 1]
+            lateral = self._cmd[:, 1] * self._holonomic  # a diff robot has no sideways motion
+            vx = c * self._cmd[:, 0] - s * lateral
+            vy = s * self._cmd[:, 0] + c * lateral
             self._vel = np.stack([vx, vy, self._cmd[:, 2]], axis=1)
             self._pose += self._vel * self.dt
             self._pose[:, 2] = geometry.wrap_angle(self._pose[:, 2])
@@ -116,26 +112,11 @@ def check_discs(
     contact_slack: float = 1e-3,
 ) -> WorldCheck:
     """Safety figures for disc robots from their true positions (shared by every backend)."""
-    n = len(ids)
-    if n >= 2:
-        d = np.linalg.norm(xy[:, None, :] - xy[None, :, :], axis=-1)
-        gap = d - radius[:, None] - radius[None, :]
-        iu = np.triu_indices(n, 1)
-        min_clear = float(gap[iu].min())
-    else:
-        min_clear = math.inf
+    min_clear = geometry.min_disc_gap(xy, radius)
     world_poly = geometry.transform(object_polygon, object_pose)
     sd = geometry.polygon_signed_distance(xy, world_poly)
     penetration = float(max(0.0, np.max(radius - sd)))
-    touching: list[str] = []
-    for k, rid in enumerate(ids):
-        hit = any(
-            geometry.polygon_signed_distance(xy[k : k + 1], o)[0] < radius[k] - contact_slack
-            for o in obstacles
-        )
-        (x0, y0), (x1, y1) = bounds
-        r = radius[k] - contact_slack
-        out = xy[k, 0] < x0 + r or xy[k, 0] > x1 - r or xy[k, 1] < y0 + r or xy[k, 1] > y1 - r
-        if hit or out:
-            touching.append(rid)
-    return WorldCheck(min_clear, penetration, tuple(touching))
+    hit = geometry.discs_touch_static(xy, radius, obstacles, bounds, contact_slack)
+    return WorldCheck(
+        min_clear, penetration, tuple(rid for rid, h in zip(ids, hit, strict=True) if h)
+    )

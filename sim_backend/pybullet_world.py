@@ -536,8 +536,6 @@ class PybulletWorld:
     def set_command(self, robot_id: str, vx: float, vy: float, wz: float) -> None:
         """Body-frame velocity target (m/s, m/s, rad/s); a differential robot ignores vy."""
         i = self._index[robot_id]
-        if self._diff[i]:
-            vy = 0.0
         cmd = (float(vx), float(vy), float(wz))
         if tuple(self._cmd[i]) != cmd:
             self._cmd[i] = cmd

@@ -34,7 +34,7 @@ def run(args) -> int:
     from controller.config import load_config
     from controller.io.recorder import default_log_path
     from controller.mission.factory import MissionError, build_mission
-    from controller.runtime.dry_run import DryRun, verdict_ok
+    from controller.runtime.dry_run import DryRun
 
     cfg = load_config(args.config)
     if args.backend:
@@ -47,8 +47,7 @@ def run(args) -> int:
         return 1
     print(f"fleet run: {cfg.source}, backend {cfg.sim.backend}, log {out}", file=sys.stderr)
     summary = DryRun(cfg, mission, out, gui=args.gui, max_time=args.max_time).run()
-    ok = summary["done"] and not summary["failed"] and verdict_ok(summary)
-    summary["status"] = "ok" if ok else "failed"
+    ok = summary["status"] == "ok"
     if args.json:
         emit_json(summary)
     else:

@@ -183,6 +183,8 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         "min_clearance_m": None,
         "min_clearance_t": None,
         "max_object_penetration_m": None,
+        "obstacle_contacts": None,
+        "verdict": None,
     }
     if cfg is not None:
         # discs from ground truth when the log has it (dry run), else from the estimates
@@ -199,6 +201,11 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
             poly = geometry.ensure_ccw(cfg.object_polygon())
             depth, _ = metrics.object_penetration(tr_h, r_h, obj, poly)
             out["max_object_penetration_m"] = depth
+        hits = metrics.obstacle_contacts(tr_h, r_h, cfg.obstacle_polygons(), cfg.bounds_array())
+        out["obstacle_contacts"] = sorted(ids[have[i]] for i in hits)
+        from controller.runtime.dry_run import judge  # the run's own verdict code
+
+        out["verdict"] = judge(out)
     return out
 
 

@@ -101,13 +101,29 @@ def min_clearance(tracks: list[Track], radii: ArrayLike) -> tuple[float, float] 
     grid = common_grid(tracks)
     if len(grid) == 0:
         return None
+    gap = clearance_series(tracks, radii, grid)
+    k = int(np.argmin(gap))
+    return float(gap[k]), float(grid[k])
+
+
+def clearance_series(tracks: list[Track], radii: ArrayLike, grid: ArrayLike) -> FloatArray:
+    """The smallest robot-robot gap (m) at each time of ``grid``."""
     xy = np.stack([tr.at(grid)[:, :2] for tr in tracks], axis=1)  # (T, N, 2)
-    d = np.linalg.norm(xy[:, :, None, :] - xy[:, None, :, :], axis=-1)
-    gap = d - radii[None, :, None] - radii[None, None, :]
-    n = len(tracks)
-    gap[:, np.arange(n), np.arange(n)] = np.inf
-    k = int(np.argmin(gap.min(axis=(1, 2))))
-    return float(gap[k].min()), float(grid[k])
+    return np.asarray(geometry.min_disc_gap(xy, radii), dtype=float).reshape(len(grid))
+
+
+def obstacle_contacts(
+    robots: list[Track],
+    radii: ArrayLike,
+    obstacles: list[ArrayLike],
+    bounds: ArrayLike | None,
+) -> list[int]:
+    """Indices of the robots whose disc ever overlapped a static obstacle or crossed a wall."""
+    out = []
+    for i, (tr, r) in enumerate(zip(robots, np.asarray(radii, dtype=float), strict=True)):
+        if len(tr) and geometry.discs_touch_static(tr.pose[:, :2], r, obstacles, bounds).any():
+            out.append(i)
+    return out
 
 
 def object_penetration(

@@ -9,6 +9,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,9 +29,45 @@ from drivers.agent import Agent, AgentParams
 log = logging.getLogger(__name__)
 
 
+@dataclass(frozen=True)
+class VerdictRules:
+    """The hardware contract a run is judged by (Robotarium's "will / will NOT run on hardware"):
+    the robot discs never overlap (gap ≥ ``min_robot_gap_m``), no robot enters the object deeper
+    than ``max_object_penetration_m`` (contact is allowed, a contact patch of a centimetre is the
+    solver's), no robot touches a static obstacle or a wall."""
+
+    min_robot_gap_m: float = 0.0
+    max_object_penetration_m: float = 0.01
+    max_obstacle_contacts: int = 0
+
+
+RULES = VerdictRules()
+
+
+def judge(figures: Mapping[str, Any], rules: VerdictRules = RULES) -> list[dict[str, Any]]:
+    """The one verdict: what in a run's figures breaks the contract (an empty list: clean).
+
+    ``figures`` holds ``min_clearance_m`` (None: fewer than two robots or unknown),
+    ``max_object_penetration_m`` (None: unknown) and ``obstacle_contacts`` (robot ids): the keys
+    of ``fleet run --json`` and ``fleet replay --json``. Each failure is ``{reason, detail}``
+    with reason ``collision``, ``penetration`` or ``obstacle_contact``.
+    """
+    out: list[dict[str, Any]] = []
+    gap = figures.get("min_clearance_m")
+    if gap is not None and gap < rules.min_robot_gap_m:
+        out.append({"reason": "collision", "detail": f"robot-robot gap {gap:.4g} m"})
+    depth = figures.get("max_object_penetration_m")
+    if depth is not None and depth > rules.max_object_penetration_m:
+        out.append({"reason": "penetration", "detail": f"a robot {depth:.4g} m inside the object"})
+    contacts = list(figures.get("obstacle_contacts") or [])
+    if len(contacts) > rules.max_obstacle_contacts:
+        out.append({"reason": "obstacle_contact", "detail": f"robots {contacts} hit an obstacle"})
+    return out
+
+
 @dataclass
 class Verdict:
-    """What the dry run measured against the hardware contract (Robotarium-style)."""
+    """What the dry run measured against the hardware contract, accumulated over the run."""
 
     min_clearance_m: float = math.inf
     max_object_penetration_m: float = 0.0
@@ -171,6 +208,9 @@ class DryRun:
                 "messages_logged": recorder.written,
             }
         )
+        result["verdict"] = judge(result)
+        ok = result.get("done") and not result.get("failed") and not result["verdict"]
+        result["status"] = "ok" if ok else "failed"
         return result
 
     def _handshake(self, node: ControllerNode, agents, coord, timeout: float = 20.0) -> None:
@@ -189,13 +229,3 @@ class DryRun:
                     f"{up} of {len(agents)} robots came up; unmatched keys: {unmatched}"
                 )
             time.sleep(0.01)
-
-
-def verdict_ok(summary: dict) -> bool:
-    """The hardware contract: no collisions, no obstacle contact, no deep penetration."""
-    clear = summary.get("min_clearance_m")
-    return (
-        (clear is None or clear >= 0.0)
-        and summary["max_object_penetration_m"] <= 0.01
-        and not summary["obstacle_contacts"]
-    )

@@ -141,7 +141,7 @@ class MavlinkDriver:
         self._last_hb_sent = -math.inf
         self._streaming = False
         self._lost_logged = False
-        self.counters = {"setpoints": 0, "poses": 0, "unrouted": 0, "vy_dropped": 0}
+        self.counters = {"setpoints": 0, "poses": 0, "unrouted": 0}
 
     # ------------------------------------------------------------------ contract
 
@@ -181,11 +181,7 @@ class MavlinkDriver:
         now = self._service()
         if self._lost(now):
             raise LinkLost(self._lost_detail(now))
-        vx, vy, yaw_rate = mc.flu_to_frd(cmd.vx, cmd.vy, cmd.wz)
-        if not self.capabilities.holonomic:
-            if vy != 0.0:
-                self.counters["vy_dropped"] += 1
-            vy = 0.0
+        vx, vy, yaw_rate = mc.flu_to_frd(cmd.vx, cmd.vy, cmd.wz)  # vy: 0 for diff (agent gate)
         self._setpoint = _Setpoint(vx, vy, yaw_rate, now + cmd.ttl)
         self._send_setpoint(now)
 

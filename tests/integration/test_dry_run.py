@@ -9,7 +9,7 @@ import numpy as np
 from controller.io.recorder import read_log
 from controller.mission.basic import GotoMission
 from controller.mission.tracking import RobotLimits
-from controller.runtime.dry_run import DryRun
+from controller.runtime.dry_run import DryRun, judge
 from tests.support.config import make_config
 
 
@@ -113,5 +113,5 @@ def test_default_scenario_with_mavlink_robots_arrests_the_object(tmp_path):
     cfg = make_config(mavlink_patch(free_udp_port(), free_udp_port()))
     res = DryRun(cfg, build_mission(cfg), tmp_path / "cap.mcap", max_time=90.0).run()
     assert res["arrested"] and res["done"] and not res["failed"], res
-    assert res["min_clearance_m"] >= 0 and res["max_object_penetration_m"] <= 0.01
-    assert res["obstacle_contacts"] == [] and res["missed_ticks"] == 0
+    assert res["min_clearance_m"] is not None and judge(res) == []
+    assert res["missed_ticks"] == 0

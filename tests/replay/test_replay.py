@@ -58,6 +58,10 @@ def test_replay_agrees_with_the_run(dry_run_log, capsys):
     assert r["max_object_penetration_m"] == pytest.approx(
         summary["max_object_penetration_m"], abs=0.02
     )
+    # the same verdict code judges the run and its replay: the collision is found by both
+    assert [f["reason"] for f in r["verdict"]] == [f["reason"] for f in summary["verdict"]]
+    assert "collision" in [f["reason"] for f in r["verdict"]] and summary["status"] == "failed"
+    assert sorted(r["obstacle_contacts"]) == sorted(summary["obstacle_contacts"])
 
 
 def test_replay_of_a_crash_cut_log(dry_run_log, tmp_path, capsys):

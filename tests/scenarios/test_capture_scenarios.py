@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from controller.mission.factory import build_mission
-from controller.runtime.dry_run import DryRun
+from controller.runtime.dry_run import DryRun, judge
 from tests.support.config import base_config_dict, deep_update, free_port
 
 RECT = [[0.0, 0.0], [0.9, 0.0], [0.9, 0.6], [0.0, 0.6]]
@@ -69,9 +69,8 @@ SCENARIOS = {
 def check(res: dict) -> None:
     assert res["arrested"], res
     assert res["done"] and not res["failed"]
-    assert res["min_clearance_m"] >= 0.0
-    assert res["max_object_penetration_m"] <= 0.01
-    assert res["obstacle_contacts"] == []
+    assert res["min_clearance_m"] is not None
+    assert judge(res) == []
     assert res["arrival_spread_s"] is not None and res["arrival_spread_s"] >= 0
     assert res["missed_ticks"] == 0 and res["bad_payloads"] == 0
 
