@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
 from controller.estimation.models import (
+    MAX_SUBSTEP,
     MEAS_DIM,
     THETA,
     motion,
@@ -134,6 +135,40 @@ def mahalanobis2(y: ArrayLike, S: ArrayLike) -> float:
 Segment = tuple[float, FloatArray | None]  # (duration s, command or None)
 
 
+Step = Callable[
+    [str, FloatArray, FloatArray, float, "FloatArray | None", float, FloatArray],
+    tuple[FloatArray, FloatArray],
+]
+
+
+def _ekf_step(
+    model: str, x: FloatArray, P: FloatArray, h: float, u: FloatArray | None, tau: float,
+    Q: FloatArray,
+) -> tuple[FloatArray, FloatArray]:  # fmt: skip
+    x1, F = motion(model, x, h, u, tau)
+    return x1, F @ P @ F.T + Q
+
+
+def _propagate(
+    model: str,
+    x: ArrayLike,
+    P: ArrayLike,
+    segments: Iterable[Segment],
+    tau: float,
+    q_lin: float,
+    q_yaw: float,
+    step: Step,
+) -> tuple[FloatArray, FloatArray]:
+    """Propagate a mean and covariance through piecewise-constant commands, one ``step`` a
+    segment (process noise rebuilt for each segment's length and starting heading)."""
+    xs = np.ravel(np.asarray(x, dtype=float)).copy()
+    Ps = np.array(P, dtype=float)
+    for h, u in segments:
+        Q = process_noise(model, xs[THETA], h, q_lin, q_yaw)
+        xs, Ps = step(model, xs, Ps, h, u, tau, Q)
+    return xs, _sym(Ps)
+
+
 def propagate_ekf(
     model: str,
     x: ArrayLike,
@@ -144,13 +179,7 @@ def propagate_ekf(
     q_yaw: float,
 ) -> tuple[FloatArray, FloatArray]:
     """Linearised (EKF) propagation of a mean and covariance through piecewise-constant commands."""
-    xs = np.ravel(np.asarray(x, dtype=float)).copy()
-    Ps = np.array(P, dtype=float)
-    for h, u in segments:
-        Q = process_noise(model, xs[THETA], h, q_lin, q_yaw)
-        xs, F = motion(model, xs, h, u, tau)
-        Ps = F @ Ps @ F.T + Q
-    return xs, _sym(Ps)
+    return _propagate(model, x, P, segments, tau, q_lin, q_yaw, _ekf_step)
 
 
 def propagate_ukf(
@@ -164,10 +193,8 @@ def propagate_ukf(
     points: MerweScaledSigmaPoints,
 ) -> tuple[FloatArray, FloatArray]:
     """Unscented propagation of a mean and covariance through piecewise-constant commands."""
-    xs = np.ravel(np.asarray(x, dtype=float)).copy()
-    Ps = np.array(P, dtype=float)
-    for h, u in segments:
-        Q = process_noise(model, xs[THETA], h, q_lin, q_yaw)
+
+    def step(model, xs, Ps, h, u, tau, Q):
         sig = points.sigma_points(xs, Ps)
         f = motion_batch(model, sig, h, u, tau)
         x1, P1 = unscented_transform_wrapped(f, points.Wm, points.Wc, Q)
@@ -175,9 +202,10 @@ def propagate_ukf(
         if not _is_pd(P1):
             # sigma points spread past ±π in heading wrap around and the negative central
             # weight can leave an indefinite covariance: take the linearised step instead
-            x1, P1 = propagate_ekf(model, xs, Ps, [(h, u)], tau, q_lin, q_yaw)
-        xs, Ps = x1, P1
-    return xs, Ps
+            return _ekf_step(model, xs, Ps, h, u, tau, Q)
+        return x1, P1
+
+    return _propagate(model, x, P, segments, tau, q_lin, q_yaw, step)
 
 
 # --------------------------------------------------------------------------- filterpy wrappers
@@ -247,3 +275,118 @@ def _hx(x: FloatArray) -> FloatArray:
 
 
 # --------------------------------------------------------------------------- holder
+
+
+# --------------------------------------------------------------------------- strategies
+
+
+class EkfStrategy:
+    """The EKF (``estimation.filter = "ekf"``): filterpy's ExtendedKalmanFilter with the
+    nonlinear motion model and its Jacobian, the Joseph-form update and a wrapped residual."""
+
+    name = "ekf"
+
+    def make(self, model: str, n: int, tau: float, fx: Callable[..., FloatArray]) -> Any:
+        return _PoseEKF(n, MEAS_DIM)
+
+    def set_state(self, kf: Any, x: FloatArray, P: FloatArray) -> None:
+        kf.x = np.asarray(x, dtype=float).reshape(-1, 1)
+        kf.P = P
+
+    def predict(
+        self, kf: Any, model: str, h: float, u: FloatArray | None, tau: float, Q: FloatArray
+    ) -> None:
+        x1, F = motion(model, np.ravel(kf.x), h, u, tau)
+        kf.predict_nonlinear(x1, F, Q)
+
+    def innovation(self, kf: Any, z: FloatArray, R: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return innovation_linear(np.ravel(kf.x), kf.P, z, R)
+
+    def update(self, kf: Any, z: FloatArray, R: FloatArray, H: FloatArray) -> None:
+        kf.update(z.reshape(-1, 1), lambda _x: H, _hx, R=R, residual=residual)
+        kf.x[THETA, 0] = wrap_angle(float(kf.x[THETA, 0]))
+
+    def propagate(self, model, x, P, segs, tau, q_lin, q_yaw) -> tuple[FloatArray, FloatArray]:
+        return propagate_ekf(model, x, P, segs, tau, q_lin, q_yaw)
+
+
+class UkfStrategy:
+    """The UKF (``estimation.filter = "ukf"``): filterpy's UnscentedKalmanFilter with Merwe
+    sigma points (alpha 1, kappa 0), angle-aware means and residuals, vectorised propagation; a
+    step that loses definiteness (heading sigma points wrapped past ±π) falls back to the exact
+    linear update or the linearised prediction."""
+
+    name = "ukf"
+
+    def __init__(self) -> None:
+        self._points: dict[int, PoseSigmaPoints] = {}
+
+    def points(self, n: int) -> PoseSigmaPoints:
+        if n not in self._points:
+            self._points[n] = PoseSigmaPoints(n, UKF_ALPHA, UKF_BETA, UKF_KAPPA)
+        return self._points[n]
+
+    def make(self, model: str, n: int, tau: float, fx: Callable[..., FloatArray]) -> Any:
+        kf = _PoseUKF(
+            n,
+            MEAS_DIM,
+            MAX_SUBSTEP,
+            _hx,
+            fx,
+            PoseSigmaPoints(n, UKF_ALPHA, UKF_BETA, UKF_KAPPA),
+            x_mean_fn=weighted_mean,
+            z_mean_fn=weighted_mean,
+            residual_x=residual,
+            residual_z=residual,
+        )
+        kf.model = model
+        kf.tau = tau
+        return kf
+
+    def set_state(self, kf: Any, x: FloatArray, P: FloatArray) -> None:
+        kf.x = np.asarray(x, dtype=float).copy()
+        kf.P = P
+
+    def predict(
+        self, kf: Any, model: str, h: float, u: FloatArray | None, tau: float, Q: FloatArray
+    ) -> None:
+        x0, P0 = np.ravel(kf.x).copy(), kf.P.copy()
+        kf.Q = Q
+        kf.predict(dt=h, u=u)
+        if not _is_pd(_sym(kf.P)):
+            # heading sigma points wrapped past ±π: the linearised step instead (the sigma
+            # points for the update are drawn again from the repaired prior)
+            kf.x, kf.P = _ekf_step(model, x0, P0, h, u, tau, Q)
+            kf.sigmas_f = kf.points_fn.sigma_points(kf.x, kf.P)
+
+    def innovation(self, kf: Any, z: FloatArray, R: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return innovation_unscented(kf.sigmas_f, kf.Wm, kf.Wc, z, R)
+
+    def update(self, kf: Any, z: FloatArray, R: FloatArray, H: FloatArray) -> None:
+        x_prior, P_prior = kf.x.copy(), kf.P.copy()
+        kf.update(z, R=R)
+        if not _is_pd(_sym(kf.P)):
+            # wrapped heading sigma points spoiled the cross-covariance; the measurement is
+            # linear (H = [I3 0]), so the Kalman update on the same prior is exact
+            kf.x, kf.P = linear_update(x_prior, P_prior, z, R, H)
+        kf.x[THETA] = wrap_angle(float(kf.x[THETA]))
+
+    def propagate(self, model, x, P, segs, tau, q_lin, q_yaw) -> tuple[FloatArray, FloatArray]:
+        try:
+            return propagate_ukf(
+                model, x, P, segs, tau, q_lin, q_yaw, self.points(len(np.ravel(x)))
+            )
+        except np.linalg.LinAlgError:  # no sigma points without a Cholesky factor
+            return propagate_ekf(model, x, P, segs, tau, q_lin, q_yaw)
+
+
+#: The filters by their ``estimation.filter`` name (the names are ``controller.config.FILTERS``).
+STRATEGIES = {"ekf": EkfStrategy, "ukf": UkfStrategy}
+
+
+def make_strategy(name: str) -> EkfStrategy | UkfStrategy:
+    """The filter strategy named by ``estimation.filter``."""
+    try:
+        return STRATEGIES[name]()
+    except KeyError:
+        raise ValueError(f"unknown filter {name!r}; expected one of {sorted(STRATEGIES)}") from None

@@ -12,32 +12,18 @@ import math
 from typing import Any
 
 import numpy as np
-from filterpy.kalman import MerweScaledSigmaPoints
 from numpy.typing import ArrayLike, NDArray
 
 from controller.config import EstimationSection
 from controller.estimation.kalman import (
-    UKF_ALPHA,
-    UKF_BETA,
-    UKF_KAPPA,
-    PoseSigmaPoints,
     Segment,
-    _hx,
-    _is_pd,
-    _PoseEKF,
-    _PoseUKF,
     _sym,
     gate_threshold,
-    innovation_linear,
-    innovation_unscented,
-    linear_update,
     mahalanobis2,
-    propagate_ekf,
-    propagate_ukf,
+    make_strategy,
 )
 from controller.estimation.models import (
     COMMAND_DIM,
-    MAX_SUBSTEP,
     MEAS_DIM,
     MODELS,
     STATE_DIM,
@@ -45,8 +31,6 @@ from controller.estimation.models import (
     YAW_RATE_INDEX,
     motion,
     process_noise,
-    residual,
-    weighted_mean,
 )
 from controller.geometry import wrap_angle
 
@@ -70,10 +54,9 @@ class TrackFilter:
     ):
         if model not in MODELS:
             raise ValueError(f"unknown model {model!r}; expected one of {MODELS}")
-        if filter_name not in ("ekf", "ukf"):
-            raise ValueError(f"unknown filter {filter_name!r}; expected 'ekf' or 'ukf'")
         self.model = model
         self.filter_name = filter_name
+        self.strategy = make_strategy(filter_name)
         self.n = STATE_DIM[model]
         self.tau = params.command_tau
         self.q_lin = q_lin
@@ -84,25 +67,7 @@ class TrackFilter:
         self.reacquire_after = params.reacquire_after
         self.threshold = gate_threshold(params.gate_probability)
         self._H = np.hstack([np.eye(MEAS_DIM), np.zeros((MEAS_DIM, self.n - MEAS_DIM))])
-        self.points: MerweScaledSigmaPoints | None = None
-        if filter_name == "ekf":
-            self.kf: Any = _PoseEKF(self.n, MEAS_DIM)
-        else:
-            self.points = PoseSigmaPoints(self.n, UKF_ALPHA, UKF_BETA, UKF_KAPPA)
-            self.kf = _PoseUKF(
-                self.n,
-                MEAS_DIM,
-                MAX_SUBSTEP,
-                _hx,
-                self._fx,
-                self.points,
-                x_mean_fn=weighted_mean,
-                z_mean_fn=weighted_mean,
-                residual_x=residual,
-                residual_z=residual,
-            )
-            self.kf.model = model
-            self.kf.tau = self.tau
+        self.kf: Any = self.strategy.make(model, self.n, self.tau, self._fx)
         self.kf.R = self.R.copy()
         self.t: float | None = None
         self.t_accepted: float | None = None
@@ -231,11 +196,7 @@ class TrackFilter:
         for k in range(MEAS_DIM, self.n):
             P0[k, k] = sv
         P0[YAW_RATE_INDEX[self.model], YAW_RATE_INDEX[self.model]] = sw
-        if self.filter_name == "ekf":
-            self.kf.x = x0.reshape(-1, 1)
-        else:
-            self.kf.x = x0
-        self.kf.P = P0
+        self.strategy.set_state(self.kf, x0, P0)
         self.t = t
         self.t_accepted = t
         self.consecutive_rejected = 0
@@ -259,30 +220,14 @@ class TrackFilter:
     def _predict_filter(self, t: float) -> None:
         assert self.t is not None
         for h, u in self.segments(self.t, t):
-            x = self.x
-            Q = process_noise(self.model, x[THETA], h, self.q_lin, self.q_yaw)
-            if self.filter_name == "ekf":
-                x1, F = motion(self.model, x, h, u, self.tau)
-                self.kf.predict_nonlinear(x1, F, Q)
-            else:
-                P0 = self.kf.P.copy()
-                self.kf.Q = Q
-                self.kf.predict(dt=h, u=u)
-                if not _is_pd(_sym(self.kf.P)):
-                    # heading sigma points wrapped past ±π: the linearised step instead (the
-                    # sigma points for the update are drawn again from the repaired prior)
-                    x1, P1 = propagate_ekf(self.model, x, P0, [(h, u)], self.tau, self.q_lin,
-                                           self.q_yaw)  # fmt: skip
-                    self.kf.x, self.kf.P = x1, P1
-                    self.kf.sigmas_f = self.points.sigma_points(x1, P1)
+            Q = process_noise(self.model, self.x[THETA], h, self.q_lin, self.q_yaw)
+            self.strategy.predict(self.kf, self.model, h, u, self.tau, Q)
             self.kf.P = _sym(self.kf.P)
         self.t = t
 
     def innovation(self, z: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Innovation and its covariance for z against the filter's current prior (no mutation)."""
-        if self.filter_name == "ekf":
-            return innovation_linear(self.x, self.kf.P, z, self.R)
-        return innovation_unscented(self.kf.sigmas_f, self.kf.Wm, self.kf.Wc, z, self.R)
+        return self.strategy.innovation(self.kf, np.ravel(z), self.R)
 
     def measure(self, t: float, z: ArrayLike) -> str:
         """Process a pose measurement (x m, y m, theta rad) stamped t (s); returns a status."""
@@ -322,18 +267,7 @@ class TrackFilter:
                 return STATUS_INITIALIZED
             self._prune_commands()
             return STATUS_REJECTED
-        if self.filter_name == "ekf":
-            H = self._H
-            self.kf.update(zv.reshape(-1, 1), lambda _x: H, _hx, R=self.R, residual=residual)
-            self.kf.x[THETA, 0] = wrap_angle(float(self.kf.x[THETA, 0]))
-        else:
-            x_prior, P_prior = self.kf.x.copy(), self.kf.P.copy()
-            self.kf.update(zv, R=self.R)
-            if not _is_pd(_sym(self.kf.P)):
-                # wrapped heading sigma points spoiled the cross-covariance; the measurement is
-                # linear (H = [I3 0]), so the Kalman update on the same prior is exact
-                self.kf.x, self.kf.P = linear_update(x_prior, P_prior, zv, self.R, self._H)
-            self.kf.x[THETA] = wrap_angle(float(self.kf.x[THETA]))
+        self.strategy.update(self.kf, zv, self.R, self._H)
         self.kf.P = _sym(self.kf.P)
         self.accepted += 1
         self.consecutive_rejected = 0
@@ -354,18 +288,10 @@ class TrackFilter:
         segs = self.segments(self.t, now)
         if not segs:
             x, P = self.x, self.P
-        elif self.filter_name == "ekf":
-            x, P = propagate_ekf(self.model, self.x, self.P, segs, self.tau, self.q_lin, self.q_yaw)
         else:
-            assert self.points is not None
-            try:
-                x, P = propagate_ukf(
-                    self.model, self.x, self.P, segs, self.tau, self.q_lin, self.q_yaw, self.points
-                )
-            except np.linalg.LinAlgError:  # no sigma points without a Cholesky factor
-                x, P = propagate_ekf(
-                    self.model, self.x, self.P, segs, self.tau, self.q_lin, self.q_yaw
-                )
+            x, P = self.strategy.propagate(
+                self.model, self.x, self.P, segs, self.tau, self.q_lin, self.q_yaw
+            )
         self._cache = (now, self._version, x, P)
         return x.copy(), P.copy()
 

@@ -172,6 +172,7 @@ class Bus:
     ) -> None:
         self.fleet = fleet
         self.stats = DecodeStats()
+        self._inboxes: list[Inbox] = []
         self._handles: list[Any] = []
         conf = zenoh_config(section, mode=mode, listen=listen, connect=connect, lease_s=lease_s)
         try:
@@ -203,6 +204,13 @@ class Bus:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def drops(self) -> dict[str, int]:
+        """What this session dropped: payloads that did not decode, samples a full inbox lost."""
+        return {
+            "bad_payloads": self.stats.total,
+            "inbox_overflow": sum(b.overflow for b in self._inboxes),
+        }
 
     # -- keys
     def key(self, topic: str, **parts: str) -> str:
@@ -251,6 +259,7 @@ class Bus:
         after enqueueing on zenoh's thread: keep it short.
         """
         box = inbox if inbox is not None else Inbox()
+        self._inboxes.append(box)
         fleet = self.fleet
         stats = self.stats
 

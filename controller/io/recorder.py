@@ -151,6 +151,10 @@ class McapRecorder:
         self._writer.finish()
         self._stream.close()
 
+    def drops(self) -> dict[str, int]:
+        """Samples the recorder could not write (e.g. a payload that is not JSON)."""
+        return {"recorder_dropped": self.dropped}
+
     def close(self) -> None:
         """Write everything queued, finish the file (summary, index) and close it."""
         if self._closed:

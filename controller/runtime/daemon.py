@@ -42,7 +42,9 @@ def run_daemon(
     try:
         with Bus(cfg.zenoh, cfg.fleet.name) as bus:
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
-            node = ControllerNode(cfg, bus, mission, make_estimator(cfg))
+            node = ControllerNode(
+                cfg, bus, mission, make_estimator(cfg), extra_drops=recorder.drops
+            )
             rk = Ratekeeper(cfg.fleet.rate_hz)
             print(
                 f"fleet daemon: fleet {cfg.fleet.name!r} on {list(cfg.zenoh.listen)}, "

@@ -83,6 +83,10 @@ class Verdict:
         self.obstacle_contacts.update(check.obstacle_contacts)
 
 
+def _add(a: dict[str, int], b: dict[str, int]) -> dict[str, int]:
+    return {k: a.get(k, 0) + b.get(k, 0) for k in a.keys() | b.keys()}
+
+
 class DryRun:
     """The pybullet (or ideal) dry run of a config, end to end over zenoh."""
 
@@ -124,7 +128,12 @@ class DryRun:
             ):
                 ctl_bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
                 node = ControllerNode(
-                    cfg, ctl_bus, self.mission, make_estimator(cfg), lossless_commands=True
+                    cfg,
+                    ctl_bus,
+                    self.mission,
+                    make_estimator(cfg),
+                    lossless_commands=True,
+                    extra_drops=recorder.drops,
                 )
                 drivers, emulators = make_sim_drivers(cfg, hub)
                 commands_arrived = threading.Condition()
@@ -187,6 +196,7 @@ class DryRun:
                     "ticks": coord.counters.ticks,
                     "node": dict(vars(node.counters)),
                     "bad_payloads": ctl_bus.stats.total + robot_bus.stats.total,
+                    "drops": _add(node.drops(), robot_bus.drops()),
                     "final_object_pose": [float(v) for v in world.object_pose()],
                     "mission": summary,
                 }

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -56,9 +57,11 @@ class ControllerNode:
         mission: Mission,
         estimator: Estimator,
         lossless_commands: bool = False,
+        extra_drops: Callable[[], dict[str, int]] | None = None,
     ) -> None:
         self.cfg = cfg
         self.bus = bus
+        self.extra_drops = extra_drops
         self.mission = mission
         self.est = estimator
         self.ids = cfg.robot_ids
@@ -255,6 +258,14 @@ class ControllerNode:
             )
 
     # -- status
+    def drops(self) -> dict[str, int]:
+        """Everything dropped so far: bad payloads and inbox overflow on the controller's bus,
+        plus what ``extra_drops`` reports (e.g. the recorder's)."""
+        out = dict(self.bus.drops())
+        if self.extra_drops is not None:
+            out.update(self.extra_drops())
+        return out
+
     def status(self) -> wire.FleetStatus:
         robots = [
             {"id": rid, "present": bool(self.present[i]), "link_lost": bool(self.link_lost[i])}
@@ -267,7 +278,7 @@ class ControllerNode:
             phase=self.phase,
             estop=self.estop,
             robots=robots,
-            counters=dict(vars(self.counters)),
+            counters={**vars(self.counters), **self.drops()},
         )
 
 
