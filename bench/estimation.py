@@ -30,11 +30,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from filterpy.kalman import KalmanFilter  # noqa: E402
-from tests.support.estimation_tracks import rmse, run_robot, simulate_robot, sine_object  # noqa: E402
 
 from controller.config import EstimationSection  # noqa: E402
 from controller.estimation.fleet import FleetEstimator  # noqa: E402
 from controller.estimation.track import TrackFilter  # noqa: E402
+from tests.support.estimation_tracks import rmse, run_robot, simulate_robot, sine_object  # noqa: E402
 
 TICK = 0.05
 

@@ -16,7 +16,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from controller.config import ConfigError
+from controller.config import ConfigError, InputError
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -88,12 +88,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     mod = importlib.import_module(f"controller.commands.{args._module}")
     try:
         return int(mod.run(args))
-    except ConfigError as exc:
-        print(f"fleet: config error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("fleet: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:
+        code = exit_code(exc)
+        if code is None:
+            raise
+        what = " ".join(args._words)
+        print(f"fleet {what}: {exc}", file=sys.stderr)
+        if getattr(args, "json", False):
+            emit_json({"ok": False, "status": "failed", "error": str(exc), "exit": code})
+        return code
+
+
+def exit_code(exc: BaseException) -> int | None:
+    """The exit status of an expected error, in one place: bad config or input 2; a job that
+    cannot start or a bus nobody answers on 1; None for a bug (the traceback is shown)."""
+    if isinstance(exc, ConfigError | InputError):
+        return EXIT_BAD_INPUT
+    from controller.io.bus import BusError
+    from controller.mission.job import MissionError
+
+    if isinstance(exc, MissionError | BusError):
+        return EXIT_FAILED
+    return None
 
 
 if __name__ == "__main__":  # pragma: no cover

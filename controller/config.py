@@ -16,7 +16,6 @@ import difflib
 import math
 import re
 import tomllib
-import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +36,7 @@ TRANSPORT_STRATEGIES = ("sa", "serpentine")
 SIM_BACKENDS = ("pybullet", "ideal")
 FILTERS = ("ekf", "ukf")
 ZENOH_MODES = ("peer", "client", "router")
+MISSION_KINDS = ("capture", "stage", "hold")  # what fleet daemon --mission and build_mission run
 
 Point = tuple[float, float]
 Pose = tuple[float, float, float]
@@ -52,6 +52,11 @@ class ConfigError(ValueError):
         self.message = message
         where = f"{source}: " if source else ""
         super().__init__(f"{where}{path or '<root>'}: {message}")
+
+
+class InputError(ValueError):
+    """Bad input other than the config: a missing or unreadable file, an option out of range
+    (the CLI exits 2 with the message)."""
 
 
 def _rule(default: Any = dataclasses.MISSING, **meta: Any) -> Any:
@@ -304,44 +309,51 @@ def _type_name(tp: Any) -> str:
     return str(tp)
 
 
-def _convert(tp: Any, value: Any, path: str, src: str) -> Any:
-    origin = typing.get_origin(tp)
+def _scalar(tp: type, value: Any, path: str, src: str) -> Any:
+    """A bool, int, float or str value checked against its type (a bool is never a number)."""
+    is_bool = isinstance(value, bool)
     if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(src, path, f"expected true or false, got {value!r}")
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(src, path, f"expected an integer, got {value!r}")
-        return value
+        ok = is_bool
+    elif tp is int:
+        ok = not is_bool and isinstance(value, int)
+    elif tp is float:
+        ok = not is_bool and isinstance(value, int | float)
+    else:
+        ok = isinstance(value, str)
+    if not ok:
+        raise ConfigError(src, path, f"expected {_type_name(tp)}, got {value!r}")
     if tp is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(src, path, f"expected a number, got {value!r}")
         if not math.isfinite(value):
             raise ConfigError(src, path, f"expected a finite number, got {value!r}")
         return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(src, path, f"expected a string, got {value!r}")
-        return value
+    return value
+
+
+def _tuple(tp: Any, value: Any, path: str, src: str) -> tuple:
+    """A TOML array as a tuple: ``tuple[T, ...]`` of any length or a fixed ``tuple[A, B]``."""
+    args = typing.get_args(tp)
+    if not isinstance(value, list):
+        raise ConfigError(src, path, f"expected {_type_name(tp)}, got {value!r}")
+    if len(args) == 2 and args[1] is Ellipsis:
+        return tuple(_convert(args[0], v, f"{path}[{i}]", src) for i, v in enumerate(value))
+    if len(value) != len(args):
+        raise ConfigError(src, path, f"expected {_type_name(tp)}, got {len(value)}: {value!r}")
+    return tuple(
+        _convert(a, v, f"{path}[{i}]", src)
+        for i, (a, v) in enumerate(zip(args, value, strict=True))
+    )
+
+
+def _convert(tp: Any, value: Any, path: str, src: str) -> Any:
+    """A TOML value converted to the dataclass field type ``tp`` (ConfigError naming ``path``)."""
+    if tp in (bool, int, float, str):
+        return _scalar(tp, value, path, src)
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise ConfigError(src, path, f"expected a table, got {value!r}")
         return _build(tp, value, path, src)
-    if origin is tuple:
-        args = typing.get_args(tp)
-        if not isinstance(value, list):
-            raise ConfigError(src, path, f"expected {_type_name(tp)}, got {value!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(args[0], v, f"{path}[{i}]", src) for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise ConfigError(src, path, f"expected {_type_name(tp)}, got {len(value)}: {value!r}")
-        return tuple(
-            _convert(a, v, f"{path}[{i}]", src)
-            for i, (a, v) in enumerate(zip(args, value, strict=True))
-        )
-    if isinstance(tp, types.UnionType):
-        raise TypeError(f"unsupported config type {tp}")
+    if typing.get_origin(tp) is tuple:
+        return _tuple(tp, value, path, src)
     raise TypeError(f"unsupported config type {tp}")
 
 
@@ -406,7 +418,80 @@ def _polygon(poly: Polygon, path: str, src: str) -> Polygon:
     return tuple((float(x), float(y)) for x, y in q)
 
 
+def _validate_mavlink(cfg: FleetConfig, i: int, src: str) -> None:
+    """A MAVLink robot needs a url and a profile; its system id is unique on its url; an
+    ArduRover is differential (GUIDED never moves sideways)."""
+    r = cfg.robots[i]
+    path = f"robots[{i}]"
+    if not r.url:
+        raise ConfigError(src, f"{path}.url", "a mavlink robot needs a url")
+    if not r.profile:
+        raise ConfigError(
+            src, f"{path}.profile", f"a mavlink robot needs one of {MAVLINK_PROFILES}"
+        )
+    if r.gcs_system_id == r.system_id:
+        raise ConfigError(
+            src, f"{path}.gcs_system_id", f"must differ from the robot's system_id {r.system_id}"
+        )
+    for j, other in enumerate(cfg.robots[:i]):
+        if other.driver == "mavlink" and other.url == r.url and other.system_id == r.system_id:
+            raise ConfigError(
+                src,
+                f"{path}.system_id",
+                f"robots[{j}] uses system_id {r.system_id} on the same url {r.url!r}",
+            )
+    if r.profile == "ardurover" and r.kind != "diff":
+        raise ConfigError(
+            src,
+            f"{path}.kind",
+            'an ardurover robot never moves sideways in GUIDED: set kind = "diff"',
+        )
+
+
+def _validate_robot(cfg: FleetConfig, i: int, obstacles: tuple[Obstacle, ...], src: str) -> None:
+    """A robot starts inside the room and clear of every obstacle."""
+    r = cfg.robots[i]
+    path = f"robots[{i}]"
+    (x0, y0), (x1, y1) = cfg.world.bounds
+    x, y, _ = r.start
+    if not (x0 + r.radius <= x <= x1 - r.radius and y0 + r.radius <= y <= y1 - r.radius):
+        raise ConfigError(
+            src, f"{path}.start", f"robot {r.id!r} at ({x}, {y}) is not inside world.bounds"
+        )
+    for j, o in enumerate(obstacles):
+        if geometry.discs_hit_polygon([[x, y]], r.radius, o.polygon)[0]:
+            raise ConfigError(
+                src, f"{path}.start", f"robot {r.id!r} at ({x}, {y}) overlaps obstacles[{j}]"
+            )
+    if r.driver == "mavlink":
+        _validate_mavlink(cfg, i, src)
+
+
+def _validate_robots(cfg: FleetConfig, obstacles: tuple[Obstacle, ...], src: str) -> None:
+    if not cfg.robots:
+        raise ConfigError(src, "robots", "expected at least one [[robots]] entry")
+    seen: dict[str, int] = {}
+    for i, r in enumerate(cfg.robots):
+        if r.id in seen:
+            raise ConfigError(
+                src, f"robots[{i}].id", f"duplicate robot id {r.id!r} (also robots[{seen[r.id]}])"
+            )
+        seen[r.id] = i
+        _validate_robot(cfg, i, obstacles, src)
+
+
+def _validate_object_placement(cfg: FleetConfig, obj: ObjectSection, src: str) -> None:
+    """The object placed at its start and at its goal stays inside the room."""
+    (x0, y0), (x1, y1) = cfg.world.bounds
+    for key in ("start", "goal"):
+        world_poly = geometry.transform(np.asarray(obj.polygon), getattr(obj, key))
+        lo, hi = world_poly.min(axis=0), world_poly.max(axis=0)
+        if lo[0] < x0 or hi[0] > x1 or lo[1] < y0 or hi[1] > y1:
+            raise ConfigError(src, f"object.{key}", "the object placed there leaves world.bounds")
+
+
 def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
+    """Cross-field rules, after every key was checked on its own."""
     (x0, y0), (x1, y1) = cfg.world.bounds
     if not (x1 > x0 and y1 > y0):
         raise ConfigError(
@@ -419,63 +504,8 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
     obj = dataclasses.replace(
         cfg.object, polygon=_polygon(cfg.object.polygon, "object.polygon", src)
     )
-    if not cfg.robots:
-        raise ConfigError(src, "robots", "expected at least one [[robots]] entry")
-    seen: dict[str, int] = {}
-    for i, r in enumerate(cfg.robots):
-        path = f"robots[{i}]"
-        if r.id in seen:
-            raise ConfigError(
-                src, f"{path}.id", f"duplicate robot id {r.id!r} (also robots[{seen[r.id]}])"
-            )
-        seen[r.id] = i
-        x, y, _ = r.start
-        if not (x0 + r.radius <= x <= x1 - r.radius and y0 + r.radius <= y <= y1 - r.radius):
-            raise ConfigError(
-                src, f"{path}.start", f"robot {r.id!r} at ({x}, {y}) is not inside world.bounds"
-            )
-        for j, o in enumerate(obstacles):
-            if geometry.discs_hit_polygon([[x, y]], r.radius, o.polygon)[0]:
-                raise ConfigError(
-                    src, f"{path}.start", f"robot {r.id!r} at ({x}, {y}) overlaps obstacles[{j}]"
-                )
-        if r.driver == "mavlink":
-            if not r.url:
-                raise ConfigError(src, f"{path}.url", "a mavlink robot needs a url")
-            if not r.profile:
-                raise ConfigError(
-                    src, f"{path}.profile", f"a mavlink robot needs one of {MAVLINK_PROFILES}"
-                )
-            if r.gcs_system_id == r.system_id:
-                raise ConfigError(
-                    src,
-                    f"{path}.gcs_system_id",
-                    f"must differ from the robot's system_id {r.system_id}",
-                )
-            for j, other in enumerate(cfg.robots[:i]):
-                if other.driver == "mavlink" and other.url == r.url:
-                    if other.system_id == r.system_id:
-                        raise ConfigError(
-                            src,
-                            f"{path}.system_id",
-                            f"robots[{j}] uses system_id {r.system_id} on the same url {r.url!r}",
-                        )
-            if r.profile == "ardurover" and r.kind != "diff":
-                raise ConfigError(
-                    src,
-                    f"{path}.kind",
-                    'an ardurover robot never moves sideways in GUIDED: set kind = "diff"',
-                )
-    for key in ("start", "goal"):
-        pose = getattr(obj, key)
-        world_poly = geometry.transform(np.asarray(obj.polygon), pose)
-        if (
-            world_poly[:, 0].min() < x0
-            or world_poly[:, 0].max() > x1
-            or world_poly[:, 1].min() < y0
-            or world_poly[:, 1].max() > y1
-        ):
-            raise ConfigError(src, f"object.{key}", "the object placed there leaves world.bounds")
+    _validate_robots(cfg, obstacles, src)
+    _validate_object_placement(cfg, obj, src)
     return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src)
 
 

@@ -25,8 +25,16 @@ def plot_run(run: RunLog, out_dir: str | Path) -> list[Path]:
     cfg = run.config
     ids = list(cfg.robot_ids) if cfg else sorted(set(run.measured) | set(run.truth))
     src = run.truth if run.truth else (run.estimated or run.measured)
-    written: list[Path] = []
+    written = [_plot_trajectories(run, ids, src, out / "trajectories.png")]
+    if cfg is not None and len(ids) > 1:
+        written += _plot_clearance(run, ids, src, out / "clearance.png")
+    if run.truth and run.estimated:
+        written.append(_plot_estimation_error(run, ids, out / "estimation_error.png"))
+    return written
 
+
+def _plot_trajectories(run: RunLog, ids: list[str], src: dict, path: Path) -> Path:
+    cfg = run.config
     fig, ax = plt.subplots(figsize=(7, 7))
     if cfg is not None:
         b = cfg.bounds_array()
@@ -51,41 +59,43 @@ def plot_run(run: RunLog, out_dir: str | Path) -> list[Path]:
     ax.set_ylabel("y (m)")
     ax.legend(fontsize=7, loc="upper left")
     ax.set_title(f"{run.path.name}: trajectories")
-    written.append(out / "trajectories.png")
-    fig.savefig(written[-1], dpi=110)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
+    return path
 
-    if cfg is not None and len(ids) > 1:
-        tracks = [_track(src.get(rid, [])) for rid in ids]
-        tracks_h = [tr for tr in tracks if len(tr)]
-        radii = np.array(
-            [cfg.robot(r).radius for r, tr in zip(ids, tracks, strict=True) if len(tr)]
-        )
-        grid = metrics.common_grid(tracks_h)
-        if len(grid) and len(tracks_h) > 1:
-            fig, ax = plt.subplots(figsize=(7, 3))
-            ax.plot(grid, metrics.clearance_series(tracks_h, radii, grid))
-            ax.axhline(0, color="r", lw=0.8)
-            ax.set_xlabel("t (s)")
-            ax.set_ylabel("min robot gap (m)")
-            written.append(out / "clearance.png")
-            fig.savefig(written[-1], dpi=110, bbox_inches="tight")
-            plt.close(fig)
 
-    if run.truth and run.estimated:
-        fig, ax = plt.subplots(figsize=(7, 3))
-        for rid in ids:
-            est, truth = _track(run.estimated.get(rid, [])), _track(run.truth.get(rid, []))
-            if len(est) and len(truth) > 1:
-                err = np.linalg.norm(est.pose[:, :2] - truth.at(est.t)[:, :2], axis=1)
-                ax.plot(est.t, err * 100, lw=0.8, label=rid)
-        ax.set_xlabel("t (s)")
-        ax.set_ylabel("estimate error (cm)")
-        ax.legend(fontsize=7)
-        written.append(out / "estimation_error.png")
-        fig.savefig(written[-1], dpi=110, bbox_inches="tight")
-        plt.close(fig)
-    return written
+def _plot_clearance(run: RunLog, ids: list[str], src: dict, path: Path) -> list[Path]:
+    cfg = run.config
+    assert cfg is not None
+    tracks = [_track(src.get(rid, [])) for rid in ids]
+    have = [(tr, cfg.robot(r).radius) for r, tr in zip(ids, tracks, strict=True) if len(tr)]
+    tracks_h = [tr for tr, _ in have]
+    grid = metrics.common_grid(tracks_h)
+    if not len(grid) or len(tracks_h) < 2:
+        return []
+    fig, ax = plt.subplots(figsize=(7, 3))
+    ax.plot(grid, metrics.clearance_series(tracks_h, [r for _, r in have], grid))
+    ax.axhline(0, color="r", lw=0.8)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("min robot gap (m)")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return [path]
+
+
+def _plot_estimation_error(run: RunLog, ids: list[str], path: Path) -> Path:
+    fig, ax = plt.subplots(figsize=(7, 3))
+    for rid in ids:
+        est, truth = _track(run.estimated.get(rid, [])), _track(run.truth.get(rid, []))
+        if len(est) and len(truth) > 1:
+            err = np.linalg.norm(est.pose[:, :2] - truth.at(est.t)[:, :2], axis=1)
+            ax.plot(est.t, err * 100, lw=0.8, label=rid)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("estimate error (cm)")
+    ax.legend(fontsize=7)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
 
 
 def plot_capture_plan(path: str, polygon, plan) -> None:

@@ -236,6 +236,34 @@ def _hints(cls: type) -> dict[str, Any]:
     return _HINTS[cls]
 
 
+def _check_field(
+    cls_name: str, name: str, tp: Any, value: Any, meta: typing.Mapping[str, Any]
+) -> Any:
+    """One field's value checked against its declared type and metadata (raises WireError)."""
+    where = f"{cls_name}.{name}"
+    origin = typing.get_origin(tp) or tp
+    if tp is float:
+        return _check_number(cls_name, name, value, meta)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise WireError(f"{where}: expected an integer")
+        if not (-MAX_SEQ <= value <= MAX_SEQ) or value < meta.get("min", -MAX_SEQ):
+            raise WireError(f"{where}: integer out of range")
+    elif tp is bool:
+        if not isinstance(value, bool):
+            raise WireError(f"{where}: expected true or false")
+    elif tp is str:
+        if not isinstance(value, str) or len(value) > MAX_STRING:
+            raise WireError(f"{where}: expected a string of at most {MAX_STRING}")
+    elif origin in (dict, list):
+        if not isinstance(value, origin):
+            raise WireError(f"{where}: expected an {'object' if origin is dict else 'array'}")
+        _check_json(cls_name, name, value)
+    else:  # pragma: no cover - a new field type without a rule
+        raise WireError(f"{where}: unsupported type {tp}")
+    return value
+
+
 def from_dict(cls: type[Message], obj: Any) -> Message:
     """Validate plain data into a message of type ``cls`` (raises WireError)."""
     name = cls.__name__
@@ -252,33 +280,7 @@ def from_dict(cls: type[Message], obj: Any) -> Message:
             if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
                 raise WireError(f"{name}.{fname}: missing")
             continue
-        value = obj[fname]
-        tp = hints[fname]
-        origin = typing.get_origin(tp) or tp
-        if tp is float:
-            value = _check_number(name, fname, value, f.metadata)
-        elif tp is int:
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise WireError(f"{name}.{fname}: expected an integer")
-            if not (-MAX_SEQ <= value <= MAX_SEQ) or value < f.metadata.get("min", -MAX_SEQ):
-                raise WireError(f"{name}.{fname}: integer out of range")
-        elif tp is bool:
-            if not isinstance(value, bool):
-                raise WireError(f"{name}.{fname}: expected true or false")
-        elif tp is str:
-            if not isinstance(value, str) or len(value) > MAX_STRING:
-                raise WireError(f"{name}.{fname}: expected a string of at most {MAX_STRING}")
-        elif origin is dict:
-            if not isinstance(value, dict):
-                raise WireError(f"{name}.{fname}: expected an object")
-            _check_json(name, fname, value)
-        elif origin is list:
-            if not isinstance(value, list):
-                raise WireError(f"{name}.{fname}: expected an array")
-            _check_json(name, fname, value)
-        else:  # pragma: no cover - a new field type without a rule
-            raise WireError(f"{name}.{fname}: unsupported type {tp}")
-        kwargs[fname] = value
+        kwargs[fname] = _check_field(name, fname, hints[fname], obj[fname], f.metadata)
     return cls(**kwargs)
 
 

@@ -9,7 +9,7 @@ be lost (``health`` says so, ``send`` raises ``LinkLost``), and ``connect`` can 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 from controller.wire import PoseMeasurement, Twist2D
 
@@ -35,6 +35,19 @@ class Capabilities:
     max_speed: float
     max_yaw_rate: float
     radius: float
+
+
+def capabilities_of(robot: Any) -> Capabilities:
+    """A robot's capabilities from its ``[[robots]]`` entry (``controller.config.RobotConfig``),
+    the one place they are derived: only an ``omni`` robot is holonomic (the config refuses an
+    omni ArduRover, which GUIDED never moves sideways)."""
+    return Capabilities(
+        kind=robot.kind,
+        holonomic=robot.kind == "omni",
+        max_speed=robot.max_speed,
+        max_yaw_rate=robot.max_yaw_rate,
+        radius=robot.radius,
+    )
 
 
 @dataclass(frozen=True)

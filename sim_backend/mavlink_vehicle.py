@@ -354,17 +354,7 @@ class VehicleEmulator:
     def _on_command(self, m: Any, now: float) -> int:
         cmd = m.command
         if cmd == mc.CMD_SET_MESSAGE_INTERVAL:
-            msg_id = int(m.param1)
-            if msg_id not in self.intervals:
-                return mc.RESULT_UNSUPPORTED
-            if m.param2 < 0:
-                self.intervals[msg_id] = None
-            elif m.param2 == 0:
-                self.intervals[msg_id] = 1.0 if msg_id == mc.MSG_HEARTBEAT else DEFAULT_INTERVAL
-            else:
-                self.intervals[msg_id] = m.param2 / 1e6
-            self._due.pop(msg_id, None)
-            return mc.RESULT_ACCEPTED
+            return self._set_interval(m)
         if cmd == mc.CMD_COMPONENT_ARM_DISARM:
             self.armed = m.param1 > 0.5
             return mc.RESULT_ACCEPTED
@@ -372,32 +362,49 @@ class VehicleEmulator:
             if not int(m.param1) & mc.MODE_FLAG_CUSTOM:
                 return mc.RESULT_UNSUPPORTED
             if self.profile == "ardurover":
-                mode = int(m.param2)
-                if mode not in mc.ROVER_MODES:
-                    return mc.RESULT_UNSUPPORTED
-                if mode == mc.ROVER_GUIDED and self.mode != mc.ROVER_GUIDED:
-                    self._target = None  # GUIDED starts stopped
-                self.mode = mode
-                return mc.RESULT_ACCEPTED
-            main, sub = int(m.param2), int(m.param3)
-            if main == mc.PX4_MAIN_OFFBOARD:
-                streaming = (
-                    self._sp_last is not None
-                    and self._stream_start is not None
-                    and now - self._sp_last <= STREAM_GAP
-                    and self._sp_last - self._stream_start >= STREAM_MIN - 1e-9
-                )
-                if not streaming:
-                    return mc.RESULT_TEMPORARILY_REJECTED
-                self.mode = mc.PX4_OFFBOARD
-                return mc.RESULT_ACCEPTED
-            if main == mc.PX4_MAIN_MANUAL:
-                self.mode = mc.PX4_MANUAL
-                return mc.RESULT_ACCEPTED
-            if main == mc.PX4_MAIN_AUTO and sub == mc.PX4_SUB_AUTO_LOITER:
-                self.mode = mc.PX4_HOLD
-                return mc.RESULT_ACCEPTED
+                return self._set_rover_mode(int(m.param2))
+            return self._set_px4_mode(int(m.param2), int(m.param3), now)
+        return mc.RESULT_UNSUPPORTED
+
+    def _set_interval(self, m: Any) -> int:
+        msg_id = int(m.param1)
+        if msg_id not in self.intervals:
             return mc.RESULT_UNSUPPORTED
+        if m.param2 < 0:
+            self.intervals[msg_id] = None
+        elif m.param2 == 0:
+            self.intervals[msg_id] = 1.0 if msg_id == mc.MSG_HEARTBEAT else DEFAULT_INTERVAL
+        else:
+            self.intervals[msg_id] = m.param2 / 1e6
+        self._due.pop(msg_id, None)
+        return mc.RESULT_ACCEPTED
+
+    def _set_rover_mode(self, mode: int) -> int:
+        if mode not in mc.ROVER_MODES:
+            return mc.RESULT_UNSUPPORTED
+        if mode == mc.ROVER_GUIDED and self.mode != mc.ROVER_GUIDED:
+            self._target = None  # GUIDED starts stopped
+        self.mode = mode
+        return mc.RESULT_ACCEPTED
+
+    def _set_px4_mode(self, main: int, sub: int, now: float) -> int:
+        if main == mc.PX4_MAIN_OFFBOARD:
+            streaming = (
+                self._sp_last is not None
+                and self._stream_start is not None
+                and now - self._sp_last <= STREAM_GAP
+                and self._sp_last - self._stream_start >= STREAM_MIN - 1e-9
+            )
+            if not streaming:
+                return mc.RESULT_TEMPORARILY_REJECTED
+            self.mode = mc.PX4_OFFBOARD
+            return mc.RESULT_ACCEPTED
+        if main == mc.PX4_MAIN_MANUAL:
+            self.mode = mc.PX4_MANUAL
+            return mc.RESULT_ACCEPTED
+        if main == mc.PX4_MAIN_AUTO and sub == mc.PX4_SUB_AUTO_LOITER:
+            self.mode = mc.PX4_HOLD
+            return mc.RESULT_ACCEPTED
         return mc.RESULT_UNSUPPORTED
 
     def _ack(self, m: Any, result: int) -> None:

@@ -7,11 +7,11 @@ The controller on the lab network (``controller.runtime.daemon``). Stops on SIGI
 from __future__ import annotations
 
 import signal
-import sys
 import threading
 from pathlib import Path
 
 from controller.commands import add_config_argument
+from controller.config import MISSION_KINDS
 
 
 def add_arguments(parser, word: str) -> None:
@@ -20,16 +20,17 @@ def add_arguments(parser, word: str) -> None:
     parser.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
     parser.add_argument(
         "--mission",
-        choices=("capture", "hold"),
+        choices=MISSION_KINDS,
         default="capture",
-        help="capture: the whole job; hold: keep every robot stopped (bring-up checks)",
+        help="capture: the whole job; stage: drive to staging points around the object; "
+        "hold: keep every robot stopped (bring-up checks)",
     )
 
 
 def run(args) -> int:
     from controller.config import load_config
     from controller.io.recorder import default_log_path
-    from controller.mission.factory import MissionError, build_mission
+    from controller.mission.factory import build_mission
     from controller.runtime.daemon import run_daemon
 
     cfg = load_config(args.config)
@@ -37,9 +38,5 @@ def run(args) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    try:
-        mission = build_mission(cfg, args.mission)
-    except MissionError as exc:
-        print(f"fleet daemon: {exc}", file=sys.stderr)
-        return 1
+    mission = build_mission(cfg, args.mission)  # MissionError: exit 1 (cli.exit_code)
     return run_daemon(cfg, mission, args.mission, out, stop, args.duration)

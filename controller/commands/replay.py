@@ -11,7 +11,6 @@ original spacing (``--speed``), without the command and e-stop keys unless
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from controller.commands import DEFAULT_CONFIG
@@ -39,24 +38,14 @@ def add_arguments(parser, word: str) -> None:
 
 def run(args) -> int:
     from controller.cli import emit_json
+    from controller.config import InputError
     from controller.replay.log import load_run, metrics_of, print_summary
     from controller.viz import plot_run
 
     path = Path(args.log)
-    if not path.is_file():
-        print(f"fleet replay: {path}: no such file", file=sys.stderr)
-        return 2
     if args.speed < 0:
-        print("fleet replay: --speed: expected >= 0", file=sys.stderr)
-        return 2
-    try:
-        run_log = load_run(path)
-    except OSError as exc:
-        print(f"fleet replay: {path}: {exc}", file=sys.stderr)
-        return 2
-    if not run_log.topics and not run_log.complete:
-        print(f"fleet replay: {path}: not an MCAP log (or empty)", file=sys.stderr)
-        return 2
+        raise InputError("--speed: expected >= 0")
+    run_log = load_run(path)  # InputError for a missing, unreadable or empty file
     result = metrics_of(run_log)
     if args.plots:
         result["plots"] = [str(p) for p in plot_run(run_log, args.plots)]

@@ -17,6 +17,7 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
+from controller.config import FILTERS
 from controller.estimation.models import (
     MAX_SUBSTEP,
     MEAS_DIM,
@@ -149,50 +150,8 @@ def _ekf_step(
     return x1, F @ P @ F.T + Q
 
 
-def _propagate(
-    model: str,
-    x: ArrayLike,
-    P: ArrayLike,
-    segments: Iterable[Segment],
-    tau: float,
-    q_lin: float,
-    q_yaw: float,
-    step: Step,
-) -> tuple[FloatArray, FloatArray]:
-    """Propagate a mean and covariance through piecewise-constant commands, one ``step`` a
-    segment (process noise rebuilt for each segment's length and starting heading)."""
-    xs = np.ravel(np.asarray(x, dtype=float)).copy()
-    Ps = np.array(P, dtype=float)
-    for h, u in segments:
-        Q = process_noise(model, xs[THETA], h, q_lin, q_yaw)
-        xs, Ps = step(model, xs, Ps, h, u, tau, Q)
-    return xs, _sym(Ps)
-
-
-def propagate_ekf(
-    model: str,
-    x: ArrayLike,
-    P: ArrayLike,
-    segments: Iterable[Segment],
-    tau: float,
-    q_lin: float,
-    q_yaw: float,
-) -> tuple[FloatArray, FloatArray]:
-    """Linearised (EKF) propagation of a mean and covariance through piecewise-constant commands."""
-    return _propagate(model, x, P, segments, tau, q_lin, q_yaw, _ekf_step)
-
-
-def propagate_ukf(
-    model: str,
-    x: ArrayLike,
-    P: ArrayLike,
-    segments: Iterable[Segment],
-    tau: float,
-    q_lin: float,
-    q_yaw: float,
-    points: MerweScaledSigmaPoints,
-) -> tuple[FloatArray, FloatArray]:
-    """Unscented propagation of a mean and covariance through piecewise-constant commands."""
+def _ukf_step(points: MerweScaledSigmaPoints) -> Step:
+    """One unscented propagation step with these sigma points (linearised where it fails)."""
 
     def step(model, xs, Ps, h, u, tau, Q):
         sig = points.sigma_points(xs, Ps)
@@ -205,7 +164,29 @@ def propagate_ukf(
             return _ekf_step(model, xs, Ps, h, u, tau, Q)
         return x1, P1
 
-    return _propagate(model, x, P, segments, tau, q_lin, q_yaw, step)
+    return step
+
+
+def propagate(
+    model: str,
+    x: ArrayLike,
+    P: ArrayLike,
+    segments: Iterable[Segment],
+    tau: float,
+    q_lin: float,
+    q_yaw: float,
+    points: MerweScaledSigmaPoints | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """Propagate a mean and covariance through piecewise-constant commands: linearised (EKF)
+    without ``points``, unscented with them. Process noise is rebuilt for each segment's length
+    and starting heading."""
+    step = _ekf_step if points is None else _ukf_step(points)
+    xs = np.ravel(np.asarray(x, dtype=float)).copy()
+    Ps = np.array(P, dtype=float)
+    for h, u in segments:
+        Q = process_noise(model, xs[THETA], h, q_lin, q_yaw)
+        xs, Ps = step(model, xs, Ps, h, u, tau, Q)
+    return xs, _sym(Ps)
 
 
 # --------------------------------------------------------------------------- filterpy wrappers
@@ -307,7 +288,7 @@ class EkfStrategy:
         kf.x[THETA, 0] = wrap_angle(float(kf.x[THETA, 0]))
 
     def propagate(self, model, x, P, segs, tau, q_lin, q_yaw) -> tuple[FloatArray, FloatArray]:
-        return propagate_ekf(model, x, P, segs, tau, q_lin, q_yaw)
+        return propagate(model, x, P, segs, tau, q_lin, q_yaw)
 
 
 class UkfStrategy:
@@ -372,16 +353,16 @@ class UkfStrategy:
         kf.x[THETA] = wrap_angle(float(kf.x[THETA]))
 
     def propagate(self, model, x, P, segs, tau, q_lin, q_yaw) -> tuple[FloatArray, FloatArray]:
+        points = self.points(len(np.ravel(x)))
         try:
-            return propagate_ukf(
-                model, x, P, segs, tau, q_lin, q_yaw, self.points(len(np.ravel(x)))
-            )
+            return propagate(model, x, P, segs, tau, q_lin, q_yaw, points)
         except np.linalg.LinAlgError:  # no sigma points without a Cholesky factor
-            return propagate_ekf(model, x, P, segs, tau, q_lin, q_yaw)
+            return propagate(model, x, P, segs, tau, q_lin, q_yaw)
 
 
-#: The filters by their ``estimation.filter`` name (the names are ``controller.config.FILTERS``).
-STRATEGIES = {"ekf": EkfStrategy, "ukf": UkfStrategy}
+#: The filters by their ``estimation.filter`` name (``controller.config.FILTERS``).
+STRATEGIES = {s.name: s for s in (EkfStrategy, UkfStrategy)}
+assert set(STRATEGIES) == set(FILTERS), "every name in config.FILTERS has a strategy"
 
 
 def make_strategy(name: str) -> EkfStrategy | UkfStrategy:

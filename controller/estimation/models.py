@@ -16,11 +16,12 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from controller.config import ROBOT_KINDS
 from controller.geometry import wrap_angle
 
 FloatArray = NDArray[np.float64]
-ROBOT_MODELS = ("omni", "diff")
-MODELS = ("omni", "diff", "object")
+ROBOT_MODELS = ROBOT_KINDS  # a robot's motion model is its kind
+MODELS = (*ROBOT_KINDS, "object")
 STATE_DIM = {"omni": 6, "diff": 5, "object": 6}
 COMMAND_DIM = {"omni": 3, "diff": 2, "object": 3}
 YAW_RATE_INDEX = {"omni": 5, "diff": 4, "object": 5}
@@ -75,36 +76,50 @@ def motion(
         The new state (heading wrapped) and the Jacobian (or ``None``).
     """
     s = np.ravel(np.asarray(x, dtype=float)).tolist()
-    n = len(s)
-    F = np.eye(n) if jacobian else None
+    F = np.eye(len(s)) if jacobian else None
     if dt <= 0.0:
         return np.array(s), F
+    if model == "object":
+        return _object_motion(s, dt, u, tau, F)
+    if model not in ROBOT_MODELS:
+        raise ValueError(f"unknown motion model {model!r}; expected one of {MODELS}")
+    return _robot_motion(model == "omni", s, dt, u, tau, F)
+
+
+def _object_motion(
+    s: list[float], dt: float, u: ArrayLike | None, tau: float, F: FloatArray | None
+) -> tuple[FloatArray, FloatArray | None]:
+    """The object: constant velocity, or (pushed) its world velocity following the push."""
+    if u is None:  # constant velocity
+        s[0] += dt * s[3]
+        s[1] += dt * s[4]
+        s[2] = wrap_angle(s[2] + dt * s[5])
+        if F is not None:
+            F[0, 3] = F[1, 4] = F[2, 5] = dt
+        return np.array(s), F
+    # Pushed: the world-frame velocity follows the commanded push velocity (linear model).
+    a = math.exp(-dt / tau)
+    beta = tau / dt * (1.0 - a)
+    for k in range(3):
+        c = float(u[k])  # type: ignore[index]
+        v0 = s[3 + k]
+        s[k] += dt * (beta * v0 + (1.0 - beta) * c)
+        s[3 + k] = a * v0 + (1.0 - a) * c
+        if F is not None:
+            F[k, 3 + k] = dt * beta
+            F[3 + k, 3 + k] = a
+    s[2] = wrap_angle(s[2])
+    return np.array(s), F
+
+
+def _robot_motion(
+    omni: bool, s: list[float], dt: float, u: ArrayLike | None, tau: float, F: FloatArray | None
+) -> tuple[FloatArray, FloatArray | None]:
+    """A robot: body velocities following the command through a first-order lag, integrated in
+    sub-steps of at most ``MAX_SUBSTEP`` (with the chained Jacobian when ``F`` is given)."""
+    n = len(s)
     steps = max(1, math.ceil(dt / MAX_SUBSTEP - 1e-9))
     h = dt / steps
-    if model == "object":
-        if u is None:  # constant velocity
-            s[0] += dt * s[3]
-            s[1] += dt * s[4]
-            s[2] = wrap_angle(s[2] + dt * s[5])
-            if F is not None:
-                F[0, 3] = F[1, 4] = F[2, 5] = dt
-            return np.array(s), F
-        # Pushed: the world-frame velocity follows the commanded push velocity (linear model).
-        a = math.exp(-dt / tau)
-        beta = tau / dt * (1.0 - a)
-        for k in range(3):
-            c = float(u[k])  # type: ignore[index]
-            v0 = s[3 + k]
-            s[k] += dt * (beta * v0 + (1.0 - beta) * c)
-            s[3 + k] = a * v0 + (1.0 - a) * c
-            if F is not None:
-                F[k, 3 + k] = dt * beta
-                F[3 + k, 3 + k] = a
-        s[2] = wrap_angle(s[2])
-        return np.array(s), F
-    omni = model == "omni"
-    if not omni and model != "diff":
-        raise ValueError(f"unknown motion model {model!r}; expected one of {MODELS}")
     if u is None:
         cu, cv, cw = 0.0, 0.0, 0.0
     elif omni:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.mission.tracking import RobotLimits, track_velocity
-from controller.mission.types import FleetView, MissionOutput
+from controller.mission.types import FleetView, Intent, MissionOutput, Phase
 
 
 @dataclass
@@ -20,15 +20,19 @@ class GotoMission:
     gain: float = 1.0
     tolerance: float = 0.05
 
-    def step(self, view: FleetView) -> MissionOutput:
+    def plan(self, view: FleetView) -> Intent:
         err = self.targets - view.poses[:, :2]
-        dist = np.linalg.norm(err, axis=1)
-        v = self.gain * err
-        cmds = track_velocity(view.poses, v, self.limits)
-        cmds[dist < self.tolerance] = 0.0
+        arrived = np.linalg.norm(err, axis=1) < self.tolerance
+        done = bool(np.all(arrived))
+        phase = Phase.DONE if done else Phase.GOTO
+        return Intent(self.gain * err, phase, hold=arrived, done=done)
+
+    def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
+        """No filter: staging and tests drive straight (the tracking law and the limits)."""
+        cmds = track_velocity(view.poses, intent.velocities, self.limits)
+        cmds[intent.hold] = 0.0
         cmds[view.stale | ~view.present] = 0.0
-        done = bool(np.all(dist < self.tolerance))
-        return MissionOutput(commands=cmds, phase="goto" if not done else "done", done=done)
+        return MissionOutput(commands=cmds, phase=intent.phase, done=intent.done)
 
 
 @dataclass
@@ -37,5 +41,8 @@ class HoldMission:
 
     n: int
 
-    def step(self, view: FleetView) -> MissionOutput:
-        return MissionOutput(commands=np.zeros((self.n, 3)), phase="hold")
+    def plan(self, view: FleetView) -> Intent:
+        return Intent(np.zeros((self.n, 2)), Phase.STANDBY, stop=True)
+
+    def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
+        return MissionOutput(commands=np.zeros((self.n, 3)), phase=intent.phase)

@@ -1,37 +1,140 @@
 """CaptureMission: approach a moving object, close in on the capture points, arrest it (§3).
 
-Pure per-tick mission: ``step(view) -> MissionOutput``. Phases: ``approach`` (chase each
-point's image on the convex envelope, then keep station there) -> ``close_in`` (all robots on
-the envelope: every one moves to its contact point, point + (r + gap)·n) -> ``arrested`` (every
-robot within ``contact_tolerance`` of its contact point; the arrest event carries the arrival
-spread) -> ``done`` after a short settle. Every command goes through the CBF safety filter.
+Pure per-tick mission in the node's two stages. ``plan(view) -> Intent`` is a fixed, named
+sequence: the object pose the goals ride on, the goals (capture points, envelope images,
+contact targets), detours around static obstacles (planned once), the targets and feed-forward
+of the current phase, the projective planner (Sharma Table I), then the phase logic
+(:func:`capture_phase`, a pure function). ``safety(view, intent)`` is the shared
+:class:`controller.mission.guard.SafetyStage`.
 
-Timing statistics need a clock; the mission never reads one itself: pass ``clock`` (e.g.
-``time.perf_counter`` from the composition root or a benchmark) to get them in ``summary()``.
+Phases: ``approach`` (chase each point's image on the convex envelope, then keep station there)
+-> ``close_in`` (all robots on the envelope: every one moves to its contact point,
+point + (r + gap)·n) -> ``arrested`` (every robot within ``contact_tolerance`` of its contact
+point; the arrest event carries the arrival spread) -> ``done`` after a short settle.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from controller import geometry
-from controller.mission.tracking import RobotLimits, track_reversible
-from controller.mission.types import FleetView, MissionOutput
+from controller.config import FleetConfig
+from controller.mission.guard import SafetyStage
+from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.approach import (
     STATION_GAP,
     PlannerParams,
     envelope,
-    limit_accel,
     plan_velocities,
     ray_first_hit,
     ray_to_convex,
     separate_stations,
 )
-from controller.planning.safety import SafetyFilter
+
+
+@dataclass(frozen=True)
+class CaptureSettings:
+    """The capture mission's tuning constants, in one place (SI units).
+
+    ``contact_gap``: gap (m) between a robot's disc and the surface at its contact target;
+    ``settle_s``: how long (s) the arrested fleet stays still before the mission is done;
+    ``waypoint_reached``: distance (m) at which a detour waypoint counts as reached;
+    ``detour_clearance``: extra clearance (m) beyond the robot radius when testing whether the
+    straight line to a station crosses an obstacle; ``detour_samples``: points tested on it;
+    ``detour_spacing``: spacing (m) of a detour's waypoints. The ``[approach]`` section gives
+    the tolerances, the timeout and the planner's parameters.
+    """
+
+    contact_gap: float = 0.015
+    settle_s: float = 0.5
+    waypoint_reached: float = 0.15
+    detour_clearance: float = 0.05
+    detour_samples: int = 50
+    detour_spacing: float = 0.6
+    envelope_tolerance: float = 0.08
+    contact_tolerance: float = 0.03
+    timeout: float = 180.0
+
+    @classmethod
+    def from_config(cls, cfg: FleetConfig) -> CaptureSettings:
+        ap = cfg.approach
+        return cls(
+            envelope_tolerance=ap.envelope_tolerance,
+            contact_tolerance=ap.contact_tolerance,
+            timeout=ap.timeout,
+        )
+
+
+@dataclass(frozen=True)
+class Goals:
+    """World-frame goals of the capture points at one object pose, (M, 2) each."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    images: np.ndarray  # stations on the convex envelope (approach)
+    contacts: np.ndarray  # disc centres touching the object (close in)
+
+
+@dataclass(frozen=True)
+class PhaseStep:
+    """What :func:`capture_phase` decided this tick."""
+
+    phase: str
+    events: list[Event]
+    contact_t: np.ndarray
+    arrest_t: float | None
+    arrival_spread: float | None
+    arrest: bool = False
+    done: bool = False
+    failed: bool = False
+    reason: str = ""
+
+
+def capture_phase(
+    phase: str,
+    t: float,
+    t0: float,
+    dist: np.ndarray,
+    detouring: bool,
+    contact_t: np.ndarray,
+    arrest_t: float | None,
+    arrival_spread: float | None,
+    s: CaptureSettings,
+) -> PhaseStep:
+    """The capture's phase logic, pure: given the distances (M,) of the assigned robots to
+    their current targets at time ``t`` (s), the next phase and its events."""
+    events: list[Event] = []
+    contact_t = contact_t.copy()
+    arrest = done = failed = False
+    reason = ""
+
+    def go(p: str) -> str:
+        events.append(("phase", {"phase": p, "t": t}))
+        return p
+
+    if phase == Phase.APPROACH and np.all(dist < s.envelope_tolerance) and not detouring:
+        phase = go(Phase.CLOSE_IN)
+    elif phase == Phase.CLOSE_IN:
+        arrived = dist < s.contact_tolerance
+        contact_t[arrived & np.isnan(contact_t)] = t
+        if np.all(arrived):
+            arrest_t = t
+            arrival_spread = float(np.nanmax(contact_t) - np.nanmin(contact_t))
+            phase = go(Phase.ARRESTED)
+            arrest = True
+            events.append(("arrest", {"t": t, "arrival_spread_s": arrival_spread}))
+    elif phase == Phase.ARRESTED and arrest_t is not None and t - arrest_t >= s.settle_s:
+        phase = go(Phase.DONE)
+    done = phase == Phase.DONE  # stays done (a reader may miss one tick)
+    if phase in (Phase.APPROACH, Phase.CLOSE_IN) and t - t0 > s.timeout:
+        phase = go(Phase.FAILED)
+        failed, reason = True, Reason.TIMEOUT
+    return PhaseStep(
+        phase, events, contact_t, arrest_t, arrival_spread, arrest, done, failed, reason
+    )
 
 
 @dataclass
@@ -43,28 +146,28 @@ class CaptureMission:
     points: np.ndarray
     normals: np.ndarray
     assignment: np.ndarray
-    cfg: Any
+    cfg: FleetConfig
     rng: np.random.Generator
-    clock: Callable[[], float] | None = None
-    contact_gap: float = 0.015
-    settle_s: float = 0.5
-    phase: str = "approach"
-    _times: dict[str, list[float]] = field(default_factory=dict)
+    settings: CaptureSettings | None = None
+    phase: str = Phase.APPROACH
+    guard: SafetyStage | None = None
+    waypoints: dict[int, list[np.ndarray]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         cfg = self.cfg
         ap = cfg.approach
+        self.s = self.settings or CaptureSettings.from_config(cfg)
         self.points = np.asarray(self.points, float)
         nrm = np.asarray(self.normals, float)
         self.normals = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
         self.assignment = np.asarray(self.assignment, int)
-        self.limits = RobotLimits.from_config(cfg.robots)
+        self.guard = self.guard or SafetyStage(cfg)
         self.n = len(cfg.robots)
-        self.radii = np.array([r.radius for r in cfg.robots], float)
-        self.max_accel = np.minimum(self.limits.max_accel, ap.max_accel)
+        self.radii = self.guard.radii
+        self.max_speed = self.guard.limits.max_speed
         self.dt = 1.0 / cfg.fleet.rate_hz
-        self.obstacles = [geometry.ensure_ccw(p) for p in cfg.obstacle_polygons()]
-        self.object_poly = geometry.ensure_ccw(cfg.object_polygon())
+        self.obstacles = self.guard.obstacles
+        self.object_poly = self.guard.object_poly
         self.params = PlannerParams(
             max_turn=np.deg2rad(ap.max_turn_deg),
             projection=ap.projection,
@@ -72,133 +175,110 @@ class CaptureMission:
             alpha_growth=ap.alpha_growth,
             alpha_max=np.deg2rad(ap.alpha_max_deg),
         )
-        self.filter = SafetyFilter(
-            self.radii,
-            self.limits.max_speed,
-            cfg.bounds_array(),
-            len(self.obstacles) + 1,
-            margin=ap.safety_margin,
-        )
         self.assigned = np.zeros(self.n, bool)
         self.assigned[self.assignment] = True
         self.t0: float | None = None
         self.heading: np.ndarray | None = None
-        self.v_prev = np.zeros((self.n, 2))
         self.contact_t = np.full(len(self.points), np.nan)
         self.arrest_t: float | None = None
         self.arrival_spread: float | None = None
-        self.waypoints: dict[int, list[np.ndarray]] = {}
-        self._routes_planned = False
-        self.events_count: dict[str, int] = {}
-        self.infeasible = 0
-        self.min_filter_status = "solved"
+        self._detours_planned = False
 
-    # --- geometry of the goals -------------------------------------------------------------
-    def goals(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    # --- stage 1: the pose the goals ride on ------------------------------------------------
+    def goal_pose(self, view: FleetView) -> np.ndarray:
+        """The object's next pose (one tick ahead): a longer look-ahead would put the trailing
+        robots' contact points inside the object as it is now."""
+        if view.object_velocity is not None:
+            return np.asarray(view.object_pose, float) + np.asarray(view.object_velocity) * self.dt
+        if view.object_prediction is not None:
+            return np.asarray(view.object_prediction, float)
+        return np.asarray(view.object_pose, float)
+
+    # --- stage 2: the goals -------------------------------------------------------------------
+    def goals(self, pose: np.ndarray) -> Goals:
         """World capture points, normals, envelope images and contact targets (M, 2 each)."""
         pts = geometry.transform(self.points, pose)
         nrm = self.normals @ geometry.rot(float(pose[2])).T
-        env = envelope(
-            geometry.transform(self.object_poly, pose), self.cfg.approach.envelope_margin
-        )
-        img = ray_to_convex(pts, nrm, env)
+        world = geometry.transform(self.object_poly, pose)
+        img = ray_to_convex(pts, nrm, envelope(world, self.cfg.approach.envelope_margin))
         r = self.radii[self.assignment]
-        contact = pts + (r + self.contact_gap)[:, None] * nrm
+        contact = pts + (r + self.s.contact_gap)[:, None] * nrm
         # a ray out of a deep notch crosses the object's own arm before it leaves the hull:
         # keep the image on the free part of the ray (the robot waits inside the notch)
-        world = geometry.transform(self.object_poly, pose)
         free = ray_first_hit(pts, nrm, world) - r - STATION_GAP
         out = np.minimum(np.sum((img - pts) * nrm, axis=1), free)
-        out = separate_stations(pts, nrm, out, r, self.contact_gap)
-        img = pts + nrm * out[:, None]
-        return pts, nrm, img, contact
+        out = separate_stations(pts, nrm, out, r, self.s.contact_gap)
+        return Goals(pts, nrm, pts + nrm * out[:, None], contact)
 
-    def _plan_routes(self, centers: np.ndarray, img: np.ndarray) -> None:
-        """RobotRoadmap routes for robots whose straight line to their image is blocked."""
+    # --- stage 3: detours around static obstacles (once) ----------------------------------
+    def plan_detours(self, centers: np.ndarray, images: np.ndarray) -> None:
+        """Robot routes (A*) for robots whose straight line to their station is blocked."""
         from controller.planning.roadmap import RobotRoadmap
 
-        self._routes_planned = True
+        self._detours_planned = True
         blocked = []
         for m, i in enumerate(self.assignment):
-            for poly in self.obstacles:
-                grown = envelope(poly, self.radii[i] + 0.05, samples=8)
-                seg = np.linspace(centers[i], img[m], 50)
-                if geometry.points_in_polygon(seg, grown).any():
-                    blocked.append((m, i))
-                    break
+            r = self.radii[i] + self.s.detour_clearance
+            grown = [envelope(p, r, 8) for p in self.obstacles]
+            seg = np.linspace(centers[i], images[m], self.s.detour_samples)
+            if any(geometry.points_in_polygon(seg, g).any() for g in grown):
+                blocked.append((m, i))
         if not blocked:
             return
-        rr = float(self.radii.max()) + self.cfg.approach.safety_margin + 0.05
+        rr = float(self.radii.max()) + self.cfg.approach.safety_margin + self.s.detour_clearance
         rm = RobotRoadmap.build(
             self.cfg.bounds_array(), self.obstacles, rr, self.cfg.route.resolution
         )
         for m, i in blocked:
-            res = rm.plan(centers[i], img[m], heuristic="euclid", subgoal_spacing=0.6)
-            if res.status == "ok":
+            res = rm.plan(centers[i], images[m], subgoal_spacing=self.s.detour_spacing)
+            if res.ok:
                 self.waypoints[i] = [w[:2] for w in res.subgoals[:-1]]
 
-    # --- the step ----------------------------------------------------------------------------
-    def step(self, view: FleetView) -> MissionOutput:
-        tic = self.clock() if self.clock else 0.0
-        n = self.n
-        events: list[tuple[str, dict[str, Any]]] = []
-        if view.object_pose is None or view.estop:
-            self.v_prev[:] = 0.0
-            return MissionOutput(np.zeros((n, 3)), self.phase)
-        if self.t0 is None:
-            self.t0 = view.t
-            events.append(("phase", {"phase": self.phase, "t": view.t}))
-        ovel = np.zeros(3) if view.object_velocity is None else np.asarray(view.object_velocity)
-        # goals ride on the object's next pose (one tick ahead): a longer look-ahead would put
-        # the trailing robots' contact points inside the object as it is now
-        if view.object_velocity is not None:
-            pose = np.asarray(view.object_pose, float) + ovel * self.dt
-        elif view.object_prediction is not None:
-            pose = np.asarray(view.object_prediction, float)
-        else:
-            pose = np.asarray(view.object_pose, float)
+    # --- stage 4: targets and feed-forward of the phase --------------------------------------
+    def targets(
+        self, view: FleetView, pose: np.ndarray, goals: Goals
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Goal positions (N, 2), goal velocities (N, 2) and the assigned robots' current
+        targets (M, 2): stations while approaching, contacts after; detour waypoints first."""
         centers = view.poses[:, :2]
-        if self.heading is None:
-            th = view.poses[:, 2]
-            self.heading = np.stack([np.cos(th), np.sin(th)], 1)
-        pts, nrm, img, contact = self.goals(pose)
-        if not self._routes_planned:
-            self._plan_routes(centers, img)
         a = self.assignment
+        tgt = goals.images if self.phase == Phase.APPROACH else goals.contacts
         goal = centers.copy()
-        gvel = np.zeros((n, 2))
-        c = pose[:2]
-        tgt = img if self.phase == "approach" else contact
+        gvel = np.zeros((self.n, 2))
+        ovel = np.zeros(3) if view.object_velocity is None else np.asarray(view.object_velocity)
         goal[a] = tgt
-        rel = tgt - c
+        rel = tgt - pose[:2]
         gvel[a] = ovel[:2] + ovel[2] * np.stack([-rel[:, 1], rel[:, 0]], 1)
-        # waypoints around static obstacles
         for i, wps in list(self.waypoints.items()):
-            while wps and np.linalg.norm(centers[i] - wps[0]) < 0.15:
+            while wps and np.linalg.norm(centers[i] - wps[0]) < self.s.waypoint_reached:
                 wps.pop(0)
             if wps:
                 goal[i] = wps[0]
                 gvel[i] = 0.0
             else:
                 del self.waypoints[i]
-        dist = np.linalg.norm(centers[a] - tgt, axis=1)
-        ap = self.cfg.approach
-        obj_world = geometry.transform(self.object_poly, pose)
-        polys = self.obstacles + [obj_world]
-        avoid = np.ones((n, len(polys)), bool)
-        exempt = np.zeros((n, len(polys)), bool)
-        if self.phase != "approach":
-            avoid[a, -1] = False
-            exempt[a, -1] = True
+        return goal, gvel, tgt
+
+    # --- stage 5: the projective planner ----------------------------------------------------
+    def projective(
+        self, view: FleetView, goal: np.ndarray, gvel: np.ndarray, pose: np.ndarray
+    ) -> np.ndarray:
+        """Sharma Table I velocities (N, 2): robots closing in may reach the object."""
+        polys = self.obstacles + [geometry.transform(self.object_poly, pose)]
+        avoid = np.ones((self.n, len(polys)), bool)
+        if self.phase != Phase.APPROACH:
+            avoid[self.assignment, -1] = False
         active = self.assigned & ~view.stale & view.present
-        if self.phase == "arrested":
+        if self.phase == Phase.ARRESTED:
             active[:] = False
-        t_plan = self.clock() if self.clock else 0.0
-        vel, head, _ = plan_velocities(
-            centers,
+        if self.heading is None:
+            th = view.poses[:, 2]
+            self.heading = np.stack([np.cos(th), np.sin(th)], 1)
+        vel, self.heading, _ = plan_velocities(
+            view.poses[:, :2],
             self.heading,
             self.radii,
-            self.limits.max_speed,
+            self.max_speed,
             goal,
             gvel,
             polys,
@@ -207,86 +287,72 @@ class CaptureMission:
             self.params,
             self.rng,
         )
-        if self.phase == "arrested":
-            vel[a] = 0.0
-        self.heading = head
-        vel = limit_accel(vel, self.v_prev, self.max_accel, self.dt)
-        t_filter = self.clock() if self.clock else 0.0
-        stale = view.stale | ~view.present
-        motion = [None] * len(self.obstacles) + [view.object_velocity]
-        res = self.filter.filter(centers, vel, polys, exempt=exempt, stale=stale, motion=motion)
-        t_end = self.clock() if self.clock else 0.0
-        if res.stopped.any():
-            self.infeasible += 1
-            events.append(
-                ("safety_stop", {"robots": [view.ids[i] for i in np.flatnonzero(res.stopped)]})
-            )
-        vel = res.velocities
-        self.v_prev = vel
-        cmds = track_reversible(view.poses, vel, self.limits)
-        # phase logic
-        arrest = False
-        done = failed = False
-        if self.phase == "approach":
-            if np.all(dist < ap.envelope_tolerance) and not self.waypoints:
-                self._set_phase("close_in", view.t, events)
-        elif self.phase == "close_in":
-            arrived = dist < ap.contact_tolerance
-            first = arrived & np.isnan(self.contact_t)
-            self.contact_t[first] = view.t
-            if np.all(arrived):
-                self.arrest_t = view.t
-                self.arrival_spread = float(np.nanmax(self.contact_t) - np.nanmin(self.contact_t))
-                self._set_phase("arrested", view.t, events)
-                arrest = True
-                events.append(
-                    (
-                        "arrest",
-                        {
-                            "t": view.t,
-                            "arrival_spread_s": self.arrival_spread,
-                            "contacts": [
-                                {"robot": view.ids[i], "point": [float(x) for x in p]}
-                                for i, p in zip(a, pts, strict=True)
-                            ],
-                        },
-                    )
-                )
-        elif self.phase == "arrested":
-            cmds[:] = 0.0
-            if self.arrest_t is not None and view.t - self.arrest_t >= self.settle_s:
-                done = True
-                self._set_phase("done", view.t, events)
-        done = done or self.phase == "done"  # stays done (a reader may miss one tick)
-        if self.phase in ("approach", "close_in") and view.t - self.t0 > ap.timeout:
-            failed = True
-            self._set_phase("failed", view.t, events)
-        cmds[stale] = 0.0
-        if self.clock:
-            self._times.setdefault("plan_s", []).append(t_filter - t_plan)
-            self._times.setdefault("filter_s", []).append(t_end - t_filter)
-            self._times.setdefault("step_s", []).append(self.clock() - tic)
-        return MissionOutput(
-            cmds, self.phase, events=events, done=done, failed=failed, arrest=arrest
+        if self.phase == Phase.ARRESTED:
+            vel[self.assignment] = 0.0
+        return vel
+
+    # --- the two stages the node runs ---------------------------------------------------------
+    def plan(self, view: FleetView) -> Intent:
+        zero = np.zeros((self.n, 2))
+        if view.object_pose is None or view.estop:
+            return Intent(zero, self.phase, stop=True)
+        events: list[Event] = []
+        if self.t0 is None:
+            self.t0 = view.t
+            events.append(("phase", {"phase": self.phase, "t": view.t}))
+        holding = self.phase == Phase.ARRESTED  # the fleet stays still once arrested
+        pose = self.goal_pose(view)
+        goals = self.goals(pose)
+        if not self._detours_planned:
+            self.plan_detours(view.poses[:, :2], goals.images)
+        goal, gvel, tgt = self.targets(view, pose, goals)
+        vel = self.projective(view, goal, gvel, pose)
+        dist = np.linalg.norm(view.poses[self.assignment, :2] - tgt, axis=1)
+        step = capture_phase(
+            self.phase,
+            view.t,
+            self.t0,
+            dist,
+            bool(self.waypoints),
+            self.contact_t,
+            self.arrest_t,
+            self.arrival_spread,
+            self.s,
+        )
+        if step.arrest:
+            contacts = [
+                {"robot": view.ids[i], "point": [float(x) for x in p]}
+                for i, p in zip(self.assignment, goals.points, strict=True)
+            ]
+            for kind, data in step.events:
+                if kind == "arrest":
+                    data["contacts"] = contacts
+        self.phase = step.phase
+        self.contact_t, self.arrest_t = step.contact_t, step.arrest_t
+        self.arrival_spread = step.arrival_spread
+        hold = np.ones(self.n, bool) if holding else None
+        return Intent(
+            vel,
+            self.phase,
+            events + step.events,
+            object_pose=pose,
+            touch=self.assigned if self.phase != Phase.APPROACH else None,
+            hold=hold,
+            done=step.done,
+            failed=step.failed,
+            reason=step.reason,
+            arrest=step.arrest,
         )
 
-    def _set_phase(self, phase: str, t: float, events: list) -> None:
-        self.phase = phase
-        events.append(("phase", {"phase": phase, "t": t}))
+    def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
+        assert self.guard is not None
+        return self.guard.apply(view, intent)
 
     def summary(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "phase": self.phase,
+        assert self.guard is not None
+        return {
+            "phase": str(self.phase),
             "arrival_spread_s": self.arrival_spread,
             "arrest_time_s": self.arrest_t,
-            "infeasible_filter_calls": self.infeasible,
+            "infeasible_filter_calls": self.guard.counters.infeasible,
         }
-        for k, v in self._times.items():
-            arr = np.asarray(v) * 1e3
-            out[k.replace("_s", "_ms")] = {
-                "median": float(np.median(arr)),
-                "p90": float(np.percentile(arr, 90)),
-                "max": float(arr.max()),
-                "calls": len(arr),
-            }
-        return out

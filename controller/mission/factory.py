@@ -2,17 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
 from controller import geometry
-from controller.config import FleetConfig
+from controller.config import MISSION_KINDS, FleetConfig
 from controller.mission.basic import GotoMission, HoldMission
 from controller.mission.job import CaptureJob, MissionError
 from controller.mission.tracking import RobotLimits
-
-MISSION_KINDS = ("capture", "stage", "hold")
 
 
 def staging_targets(cfg: FleetConfig, margin: float = 0.6) -> np.ndarray:
@@ -30,7 +26,6 @@ def build_mission(
     kind: str = "capture",
     capture: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     rng: np.random.Generator | None = None,
-    clock: Callable[[], float] | None = None,
 ):
     """The mission a config runs: ``capture`` (the whole job: GA plan, assignment, approach,
     arrest), ``stage`` (drive to a ring of staging points around the object) or ``hold``
@@ -38,8 +33,7 @@ def build_mission(
 
     ``capture`` = (points (M, 2), outward normals (M, 2), both in the object frame, robot index
     per point (M,)) replaces the GA plan and the assignment (hand-made capture sets). ``rng``
-    defaults to one seeded from ``capture.seed``; ``clock`` only feeds timing statistics (the
-    composition root passes one; the mission never reads a clock of its own)."""
+    defaults to one seeded from ``capture.seed``."""
     if kind not in MISSION_KINDS:
         raise MissionError(f"unknown mission {kind!r}; expected one of {MISSION_KINDS}")
     if kind == "hold":
@@ -51,5 +45,5 @@ def build_mission(
         from controller.mission.capture import CaptureMission
 
         points, normals, assignment = capture
-        return CaptureMission(points, normals, assignment, cfg, gen, clock=clock)
-    return CaptureJob(cfg, gen, clock)
+        return CaptureMission(points, normals, assignment, cfg, gen)
+    return CaptureJob(cfg, gen)

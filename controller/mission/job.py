@@ -3,17 +3,16 @@ estimates are in, then the approach-and-arrest mission (pure, per tick)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
-from controller.mission.types import FleetView, MissionOutput
+from controller.mission.types import FleetView, Intent, MissionOutput, Phase
 
 
-class MissionError(ValueError):
+class MissionError(RuntimeError):
     """The mission cannot be built for this fleet (e.g. too few robots for the capture)."""
 
 
@@ -30,25 +29,23 @@ class CaptureJob:
         self,
         cfg: FleetConfig,
         rng: np.random.Generator | None = None,
-        clock: Callable[[], float] | None = None,
     ) -> None:
         from controller.planning.capture import CaptureParams, plan_capture
 
         self.cfg = cfg
-        self.clock = clock
         self.rng = rng if rng is not None else np.random.default_rng(cfg.capture.seed)
         self.n = len(cfg.robots)
-        self.plan = plan_capture(
+        self.capture = plan_capture(
             cfg.object_polygon(),
             cfg.max_robot_radius,
             CaptureParams.from_config(cfg.capture),
             self.rng,
         )
-        if not self.plan.form_closure and cfg.capture.closure == "exact":
+        if not self.capture.form_closure and cfg.capture.closure == "exact":
             raise MissionError("the capture GA found no set of points in form closure")
-        if self.plan.robots_needed > self.n:
+        if self.capture.robots_needed > self.n:
             raise MissionError(
-                f"the capture needs {self.plan.robots_needed} robots; the fleet has {self.n}"
+                f"the capture needs {self.capture.robots_needed} robots; the fleet has {self.n}"
             )
         self.assignment: np.ndarray | None = None
         self.inner: Any = None
@@ -57,46 +54,49 @@ class CaptureJob:
         from controller.planning.capture import assign_robots
 
         radius = np.array([r.radius for r in self.cfg.robots])
-        centres = self.plan.points + radius.max() * self.plan.push_normals
+        centres = self.capture.points + radius.max() * self.capture.push_normals
         targets = geometry.transform(centres, view.object_pose)
         speed = np.array([r.max_speed for r in self.cfg.robots])
         return np.asarray(assign_robots(view.poses[:, :2], speed, targets), dtype=int)
 
-    def step(self, view: FleetView) -> MissionOutput:
+    def plan(self, view: FleetView) -> Intent:
         if self.inner is not None:
-            return self.inner.step(view)
-        hold = np.zeros((self.n, 3))
+            return self.inner.plan(view)
         ready = view.object_pose is not None and bool(np.all(view.present & ~view.stale))
         if not ready:
-            return MissionOutput(commands=hold, phase="plan")
+            return Intent(np.zeros((self.n, 2)), Phase.PLAN, stop=True)
         from controller.mission.capture import CaptureMission
 
         self.assignment = self._assign(view)
         self.inner = CaptureMission(
-            self.plan.points,
-            self.plan.push_normals,
+            self.capture.points,
+            self.capture.push_normals,
             self.assignment,
             self.cfg,
             self.rng,
-            clock=self.clock,
         )
         data = {
-            "points": self.plan.points.round(4).tolist(),
-            "normals": self.plan.push_normals.round(4).tolist(),
+            "points": self.capture.points.round(4).tolist(),
+            "normals": self.capture.push_normals.round(4).tolist(),
             "robots": [view.ids[i] for i in self.assignment],
-            "objective": float(self.plan.objective),
-            "form_closure": bool(self.plan.form_closure),
-            "robots_needed": int(self.plan.robots_needed),
+            "objective": float(self.capture.objective),
+            "form_closure": bool(self.capture.form_closure),
+            "robots_needed": int(self.capture.robots_needed),
         }
-        out = self.inner.step(view)
-        out.events.insert(0, ("capture", data))
-        return out
+        intent = self.inner.plan(view)
+        intent.events.insert(0, ("capture", data))
+        return intent
+
+    def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
+        if self.inner is None:
+            return MissionOutput(np.zeros((self.n, 3)), intent.phase, list(intent.events))
+        return self.inner.safety(view, intent)
 
     def summary(self) -> dict[str, Any]:
         out: dict[str, Any] = {
-            "capture_points": len(self.plan.points),
-            "capture_objective": float(self.plan.objective),
-            "form_closure": bool(self.plan.form_closure),
+            "capture_points": len(self.capture.points),
+            "capture_objective": float(self.capture.objective),
+            "form_closure": bool(self.capture.form_closure),
             "assigned": None
             if self.assignment is None
             else [self.cfg.robots[i].id for i in self.assignment],

@@ -1,15 +1,53 @@
-"""What a mission sees and returns each tick: ``FleetView`` in, ``MissionOutput`` out.
+"""What a mission sees and returns each tick, and the names of its phases and failures.
 
-The types every mission and the node share (the pure missions never import the I/O node).
-Estimates are N×k arrays in config robot order, SI units.
+``FleetView`` in; the mission's plan stage returns an ``Intent`` (nominal world velocities and
+what the safety stage must know); its safety stage returns the ``MissionOutput`` (body-frame
+commands). The types every mission and the node share: the pure missions never import the I/O
+node. Estimates are N×k arrays in config robot order, SI units.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any, Protocol
 
 import numpy as np
+
+
+class Phase(StrEnum):
+    """Mission phases, as they appear on ``plan/phase``, in ``fleet status`` and ``--json``."""
+
+    PLAN = "plan"  # waiting for every robot's and the object's first estimates
+    APPROACH = "approach"  # chase the capture points' images on the convex envelope
+    CLOSE_IN = "close_in"  # every robot on the envelope: move in to contact
+    HOLD = "hold"  # in contact: preload and watch the object stay put
+    ARRESTED = "arrested"  # the object held still through the hold
+    ROUTE = "route"  # plan the object's route to its goal
+    REARRANGE = "rearrange"  # robots move to the pushing contacts
+    TRANSPORT = "transport"  # push the object along the route
+    DONE = "done"
+    FAILED = "failed"
+    GOTO = "goto"  # GotoMission
+    STANDBY = "hold"  # HoldMission (bring-up): every robot stopped (same word as HOLD)
+
+
+class Reason(StrEnum):
+    """Why a run failed (``failure.reason`` in ``fleet run --json``)."""
+
+    TIMEOUT = "timeout"
+    PINNED = "pinned"
+    ESCAPED = "escaped"
+    COLLISION = "collision"
+    ROBOTS_LOST = "robots_lost"
+    ROBOT_LOST = "robot_lost"
+    NO_CAPTURE = "no_capture"
+    ESTOP = "estop"
+    NO_ROUTE = "no_route"
+    STALLED = "stalled"
+
+
+Event = tuple[str, dict[str, Any]]
 
 
 @dataclass(frozen=True)
@@ -29,16 +67,49 @@ class FleetView:
 
 
 @dataclass
+class Intent:
+    """The plan stage's answer: nominal world velocities (N, 2) m/s and what the safety stage
+    needs to filter them.
+
+    ``object_pose`` places the object's barrier (None: the object is unknown, no barrier);
+    ``touch`` (N,) marks robots allowed to touch the object (their contact role; never enter
+    it); ``hold`` (N,) robots commanded exactly zero after the filter; ``stop`` every robot
+    zero (e-stop, nothing known yet)."""
+
+    velocities: np.ndarray
+    phase: str
+    events: list[Event] = field(default_factory=list)
+    object_pose: np.ndarray | None = None
+    touch: np.ndarray | None = None
+    hold: np.ndarray | None = None
+    stop: bool = False
+    done: bool = False
+    failed: bool = False
+    reason: str = ""
+    arrest: bool = False
+
+
+@dataclass
 class MissionOutput:
     """Body-frame commands (N, 3) for every robot, the phase, and events to publish."""
 
     commands: np.ndarray
     phase: str
-    events: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
+    events: list[Event] = field(default_factory=list)
     done: bool = False
     failed: bool = False
     arrest: bool = False
+    reason: str = ""
 
 
 class Mission(Protocol):
-    def step(self, view: FleetView) -> MissionOutput: ...
+    """A per-tick mission in two stages the node runs (and times) in order."""
+
+    def plan(self, view: FleetView) -> Intent: ...
+
+    def safety(self, view: FleetView, intent: Intent) -> MissionOutput: ...
+
+
+def step(mission: Mission, view: FleetView) -> MissionOutput:
+    """Both stages at once (tests, benchmarks)."""
+    return mission.safety(view, mission.plan(view))

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from controller import geometry, wire
-from controller.config import ConfigError, FleetConfig, parse_config
+from controller.config import ConfigError, FleetConfig, InputError, parse_config
 from controller.io.recorder import log_is_complete, read_log, read_metadata
 from controller.replay import metrics
 
@@ -53,6 +53,18 @@ class RunLog:
 def load_run(path: str | Path) -> RunLog:
     """Read a log into a :class:`RunLog`. Messages that do not decode are counted, not fatal."""
     path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    try:
+        run = _read_run(path)
+    except OSError as exc:
+        raise InputError(f"{path}: {exc.strerror or exc}") from exc
+    if not run.topics and not run.complete:
+        raise InputError(f"{path}: not an MCAP log (or empty)")
+    return run
+
+
+def _read_run(path: Path) -> RunLog:
     run = RunLog(path=path, complete=log_is_complete(path))
     meta = read_metadata(path).get("fleet.config")
     if meta:

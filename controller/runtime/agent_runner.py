@@ -8,8 +8,9 @@ import time
 
 from controller.config import FleetConfig
 from controller.io.bus import Bus
-from controller.runtime.wiring import capabilities, make_hub
+from controller.runtime.wiring import make_hub
 from drivers.agent import Agent, AgentParams
+from drivers.base import capabilities_of
 from drivers.sim import SimDriver
 from sim_backend.hub import SimHub
 
@@ -69,7 +70,7 @@ def run_agent(
         hub = make_hub(solo)
         noise = cfg.sim.pose_noise
         driver = SimDriver(
-            hub, robot.id, capabilities(robot), noise.xy, noise.theta, time_offset=wall0
+            hub, robot.id, capabilities_of(robot), noise.xy, noise.theta, time_offset=wall0
         )
     try:
         driver.connect(timeout=connect_timeout)

@@ -43,7 +43,12 @@ def run_daemon(
         with Bus(cfg.zenoh, cfg.fleet.name) as bus:
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
             node = ControllerNode(
-                cfg, bus, mission, make_estimator(cfg), extra_drops=recorder.drops
+                cfg,
+                bus,
+                mission,
+                make_estimator(cfg),
+                extra_drops=recorder.drops,
+                clock=time.monotonic,
             )
             rk = Ratekeeper(cfg.fleet.rate_hz)
             print(

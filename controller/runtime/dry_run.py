@@ -134,6 +134,7 @@ class DryRun:
                     make_estimator(cfg),
                     lossless_commands=True,
                     extra_drops=recorder.drops,
+                    clock=time.perf_counter,
                 )
                 drivers, emulators = make_sim_drivers(cfg, hub)
                 commands_arrived = threading.Condition()
@@ -184,7 +185,7 @@ class DryRun:
                     e.stop()
                 self.verdict.missed_ticks = coord.counters.missed
                 out = node.last_output
-                summary = getattr(self.mission, "summary", dict)()
+                summary = {**getattr(self.mission, "summary", dict)(), **node.timing_summary()}
                 result = {
                     "phase": node.phase,
                     "done": bool(out.done) if out else False,

@@ -98,33 +98,23 @@ class LockstepCoordinator:
         return n
 
     def publish_truth(self, now: float) -> None:
+        """Ground truth of every robot and the object (scoring and logs only)."""
         w = self.hub.world
         for rid, pub in self._truth_robot.items():
-            x, y, th = (float(v) for v in w.robot_pose(rid))
-            pub.put(
-                wire.PoseMeasurement(
-                    t=now,
-                    seq=self.step_index,
-                    x=x,
-                    y=y,
-                    theta=th,
-                    sigma_xy=0.0,
-                    sigma_theta=0.0,
-                    source="truth",
-                )
-            )
-        x, y, th = (float(v) for v in w.object_pose())
-        self._truth_obj.put(
-            wire.PoseMeasurement(
-                t=now,
-                seq=self.step_index,
-                x=x,
-                y=y,
-                theta=th,
-                sigma_xy=0.0,
-                sigma_theta=0.0,
-                source="truth",
-            )
+            pub.put(self._truth(now, w.robot_pose(rid)))
+        self._truth_obj.put(self._truth(now, w.object_pose()))
+
+    def _truth(self, now: float, pose) -> wire.PoseMeasurement:
+        x, y, th = (float(v) for v in pose)
+        return wire.PoseMeasurement(
+            t=now,
+            seq=self.step_index,
+            x=x,
+            y=y,
+            theta=th,
+            sigma_xy=0.0,
+            sigma_theta=0.0,
+            source="truth",
         )
 
     def wait_done(self, step: int) -> bool:

@@ -1,9 +1,18 @@
-"""The controller node: the central side's I/O shell around the pure mission step.
+"""The controller node: the central side's I/O shell around the pure mission.
 
-Fixed, named pipeline per tick: sample (drain the inboxes) → estimate (filters, predicted to the
-tick time) → plan (the mission step, pure) → publish (one command per robot, filter states,
-events). The tick source is injected: the wall-clock rate keeper of the lab daemon or the sim's
-lockstep clock. Nothing here reads the wall clock for control decisions; ``now`` is passed in.
+Fixed, named pipeline per tick (``tick``):
+
+1. **sample** - drain the inboxes: e-stops, robot events, pose measurements into the filters;
+2. **estimate** - every filter predicted to the tick time (``FleetView``);
+3. **plan** - the mission's plan stage (pure): nominal velocities, phase, events (``Intent``);
+4. **safety** - the mission's safety stage (pure): CBF filter and tracking law, body-frame
+   commands (``MissionOutput``); an engaged e-stop zeroes them;
+5. **publish** - one command per robot (with a time-to-live), plan events, filter states, and in
+   the lockstep dry run the ``TickDone`` answer.
+
+The node times the stages with an injected clock (``timings``). The tick source is injected too:
+the wall-clock rate keeper of the lab daemon or the sim's lockstep clock. Nothing here reads a
+clock for control decisions; ``now`` is passed in.
 """
 
 from __future__ import annotations
@@ -22,7 +31,7 @@ from controller.mission.types import FleetView, Mission, MissionOutput
 
 log = logging.getLogger(__name__)
 
-SIGMA_CAP = 999.0  # m or rad: a sigma this large means "unknown" on the wire (limit 1e3)
+STAGES = ("sample", "plan", "safety", "publish")  # timed: sample+estimate, plan, safety, publish
 
 
 class Estimator(Protocol):
@@ -58,7 +67,12 @@ class ControllerNode:
         estimator: Estimator,
         lossless_commands: bool = False,
         extra_drops: Callable[[], dict[str, int]] | None = None,
+        clock: Callable[[], float] | None = None,
     ) -> None:
+        """``clock`` (s, monotonic) only times the stages; ``extra_drops`` adds drop counters
+        of other parts (the recorder) to ``fleet status``."""
+        self.clock = clock
+        self.timings: dict[str, list[float]] = {k: [] for k in STAGES}
         self.cfg = cfg
         self.bus = bus
         self.extra_drops = extra_drops
@@ -171,11 +185,44 @@ class ControllerNode:
         )
 
     def tick(self, now: float, step: int | None = None) -> MissionOutput:
-        """sample → estimate → plan → publish, at time ``now``."""
+        """sample → estimate → plan → safety → publish, at time ``now``."""
+        marks = [self._now()]
         self.sample()
         self.last_tick = now
         view = self.view(now)
-        out = self.mission.step(view)
+        marks.append(self._now())
+        intent = self.mission.plan(view)
+        marks.append(self._now())
+        out = self.mission.safety(view, intent)
+        marks.append(self._now())
+        self._publish(now, view, out, step)
+        marks.append(self._now())
+        if self.clock is not None:
+            for name, a, b in zip(STAGES, marks[:-1], marks[1:], strict=True):
+                self.timings[name].append(b - a)
+        return out
+
+    def _now(self) -> float:
+        return self.clock() if self.clock is not None else 0.0
+
+    def timing_summary(self) -> dict[str, dict[str, float]]:
+        """Per stage (and the mission's plan + safety as ``step_ms``): median, p90, max in ms."""
+        if self.clock is None or not self.timings["plan"]:
+            return {}
+        series = {f"{k}_ms": np.asarray(v) * 1e3 for k, v in self.timings.items()}
+        series["filter_ms"] = series.pop("safety_ms")
+        series["step_ms"] = series["plan_ms"] + series["filter_ms"]
+        return {
+            k: {
+                "median": float(np.median(a)),
+                "p90": float(np.percentile(a, 90)),
+                "max": float(a.max()),
+                "calls": len(a),
+            }
+            for k, a in series.items()
+        }
+
+    def _publish(self, now: float, view: FleetView, out: MissionOutput, step: int | None) -> None:
         cmds = np.zeros_like(out.commands) if self.estop else out.commands
         if out.arrest and not self.arrested:
             self.arrested = True
@@ -208,8 +255,6 @@ class ControllerNode:
                     arrest=self.arrested,
                 )
             )
-        self.last_output = out
-        return out
 
     def hold(self, now: float) -> None:
         """Command every robot to stop now (shutdown, mission end)."""

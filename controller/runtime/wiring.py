@@ -11,23 +11,13 @@ import logging
 
 from controller.config import FleetConfig
 from controller.estimation.fleet import FleetEstimator
-from drivers.base import Capabilities
+from drivers.base import capabilities_of
 from drivers.sim import SimDriver
 from sim_backend.factory import make_world
 from sim_backend.hub import SimHub
 from sim_backend.sensors import make_sensors
 
 log = logging.getLogger(__name__)
-
-
-def capabilities(robot) -> Capabilities:
-    return Capabilities(
-        kind=robot.kind,
-        holonomic=robot.kind == "omni",
-        max_speed=robot.max_speed,
-        max_yaw_rate=robot.max_yaw_rate,
-        radius=robot.radius,
-    )
 
 
 def make_hub(cfg: FleetConfig, gui: bool = False) -> SimHub:
@@ -73,7 +63,7 @@ def make_sim_drivers(cfg: FleetConfig, hub: SimHub, connect_timeout: float = 5.0
                 drv = MavlinkDriver(r, clock=clock, idle=idle, pool=pool)
             else:
                 drv = SimDriver(
-                    hub, r.id, capabilities(r), cfg.sim.pose_noise.xy, cfg.sim.pose_noise.theta
+                    hub, r.id, capabilities_of(r), cfg.sim.pose_noise.xy, cfg.sim.pose_noise.theta
                 )
             drv.connect(timeout=connect_timeout)
             drivers.append(drv)

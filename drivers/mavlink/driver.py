@@ -46,7 +46,7 @@ os.environ["MAVLINK20"] = "1"  # before pymavlink picks its dialect: MAVLink 2 m
 
 
 from controller.wire import PoseMeasurement, Twist2D  # noqa: E402
-from drivers.base import Capabilities, ConnectTimeout, DriverError, LinkHealth, LinkLost  # noqa: E402
+from drivers.base import ConnectTimeout, DriverError, LinkHealth, LinkLost, capabilities_of  # noqa: E402
 from drivers.mavlink import convert as mc  # noqa: E402
 from drivers.mavlink.link import (  # noqa: E402
     AUTOPILOT_COMPONENT,
@@ -109,13 +109,7 @@ class MavlinkDriver:
         self.profile = cfg.profile
         self.system_id = cfg.system_id
         self.gcs_id = cfg.gcs_system_id
-        self.capabilities = Capabilities(
-            kind=cfg.kind,
-            holonomic=cfg.profile == "px4" and cfg.kind == "omni",
-            max_speed=cfg.max_speed,
-            max_yaw_rate=cfg.max_yaw_rate,
-            radius=cfg.radius,
-        )
+        self.capabilities = capabilities_of(cfg)
         self._clock = clock
         self._idle = idle
         self._pool = pool or DEFAULT_POOL

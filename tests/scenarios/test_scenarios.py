@@ -7,7 +7,6 @@ the GA capture planner feeds the same ``CaptureMission`` in the full job.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -124,9 +123,7 @@ def run_scenario(sc: Scenario, path) -> tuple[dict, CaptureMission]:
     pts, nrm = pts_fn()
     pw = geometry.transform(pts, cfg.object.start)
     assignment = nearest_assignment(pw, np.array([r.start[:2] for r in cfg.robots]))
-    mission = CaptureMission(
-        pts, nrm, assignment, cfg, np.random.default_rng(sc.seed), clock=time.perf_counter
-    )
+    mission = CaptureMission(pts, nrm, assignment, cfg, np.random.default_rng(sc.seed))
     res = DryRun(cfg, mission, path, max_time=sc.max_time).run()
     return res, mission
 

@@ -144,3 +144,16 @@ def test_check_json_reports_path(tmp_path, capsys):
 
     out = json.loads(capsys.readouterr().out)
     assert out["ok"] is False and out["path"] == "capture.closure"
+
+
+def test_expected_errors_map_to_exit_codes_in_one_place():
+    from controller.cli import EXIT_BAD_INPUT, EXIT_FAILED, exit_code
+    from controller.config import ConfigError, InputError
+    from controller.io.bus import BusError
+    from controller.mission.job import MissionError
+
+    assert exit_code(ConfigError("f.toml", "fleet.rate_hz", "bad")) == EXIT_BAD_INPUT == 2
+    assert exit_code(InputError("no such file")) == EXIT_BAD_INPUT
+    assert exit_code(MissionError("too few robots")) == EXIT_FAILED == 1
+    assert exit_code(BusError("nobody answered")) == EXIT_FAILED
+    assert exit_code(ZeroDivisionError()) is None  # a bug keeps its traceback

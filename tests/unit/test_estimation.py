@@ -19,8 +19,7 @@ from controller.estimation.kalman import (
     PoseSigmaPoints,
     innovation_linear,
     innovation_unscented,
-    propagate_ekf,
-    propagate_ukf,
+    propagate,
     unscented_transform_wrapped,
 )
 from controller.estimation.models import (
@@ -434,8 +433,8 @@ def test_ekf_and_ukf_propagation_agree_for_short_steps(kind, theta, dts) -> None
         u = np.array([0.2, 0.5])
     segs = [(dt, u) for dt in dts]
     trk = TrackFilter(kind, "ukf", params("ukf"), 0.09, 1.0)
-    xe, Pe = propagate_ekf(kind, x, P, segs, 0.15, 0.09, 1.0)
-    xu, Pu = propagate_ukf(kind, x, P, segs, 0.15, 0.09, 1.0, trk.strategy.points(len(x)))
+    xe, Pe = propagate(kind, x, P, segs, 0.15, 0.09, 1.0)
+    xu, Pu = propagate(kind, x, P, segs, 0.15, 0.09, 1.0, trk.strategy.points(len(x)))
     # The UKF keeps second-order terms (E[cos theta] < cos E[theta]): millimetres over ~1 s.
     assert np.abs(residual(xe, xu)).max() < 5e-3
     np.testing.assert_allclose(Pe[:3, :3], Pu[:3, :3], rtol=0.05, atol=1e-6)

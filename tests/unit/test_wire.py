@@ -173,3 +173,20 @@ def test_topic_registry_keys():
         assert wire.topic_for_key("lab", f"fleet/lab/robot/x/{k}") is not None
     for k in ("object/pose", "object/state", "estop", "status", "sim/clock"):
         assert wire.topic_for_key("lab", f"fleet/lab/{k}") is not None
+
+
+def test_parse_key_takes_keys_apart_through_the_registry():
+    k = wire.parse_key("fleet/lab/robot/r7/pose")
+    assert k.topic.name == "robot_pose" and k.fleet == "lab" and k.id == "r7"
+    assert wire.parse_key("fleet/lab/plan/arrest", "lab").what == "arrest"
+    assert wire.parse_key("fleet/lab/sim/truth/robot/r2").topic.name == "truth_robot"
+    assert wire.parse_key("fleet/lab/alive/robot/r3").parts == {"role": "robot", "id": "r3"}
+    # another fleet, a key of nobody's, an empty id segment: not ours
+    assert wire.parse_key("fleet/lab/robot/r7/pose", "other") is None
+    assert wire.parse_key("fleet/lab/robot/r7/odometry") is None
+    assert wire.parse_key("fleet/lab/robot//pose") is None
+    # every template builds keys that parse back to the same parts
+    for t in wire.TOPICS.values():
+        parts = {p: "x1" for p in ("id", "what", "role") if "{" + p + "}" in t.template}
+        back = wire.parse_key(t.key("f", **parts), "f")
+        assert back is not None and back.topic is t and back.parts == parts

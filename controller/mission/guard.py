@@ -1,0 +1,93 @@
+"""The safety stage every phase's velocities pass through: acceleration limit, the CBF filter
+(``controller.planning.safety``) against robots, obstacles, walls and the object, and the
+tracking law that turns world velocities into body-frame commands.
+
+Pure: arrays in, a ``MissionOutput`` out; its only state is the last filtered velocity (for the
+acceleration limit) and the filter's warm start.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller import geometry
+from controller.config import FleetConfig
+from controller.mission.tracking import RobotLimits, track_reversible
+from controller.mission.types import FleetView, Intent, MissionOutput
+from controller.planning.approach import limit_accel
+from controller.planning.safety import SafetyFilter
+
+FAR = 1.0e3  # m: an unknown object's barrier is parked this far away (the pattern is fixed)
+
+
+@dataclass
+class GuardCounters:
+    infeasible: int = 0  # filter calls that had to stop robots (QP infeasible)
+
+
+class SafetyStage:
+    """Filters nominal world velocities of the whole fleet, every tick, for every mission."""
+
+    def __init__(self, cfg: FleetConfig) -> None:
+        ap = cfg.approach
+        self.limits = RobotLimits.from_config(cfg.robots)
+        self.n = len(cfg.robots)
+        self.radii = np.array([r.radius for r in cfg.robots], float)
+        self.max_accel = np.minimum(self.limits.max_accel, ap.max_accel)
+        self.dt = 1.0 / cfg.fleet.rate_hz
+        self.obstacles = [geometry.ensure_ccw(p) for p in cfg.obstacle_polygons()]
+        self.object_poly = geometry.ensure_ccw(cfg.object_polygon())
+        self.filter = SafetyFilter(
+            self.radii,
+            self.limits.max_speed,
+            cfg.bounds_array(),
+            len(self.obstacles) + 1,
+            margin=ap.safety_margin,
+        )
+        self.v_prev = np.zeros((self.n, 2))
+        self.counters = GuardCounters()
+
+    def object_world(self, pose: np.ndarray | None) -> np.ndarray:
+        """The object polygon at ``pose`` (parked far away when unknown)."""
+        p = np.array([FAR, FAR, 0.0]) if pose is None else np.asarray(pose, float)
+        return geometry.transform(self.object_poly, p)
+
+    def apply(self, view: FleetView, intent: Intent) -> MissionOutput:
+        """Body-frame commands for ``intent``: zero on e-stop or ``stop``; otherwise the nominal
+        velocities, acceleration-limited, filtered, tracked; stale or absent robots and
+        ``hold`` robots get exactly zero."""
+        out = MissionOutput(
+            np.zeros((self.n, 3)),
+            intent.phase,
+            events=list(intent.events),
+            done=intent.done,
+            failed=intent.failed,
+            arrest=intent.arrest,
+            reason=intent.reason,
+        )
+        if view.estop or intent.stop:
+            self.v_prev[:] = 0.0
+            return out
+        vel = limit_accel(intent.velocities, self.v_prev, self.max_accel, self.dt)
+        polys = self.obstacles + [self.object_world(intent.object_pose)]
+        exempt = np.zeros((self.n, len(polys)), bool)
+        if intent.touch is not None:
+            exempt[:, -1] = intent.touch
+        stale = view.stale | ~view.present
+        motion = [None] * len(self.obstacles) + [view.object_velocity]
+        res = self.filter.filter(
+            view.poses[:, :2], vel, polys, exempt=exempt, stale=stale, motion=motion
+        )
+        if res.stopped.any():
+            self.counters.infeasible += 1
+            robots = [view.ids[i] for i in np.flatnonzero(res.stopped)]
+            out.events.append(("safety_stop", {"robots": robots}))
+        self.v_prev = res.velocities
+        cmds = track_reversible(view.poses, res.velocities, self.limits)
+        if intent.hold is not None:
+            cmds[intent.hold] = 0.0
+        cmds[stale] = 0.0
+        out.commands = cmds
+        return out
