@@ -116,6 +116,9 @@ class MotionSection:
     max_speed: float = _rule(0.2, min=0, max=10)
     flee_radius: float = _rule(1.5, gt=0, max=100)
     max_force: float = _rule(4.0, gt=0, max=1e4)
+    # s the live object keeps fighting while it cannot follow its script (held by robots, pinned
+    # against a wall) before it gives up and goes limp ("compromised"); 0: it never gives up
+    give_up_after: float = _rule(6.0, min=0, max=1e5)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -143,6 +146,10 @@ class CaptureSection:
     generations: int = _rule(600, min=1, max=1000000)
     seed: int = _rule(0, min=0)
     closure: str = _rule("exact", choices=CLOSURE_MODES)
+    # N: the largest push of the object the robots must resist at their contacts (and that force
+    # times its radius of gyration in torque), with every robot at most its max_force; points
+    # are added to the GA's set until it holds; 0: no check
+    hold_force: float = _rule(4.0, min=0, max=1e4)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -153,8 +160,17 @@ class ApproachSection:
     alpha_growth: float = _rule(1.25, gt=1, max=10)
     alpha_max_deg: float = _rule(180.0, gt=0, max=180)
     envelope_margin: float = _rule(0.25, min=0, max=10)
-    contact_tolerance: float = _rule(0.03, gt=0, max=1)
+    # m: a robot is in contact when its disc's estimated gap to the object is below this
+    contact_tolerance: float = _rule(0.015, gt=0, max=1)
     envelope_tolerance: float = _rule(0.08, gt=0, max=1)
+    hold_s: float = _rule(2.0, min=0, max=600)  # s of held contact before the arrest
+    # m: the object (any vertex of its estimate) may move this much during the hold
+    hold_tolerance: float = _rule(0.03, gt=0, max=10)
+    # m: how far into the object's estimate a robot in contact aims (its preload; the physics
+    # stops it at the surface, so it pushes with up to its max_force)
+    preload_depth: float = _rule(0.0, min=0, max=0.2)
+    # s: the longest look-ahead when aiming at where a moving object will be (interception)
+    intercept_horizon: float = _rule(8.0, min=0, max=600)
     prediction_horizon: float = _rule(0.5, min=0, max=10)
     safety_margin: float = _rule(0.05, min=0, max=1)
     max_accel: float = _rule(1.0, gt=0, max=100)

@@ -238,6 +238,30 @@ def discs_touch_static(
     return hit
 
 
+def polygon_clearance(
+    poly: ArrayLike, obstacles: list[ArrayLike], bounds: ArrayLike | None
+) -> float:
+    """The smallest distance (m) from a polygon to static obstacles and the room's walls
+    (``bounds``, None: no walls); negative when it overlaps one (by its deepest vertex).
+
+    Between two polygons the distance is attained at a vertex of one and an edge of the other,
+    so vertex-to-polygon signed distances both ways give it exactly (and the penetration depth
+    by vertices when they overlap)."""
+    p = np.asarray(poly, dtype=float)
+    best = math.inf
+    for o in obstacles:
+        q = np.asarray(o, dtype=float)
+        d = min(
+            float(polygon_signed_distance(p, q).min()), float(polygon_signed_distance(q, p).min())
+        )
+        best = min(best, d)
+    if bounds is not None:
+        (x0, y0), (x1, y1) = np.asarray(bounds, dtype=float)
+        walls = np.stack([p[:, 0] - x0, x1 - p[:, 0], p[:, 1] - y0, y1 - p[:, 1]])
+        best = min(best, float(walls.min()))
+    return best
+
+
 def convex_hull(points: ArrayLike) -> FloatArray:
     """Counter-clockwise convex hull (monotone chain) of points (m, 2)."""
     pts = np.unique(np.asarray(points, dtype=float), axis=0)

@@ -159,12 +159,11 @@ class SimTick(Message):
 @dataclass(frozen=True, kw_only=True)
 class TickDone(Message):
     """Lockstep answer: the controller has published every command for tick ``step``;
-    ``commands`` is how many commands it has published in all so far; ``arrest`` whether the
-    object is arrested (so the sim applies it in the same tick, not when the event arrives)."""
+    ``commands`` is how many commands it has published in all so far. (The sim learns nothing
+    else from the controller: no "arrest" switch, the physics decides whether it holds.)"""
 
     step: int = field(default=0, metadata={"min": 0})
     commands: int = field(default=0, metadata={"min": 0})
-    arrest: bool = False  # the mission has arrested the object (the sim stops its script)
 
     TYPE: ClassVar[str] = "fleet.TickDone"
 

@@ -20,12 +20,15 @@ class WorldCheck:
 
     ``min_clearance`` is min over robot pairs of centre distance - r_i - r_j (m);
     ``object_penetration`` the deepest robot overlap with the object (m, 0 if none);
-    ``obstacle_contacts`` the robot ids touching a static obstacle or wall.
+    ``obstacle_contacts`` the robot ids touching a static obstacle or wall;
+    ``object_clearance`` the object polygon's distance to obstacles and walls (m, negative when
+    it overlaps one or leaves the room).
     """
 
     min_clearance: float
     object_penetration: float
     obstacle_contacts: tuple[str, ...]
+    object_clearance: float = float("inf")
 
 
 class World(Protocol):
@@ -63,12 +66,17 @@ class World(Protocol):
         """True world-frame (vx, vy, wz) of the object frame origin."""
         ...
 
-    def arrest(self) -> None:
-        """The object is compromised: its own drive switches off, it moves only when pushed."""
+    @property
+    def object_alive(self) -> bool:
+        """Whether the object's own drive is still on. It goes limp ("compromised": it moves
+        only when pushed) by itself, after fighting a hold or a wall for a while
+        (``object.motion.give_up_after``); nothing the controller says changes that."""
         ...
 
     @property
-    def arrested(self) -> bool: ...
+    def object_gave_up_at(self) -> float | None:
+        """Sim time (s) the object went limp, None while it is alive."""
+        ...
 
     def check(self) -> WorldCheck:
         """Safety figures of the current true state."""

@@ -17,6 +17,38 @@ from controller.config import MotionSection
 from controller.geometry import wrap_angle
 
 
+@dataclass
+class GiveUp:
+    """When the live object goes limp: after ``after`` seconds in a row of being thwarted (its
+    velocity off its drive's target by more than half the target speed, and by more than
+    ``slack`` m/s), as a held or pinned object is. The world decides this from its own physics,
+    never from what the controller declares. ``after`` 0: it never gives up."""
+
+    after: float
+    slack: float = 0.02  # m/s
+    thwarted_for: float = 0.0
+    gave_up_at: float | None = None
+
+    @property
+    def alive(self) -> bool:
+        return self.gave_up_at is None
+
+    def update(self, t: float, dt: float, target: np.ndarray, actual: np.ndarray) -> bool:
+        """Account ``dt`` seconds ending at ``t`` with target and actual world velocities (vx,
+        vy, ...); returns whether the object is still alive."""
+        if not self.alive or self.after <= 0:
+            return self.alive
+        off = float(np.hypot(*(np.asarray(actual[:2]) - np.asarray(target[:2]))))
+        speed = float(np.hypot(*np.asarray(target[:2])))
+        if off > max(0.5 * speed, self.slack):
+            self.thwarted_for += dt
+            if self.thwarted_for >= self.after:
+                self.gave_up_at = t
+        else:
+            self.thwarted_for = 0.0
+        return self.alive
+
+
 @dataclass(frozen=True)
 class ObjectScript:
     motion: MotionSection

@@ -28,8 +28,11 @@ Modelling choices (each measured on this machine, see tests/test_sim_world.py):
   object's prisms carry 1 and robots ``object.contact_friction``.
 - **The live object** propels itself: its skids are frictionless and a force-limited tracker
   (``object.motion.max_force``; torque limited to that force times the radius of gyration) pushes
-  its centre of mass along ``ObjectScript.target_velocity``. ``arrest()`` switches the drive off and
-  the skid friction on: from then on it moves only when pushed.
+  its centre of mass along ``ObjectScript.target_velocity``. It keeps fighting a hold (or a wall)
+  until it has been thwarted for ``object.motion.give_up_after`` seconds in a row
+  (``sim_backend.motion.GiveUp``); then its drive switches off and the skid friction on: from then
+  on it is "compromised" and moves only when pushed. Nothing the controller declares changes the
+  object: the physics decides whether it is held.
 
 Poses are those of the polygon's own frame (not the centre of mass), so ``object.start`` places
 the polygon exactly as written.
@@ -48,7 +51,7 @@ from controller.config import FleetConfig
 from controller.geometry import wrap_angle
 from sim_backend.base import WorldCheck
 from sim_backend.ideal import check_discs
-from sim_backend.motion import ObjectScript
+from sim_backend.motion import GiveUp, ObjectScript
 
 GRAVITY = 9.81  # m/s^2
 
@@ -191,9 +194,9 @@ class PybulletWorld:
         self._build_static()
         self._build_object()
         self._build_robots()
-        self._arrested = False
         self._drive_target: tuple[float, float, float] | None = None
         self._script = ObjectScript(cfg.object.motion, cfg.object.start)
+        self._give_up = GiveUp(cfg.object.motion.give_up_after)
         self._read_state()
 
     # ------------------------------------------------------------------ construction
@@ -530,8 +533,12 @@ class PybulletWorld:
         return self._ids
 
     @property
-    def arrested(self) -> bool:
-        return self._arrested
+    def object_alive(self) -> bool:
+        return self._give_up.alive
+
+    @property
+    def object_gave_up_at(self) -> float | None:
+        return self._give_up.gave_up_at
 
     def set_command(self, robot_id: str, vx: float, vy: float, wz: float) -> None:
         """Body-frame velocity target (m/s, m/s, rad/s); a differential robot ignores vy."""
@@ -545,13 +552,19 @@ class PybulletWorld:
         """Advance by ``duration`` seconds (rounded to whole physics steps, at least one)."""
         n = max(1, int(round(duration / self.dt)))
         for _ in range(n):
-            if not self._arrested:
+            alive = self._give_up.alive
+            if alive:
                 if self._steps % self.control_every == 0 or self._drive_target is None:
                     self._update_drive_target()
                 self._drive_object()
             pb.stepSimulation(physicsClientId=self._cid)
             self._steps += 1
             self._read_object()
+            if alive and not self._give_up.update(
+                self.t, self.dt, np.asarray(self._drive_target), np.asarray(self._obj_com_vel)
+            ):
+                # it fought the hold (or the wall) long enough: drive off, floor friction on
+                self._set_floor_friction(self.cfg.object.floor_friction)
             if self._steps % self.control_every == 0:
                 self._read_robots(rebase=True)
         if self._steps % self.control_every != 0:
@@ -572,12 +585,6 @@ class PybulletWorld:
     def object_velocity(self) -> np.ndarray:
         """True world-frame (vx, vy, wz) of the object frame's origin (m/s, m/s, rad/s)."""
         return np.array(self._obj_state[3:])
-
-    def arrest(self) -> None:
-        """Switch the object's drive off and its floor friction on."""
-        if not self._arrested:
-            self._arrested = True
-            self._set_floor_friction(self.cfg.object.floor_friction)
 
     def check(self) -> WorldCheck:
         """Safety figures of the current true state."""

@@ -1,21 +1,43 @@
-"""CaptureMission: approach a moving object, close in on the capture points, arrest it (§3).
+"""CaptureMission: approach a moving object, close in to contact, hold it, arrest it (§3).
 
 Pure per-tick mission in the node's two stages. ``plan(view) -> Intent`` is a fixed, named
-sequence: the object pose the goals ride on, the goals (capture points, envelope images,
+sequence: the object pose the goals ride on, the goals (capture points, envelope stations,
 contact targets), detours around static obstacles (planned once), the targets and feed-forward
 of the current phase, the projective planner (Sharma Table I), then the phase logic
-(:func:`capture_phase`, a pure function). ``safety(view, intent)`` is the shared
-:class:`controller.mission.guard.SafetyStage`.
+(:func:`advance`, a pure function of the measured distances). ``safety(view, intent)`` is the
+shared :class:`controller.mission.guard.SafetyStage`.
 
-Phases: ``approach`` (chase each point's image on the convex envelope, then keep station there)
--> ``close_in`` (all robots on the envelope: every one moves to its contact point,
-point + (r + gap)·n) -> ``arrested`` (every robot within ``contact_tolerance`` of its contact
-point; the arrest event carries the arrival spread) -> ``done`` after a short settle.
+Phases:
+
+- ``approach``: every assigned robot chases its point's station on the convex envelope, aimed
+  where the object will be when the robot can get there (interception at full speed), then
+  keeps station;
+- ``close_in``: all robots on the envelope; each moves in to contact with its point, riding on
+  the object's estimated motion until it touches; a robot that touches stops chasing and holds
+  its contact target still in the world (chasing the estimated velocity of an object you push
+  runs away: each push moves it, which moves the estimate, which moves the robots), and picks
+  up the chase again if the object leaves it;
+- ``hold``: every robot touches the object (its estimated gap below ``contact_tolerance``):
+  the contact targets freeze in the world where the object is (a cage), each
+  ``preload_depth`` inside the surface, and the robots hold them with no feed-forward, while
+  the live object still tries to move. A held robot's motor resists up to its ``max_force``;
+  one that cannot reach its target (the object is there) pushes the small preload. Robots
+  that chased the object's estimated velocity while touching it would carry it away (each
+  push moves it, which moves the estimate, which moves them): the cage does not follow the
+  object. A robot that loses contact, or an object that moves more than ``hold_tolerance`` (any
+  vertex of its estimate), sends the fleet back to ``close_in``;
+- ``arrested``: the object stayed put through ``hold_s`` seconds of hold: the arrest event
+  (arrival spread, contacts, the displacement seen); the robots keep holding;
+- ``done`` after ``settle_s`` more seconds of hold (when the mission is the capture alone).
+
+The arrest is declared from contact and from the object staying put, both estimated; the dry
+run scores it against ground truth (``contact_gaps_at_arrest_m``, ``hold_displacement_m``), and
+the stand-in world never stops the object because the controller declared anything.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -28,43 +50,62 @@ from controller.planning.approach import (
     STATION_GAP,
     PlannerParams,
     envelope,
+    interception_times,
     plan_velocities,
     ray_first_hit,
     ray_to_convex,
     separate_stations,
 )
 
+CLOSED = (Phase.HOLD, Phase.ARRESTED, Phase.DONE)  # robots in contact, preloading
+
 
 @dataclass(frozen=True)
 class CaptureSettings:
     """The capture mission's tuning constants, in one place (SI units).
 
-    ``contact_gap``: gap (m) between a robot's disc and the surface at its contact target;
-    ``settle_s``: how long (s) the arrested fleet stays still before the mission is done;
-    ``waypoint_reached``: distance (m) at which a detour waypoint counts as reached;
-    ``detour_clearance``: extra clearance (m) beyond the robot radius when testing whether the
-    straight line to a station crosses an obstacle; ``detour_samples``: points tested on it;
-    ``detour_spacing``: spacing (m) of a detour's waypoints. The ``[approach]`` section gives
-    the tolerances, the timeout and the planner's parameters.
+    From ``[approach]``: the tolerances, ``hold_s``, ``preload_depth``, the timeout and the
+    interception horizon. Internal: ``settle_s`` (s the arrested fleet keeps holding before a
+    capture-only mission is done); ``release_factor`` (a robot in hold whose gap exceeds this
+    many contact tolerances lost contact); ``creep_gap`` (m: closer than this estimated gap to
+    the surface a robot stops riding on the object's estimated motion and creeps in: the
+    estimate of an object being pushed is what the pushing moves); ``station_gap`` (m between a
+    contact target and the
+    surface while closing in); ``waypoint_reached`` (m at which a detour waypoint counts as
+    reached); ``detour_clearance`` (m beyond the robot radius when testing whether the straight
+    line to a station crosses an obstacle), ``detour_samples`` (points tested on it),
+    ``detour_spacing`` (m between a detour's waypoints); ``speed_margin`` (the share of its
+    top speed a robot plans an interception with).
     """
 
-    contact_gap: float = 0.015
+    contact_tolerance: float = 0.015
+    envelope_tolerance: float = 0.08
+    hold_s: float = 2.0
+    hold_tolerance: float = 0.03
+    preload_depth: float = 0.0
+    timeout: float = 180.0
+    intercept_horizon: float = 8.0
     settle_s: float = 0.5
+    release_factor: float = 2.0
+    creep_gap: float = 0.03
+    station_gap: float = 0.0
     waypoint_reached: float = 0.15
     detour_clearance: float = 0.05
     detour_samples: int = 50
     detour_spacing: float = 0.6
-    envelope_tolerance: float = 0.08
-    contact_tolerance: float = 0.03
-    timeout: float = 180.0
+    speed_margin: float = 0.9
 
     @classmethod
     def from_config(cls, cfg: FleetConfig) -> CaptureSettings:
         ap = cfg.approach
         return cls(
-            envelope_tolerance=ap.envelope_tolerance,
             contact_tolerance=ap.contact_tolerance,
+            envelope_tolerance=ap.envelope_tolerance,
+            hold_s=ap.hold_s,
+            hold_tolerance=ap.hold_tolerance,
+            preload_depth=ap.preload_depth,
             timeout=ap.timeout,
+            intercept_horizon=ap.intercept_horizon,
         )
 
 
@@ -74,67 +115,141 @@ class Goals:
 
     points: np.ndarray
     normals: np.ndarray
-    images: np.ndarray  # stations on the convex envelope (approach)
-    contacts: np.ndarray  # disc centres touching the object (close in)
+    stations: np.ndarray  # on the convex envelope (approach)
+    touch: np.ndarray  # disc centres touching the surface (closing in)
+    preload: np.ndarray  # disc centres ``preload_depth`` inside it (hold)
 
 
 @dataclass(frozen=True)
-class PhaseStep:
-    """What :func:`capture_phase` decided this tick."""
+class Measures:
+    """What the phase logic reads each tick (estimates, SI units)."""
 
-    phase: str
+    t: float
+    dist: np.ndarray  # (M,) each assigned robot to its current target
+    preload: np.ndarray  # (M, 2) preload targets at the object's current estimate
+    gap: np.ndarray  # (M,) each assigned robot's disc to the object's surface (< 0: overlap)
+    polygon: np.ndarray  # (V, 2) the object's estimated polygon, world frame
+    detouring: bool
+
+
+@dataclass(frozen=True)
+class CaptureState:
+    """The capture's phase and what it remembers (immutable; :func:`advance` returns a new one)."""
+
+    phase: str = Phase.APPROACH
+    t0: float | None = None
+    contact_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    hold_t0: float | None = None
+    hold_polygon: np.ndarray | None = None
+    cage: np.ndarray | None = None  # (M, 2) world contact targets frozen at contact (NaN: none)
+    hold_displacement: float = 0.0
+    arrest_t: float | None = None
+    arrival_spread: float | None = None
+    escapes: int = 0
+    releases: int = 0
+
+
+@dataclass(frozen=True)
+class Step:
+    """The phase logic's answer for one tick."""
+
+    state: CaptureState
     events: list[Event]
-    contact_t: np.ndarray
-    arrest_t: float | None
-    arrival_spread: float | None
     arrest: bool = False
     done: bool = False
     failed: bool = False
     reason: str = ""
 
 
-def capture_phase(
-    phase: str,
-    t: float,
-    t0: float,
-    dist: np.ndarray,
-    detouring: bool,
-    contact_t: np.ndarray,
-    arrest_t: float | None,
-    arrival_spread: float | None,
-    s: CaptureSettings,
-) -> PhaseStep:
-    """The capture's phase logic, pure: given the distances (M,) of the assigned robots to
-    their current targets at time ``t`` (s), the next phase and its events."""
+def advance(st: CaptureState, m: Measures, s: CaptureSettings) -> Step:
+    """The capture's phase logic, pure: the next state and its events."""
     events: list[Event] = []
-    contact_t = contact_t.copy()
-    arrest = done = failed = False
-    reason = ""
+    arrest = False
 
-    def go(p: str) -> str:
-        events.append(("phase", {"phase": p, "t": t}))
-        return p
+    def go(state: CaptureState, phase: str) -> CaptureState:
+        events.append(("phase", {"phase": str(phase), "t": m.t}))
+        return replace(state, phase=phase)
 
-    if phase == Phase.APPROACH and np.all(dist < s.envelope_tolerance) and not detouring:
-        phase = go(Phase.CLOSE_IN)
-    elif phase == Phase.CLOSE_IN:
-        arrived = dist < s.contact_tolerance
-        contact_t[arrived & np.isnan(contact_t)] = t
-        if np.all(arrived):
-            arrest_t = t
-            arrival_spread = float(np.nanmax(contact_t) - np.nanmin(contact_t))
-            phase = go(Phase.ARRESTED)
-            arrest = True
-            events.append(("arrest", {"t": t, "arrival_spread_s": arrival_spread}))
-    elif phase == Phase.ARRESTED and arrest_t is not None and t - arrest_t >= s.settle_s:
-        phase = go(Phase.DONE)
-    done = phase == Phase.DONE  # stays done (a reader may miss one tick)
-    if phase in (Phase.APPROACH, Phase.CLOSE_IN) and t - t0 > s.timeout:
-        phase = go(Phase.FAILED)
-        failed, reason = True, Reason.TIMEOUT
-    return PhaseStep(
-        phase, events, contact_t, arrest_t, arrival_spread, arrest, done, failed, reason
+    if st.phase == Phase.APPROACH:
+        if np.all(m.dist < s.envelope_tolerance) and not m.detouring:
+            st = go(st, Phase.CLOSE_IN)
+    elif st.phase == Phase.CLOSE_IN:
+        touching = m.gap < s.contact_tolerance
+        contact_t = st.contact_t.copy()
+        contact_t[touching & np.isnan(contact_t)] = m.t
+        st = replace(st, contact_t=contact_t, cage=_recage(st.cage, touching, m.preload))
+        if np.all(touching):
+            st = replace(st, hold_t0=m.t, hold_polygon=m.polygon, hold_displacement=0.0)
+            st = go(st, Phase.HOLD)
+    elif st.phase in CLOSED:
+        st, arrest = _hold(st, m, s, go, events)
+    done = st.phase == Phase.DONE
+    failed, reason = False, ""
+    if st.phase in (Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD) and m.t - st.t0 > s.timeout:
+        reason = Reason.ESCAPED if st.escapes else Reason.TIMEOUT
+        st = go(st, Phase.FAILED)
+        failed = True
+        events.append(
+            ("failure", {"reason": str(reason), "t": m.t, "detail": _timeout_detail(st, m, s)})
+        )
+    return Step(st, events, arrest, done, failed, reason)
+
+
+def _recage(cage: np.ndarray | None, touching: np.ndarray, preload: np.ndarray) -> np.ndarray:
+    """A touching robot holds still where it touched; one the object has left closes in again."""
+    out = np.full_like(preload, np.nan) if cage is None else cage.copy()
+    new = touching & np.isnan(out[:, 0])
+    out[new] = preload[new]
+    out[~touching] = np.nan
+    return out
+
+
+def _hold(st: CaptureState, m: Measures, s: CaptureSettings, go, events) -> tuple:
+    """Hold, arrested, done: contact kept and the object still, or back to closing in."""
+    moved = float(np.max(np.linalg.norm(m.polygon - st.hold_polygon, axis=1)))
+    touching = m.gap < s.contact_tolerance
+    st = replace(
+        st,
+        hold_displacement=max(st.hold_displacement, moved),
+        cage=_recage(st.cage, touching, m.preload),
     )
+    if np.any(m.gap > s.release_factor * s.contact_tolerance):
+        events.append(("contact_lost", {"t": m.t, "gaps_m": m.gap.round(4).tolist()}))
+        return go(replace(st, releases=st.releases + 1, cage=None), Phase.CLOSE_IN), False
+    if moved > s.hold_tolerance and st.phase == Phase.HOLD:
+        events.append(("escape", {"t": m.t, "displacement_m": moved}))
+        return go(replace(st, escapes=st.escapes + 1, cage=None), Phase.CLOSE_IN), False
+    if st.phase == Phase.HOLD and m.t - st.hold_t0 >= s.hold_s and np.all(touching):
+        spread = float(np.nanmax(st.contact_t) - np.nanmin(st.contact_t))
+        st = go(replace(st, arrest_t=m.t, arrival_spread=spread), Phase.ARRESTED)
+        events.append(
+            (
+                "arrest",
+                {
+                    "t": m.t,
+                    "arrival_spread_s": spread,
+                    "hold_s": m.t - st.hold_t0,
+                    "hold_displacement_m": st.hold_displacement,
+                    "gaps_m": m.gap.round(4).tolist(),
+                },
+            )
+        )
+        return st, True
+    if st.phase == Phase.ARRESTED and m.t - st.arrest_t >= s.settle_s:
+        return go(st, Phase.DONE), False
+    return st, False
+
+
+def _timeout_detail(st: CaptureState, m: Measures, s: CaptureSettings) -> str:
+    if st.phase == Phase.APPROACH:
+        far = int(np.sum(m.dist >= s.envelope_tolerance))
+        return f"{far} robots still {np.max(m.dist):.2f} m from their stations after {s.timeout} s"
+    if st.phase == Phase.CLOSE_IN:
+        return (
+            f"{int(np.sum(m.gap >= s.contact_tolerance))} robots not in contact (gaps up to "
+            f"{np.max(m.gap):.3f} m); {st.escapes} escapes, {st.releases} contacts lost"
+        )
+    return f"hold never completed: {st.escapes} escapes, {st.releases} contacts lost"
 
 
 @dataclass
@@ -149,7 +264,6 @@ class CaptureMission:
     cfg: FleetConfig
     rng: np.random.Generator
     settings: CaptureSettings | None = None
-    phase: str = Phase.APPROACH
     guard: SafetyStage | None = None
     waypoints: dict[int, list[np.ndarray]] = field(default_factory=dict)
 
@@ -177,12 +291,13 @@ class CaptureMission:
         )
         self.assigned = np.zeros(self.n, bool)
         self.assigned[self.assignment] = True
-        self.t0: float | None = None
+        self.state = CaptureState(contact_t=np.full(len(self.points), np.nan))
         self.heading: np.ndarray | None = None
-        self.contact_t = np.full(len(self.points), np.nan)
-        self.arrest_t: float | None = None
-        self.arrival_spread: float | None = None
         self._detours_planned = False
+
+    @property
+    def phase(self) -> str:
+        return self.state.phase
 
     # --- stage 1: the pose the goals ride on ------------------------------------------------
     def goal_pose(self, view: FleetView) -> np.ndarray:
@@ -196,22 +311,23 @@ class CaptureMission:
 
     # --- stage 2: the goals -------------------------------------------------------------------
     def goals(self, pose: np.ndarray) -> Goals:
-        """World capture points, normals, envelope images and contact targets (M, 2 each)."""
+        """World capture points, normals, envelope stations and contact targets (M, 2 each)."""
         pts = geometry.transform(self.points, pose)
         nrm = self.normals @ geometry.rot(float(pose[2])).T
         world = geometry.transform(self.object_poly, pose)
         img = ray_to_convex(pts, nrm, envelope(world, self.cfg.approach.envelope_margin))
         r = self.radii[self.assignment]
-        contact = pts + (r + self.s.contact_gap)[:, None] * nrm
         # a ray out of a deep notch crosses the object's own arm before it leaves the hull:
-        # keep the image on the free part of the ray (the robot waits inside the notch)
+        # keep the station on the free part of the ray (the robot waits inside the notch)
         free = ray_first_hit(pts, nrm, world) - r - STATION_GAP
         out = np.minimum(np.sum((img - pts) * nrm, axis=1), free)
-        out = separate_stations(pts, nrm, out, r, self.s.contact_gap)
-        return Goals(pts, nrm, pts + nrm * out[:, None], contact)
+        out = separate_stations(pts, nrm, out, r, self.s.station_gap)
+        touch = pts + (r + self.s.station_gap)[:, None] * nrm
+        preload = pts + (r - self.s.preload_depth)[:, None] * nrm
+        return Goals(pts, nrm, pts + nrm * out[:, None], touch, preload)
 
     # --- stage 3: detours around static obstacles (once) ----------------------------------
-    def plan_detours(self, centers: np.ndarray, images: np.ndarray) -> None:
+    def plan_detours(self, centers: np.ndarray, stations: np.ndarray) -> None:
         """Robot routes (A*) for robots whose straight line to their station is blocked."""
         from controller.planning.roadmap import RobotRoadmap
 
@@ -220,7 +336,7 @@ class CaptureMission:
         for m, i in enumerate(self.assignment):
             r = self.radii[i] + self.s.detour_clearance
             grown = [envelope(p, r, 8) for p in self.obstacles]
-            seg = np.linspace(centers[i], images[m], self.s.detour_samples)
+            seg = np.linspace(centers[i], stations[m], self.s.detour_samples)
             if any(geometry.points_in_polygon(seg, g).any() for g in grown):
                 blocked.append((m, i))
         if not blocked:
@@ -230,25 +346,42 @@ class CaptureMission:
             self.cfg.bounds_array(), self.obstacles, rr, self.cfg.route.resolution
         )
         for m, i in blocked:
-            res = rm.plan(centers[i], images[m], subgoal_spacing=self.s.detour_spacing)
+            res = rm.plan(centers[i], stations[m], subgoal_spacing=self.s.detour_spacing)
             if res.ok:
                 self.waypoints[i] = [w[:2] for w in res.subgoals[:-1]]
 
     # --- stage 4: targets and feed-forward of the phase --------------------------------------
+    def point_velocity(self, view: FleetView, pose: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        """World velocities (M, 2) of points riding on the object (its twist at them)."""
+        ovel = np.zeros(3) if view.object_velocity is None else np.asarray(view.object_velocity)
+        rel = xy - pose[:2]
+        return ovel[:2] + ovel[2] * np.stack([-rel[:, 1], rel[:, 0]], 1)
+
     def targets(
         self, view: FleetView, pose: np.ndarray, goals: Goals
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Goal positions (N, 2), goal velocities (N, 2) and the assigned robots' current
-        targets (M, 2): stations while approaching, contacts after; detour waypoints first."""
+        targets (M, 2): stations while approaching, aimed at where the object will be when the
+        robot can get there; contacts after; preload targets once in contact; detour waypoints
+        first."""
         centers = view.poses[:, :2]
         a = self.assignment
-        tgt = goals.images if self.phase == Phase.APPROACH else goals.contacts
+        phase = self.state.phase
+        tgt = goals.stations if phase == Phase.APPROACH else goals.touch
+        vel = self.point_velocity(view, pose, tgt)
+        if phase != Phase.APPROACH:  # creep the last centimetres, no feed-forward
+            vel[self.gaps(view) < self.s.creep_gap] = 0.0
+        cage = self.state.cage
+        if phase != Phase.APPROACH and cage is not None:  # touching: still, no feed-forward
+            caged = ~np.isnan(cage[:, 0])
+            tgt, vel = np.where(caged[:, None], cage, tgt), np.where(caged[:, None], 0.0, vel)
         goal = centers.copy()
         gvel = np.zeros((self.n, 2))
-        ovel = np.zeros(3) if view.object_velocity is None else np.asarray(view.object_velocity)
-        goal[a] = tgt
-        rel = tgt - pose[:2]
-        gvel[a] = ovel[:2] + ovel[2] * np.stack([-rel[:, 1], rel[:, 0]], 1)
+        goal[a], gvel[a] = tgt, vel
+        if phase == Phase.APPROACH:
+            speed = self.s.speed_margin * self.max_speed[a]
+            t = interception_times(centers[a], tgt, vel, speed, self.s.intercept_horizon)
+            goal[a] = tgt + vel * np.diag(t)[:, None]
         for i, wps in list(self.waypoints.items()):
             while wps and np.linalg.norm(centers[i] - wps[0]) < self.s.waypoint_reached:
                 wps.pop(0)
@@ -266,11 +399,9 @@ class CaptureMission:
         """Sharma Table I velocities (N, 2): robots closing in may reach the object."""
         polys = self.obstacles + [geometry.transform(self.object_poly, pose)]
         avoid = np.ones((self.n, len(polys)), bool)
-        if self.phase != Phase.APPROACH:
+        if self.state.phase != Phase.APPROACH:
             avoid[self.assignment, -1] = False
         active = self.assigned & ~view.stale & view.present
-        if self.phase == Phase.ARRESTED:
-            active[:] = False
         if self.heading is None:
             th = view.poses[:, 2]
             self.heading = np.stack([np.cos(th), np.sin(th)], 1)
@@ -287,61 +418,76 @@ class CaptureMission:
             self.params,
             self.rng,
         )
-        if self.phase == Phase.ARRESTED:
-            vel[self.assignment] = 0.0
         return vel
+
+    # --- stage 6: what the phase logic reads ---------------------------------------------------
+    def gaps(self, view: FleetView) -> np.ndarray:
+        """Estimated gaps (M,) m between each assigned robot's disc and the object."""
+        xy = view.poses[self.assignment, :2]
+        world = geometry.transform(self.object_poly, np.asarray(view.object_pose, float))
+        return geometry.polygon_signed_distance(xy, world) - self.radii[self.assignment]
+
+    def measures(self, view: FleetView, tgt: np.ndarray, goals: Goals) -> Measures:
+        xy = view.poses[self.assignment, :2]
+        world = geometry.transform(self.object_poly, np.asarray(view.object_pose, float))
+        gap = self.gaps(view)
+        dist = np.linalg.norm(xy - tgt, axis=1)
+        return Measures(view.t, dist, goals.preload, gap, world, bool(self.waypoints))
+
+    def _caged(self) -> np.ndarray | None:
+        """Robots holding a frozen contact target (they keep their heading)."""
+        cage = self.state.cage
+        if cage is None or self.state.phase == Phase.APPROACH:
+            return None
+        out = np.zeros(self.n, bool)
+        out[self.assignment] = ~np.isnan(cage[:, 0])
+        return out
 
     # --- the two stages the node runs ---------------------------------------------------------
     def plan(self, view: FleetView) -> Intent:
         zero = np.zeros((self.n, 2))
         if view.object_pose is None or view.estop:
-            return Intent(zero, self.phase, stop=True)
+            return Intent(zero, self.state.phase, stop=True)
         events: list[Event] = []
-        if self.t0 is None:
-            self.t0 = view.t
-            events.append(("phase", {"phase": self.phase, "t": view.t}))
-        holding = self.phase == Phase.ARRESTED  # the fleet stays still once arrested
+        if self.state.t0 is None:
+            self.state = replace(self.state, t0=view.t)
+            events.append(("phase", {"phase": str(self.state.phase), "t": view.t}))
         pose = self.goal_pose(view)
         goals = self.goals(pose)
         if not self._detours_planned:
-            self.plan_detours(view.poses[:, :2], goals.images)
+            self.plan_detours(view.poses[:, :2], goals.stations)
         goal, gvel, tgt = self.targets(view, pose, goals)
         vel = self.projective(view, goal, gvel, pose)
-        dist = np.linalg.norm(view.poses[self.assignment, :2] - tgt, axis=1)
-        step = capture_phase(
-            self.phase,
-            view.t,
-            self.t0,
-            dist,
-            bool(self.waypoints),
-            self.contact_t,
-            self.arrest_t,
-            self.arrival_spread,
-            self.s,
-        )
-        if step.arrest:
-            contacts = [
-                {"robot": view.ids[i], "point": [float(x) for x in p]}
-                for i, p in zip(self.assignment, goals.points, strict=True)
-            ]
-            for kind, data in step.events:
-                if kind == "arrest":
-                    data["contacts"] = contacts
-        self.phase = step.phase
-        self.contact_t, self.arrest_t = step.contact_t, step.arrest_t
-        self.arrival_spread = step.arrival_spread
-        hold = np.ones(self.n, bool) if holding else None
+        m = self.measures(view, tgt, goals)
+        step = advance(self.state, m, self.s)
+        self.state = step.state
+        for kind, data in step.events:
+            if kind == "arrest":
+                data["contacts"] = [
+                    {"robot": view.ids[i], "point": [float(x) for x in p]}
+                    for i, p in zip(self.assignment, goals.points, strict=True)
+                ]
+        closed = self.state.phase in CLOSED
         return Intent(
             vel,
-            self.phase,
+            self.state.phase,
             events + step.events,
             object_pose=pose,
-            touch=self.assigned if self.phase != Phase.APPROACH else None,
-            hold=hold,
+            touch=self.assigned if self.state.phase != Phase.APPROACH else None,
+            # a caging robot's barrier never pushes it off the object's estimate: the physics
+            # keeps it out; it holds its ground
+            overlap=float(self.radii.max()) if closed else 0.0,
+            cage=closed,
+            hold=self._caged(),
             done=step.done,
             failed=step.failed,
             reason=step.reason,
             arrest=step.arrest,
+            progress={
+                "phase": str(self.state.phase),
+                "max_distance_m": float(np.max(m.dist)),
+                "max_gap_m": float(np.max(m.gap)),
+            },
         )
 
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
@@ -350,9 +496,13 @@ class CaptureMission:
 
     def summary(self) -> dict[str, Any]:
         assert self.guard is not None
+        st = self.state
         return {
-            "phase": str(self.phase),
-            "arrival_spread_s": self.arrival_spread,
-            "arrest_time_s": self.arrest_t,
+            "phase": str(st.phase),
+            "arrival_spread_s": st.arrival_spread,
+            "arrest_time_s": st.arrest_t,
+            "hold_displacement_estimated_m": st.hold_displacement if st.hold_t0 else None,
+            "escapes": st.escapes,
+            "contacts_lost": st.releases,
             "infeasible_filter_calls": self.guard.counters.infeasible,
         }

@@ -66,6 +66,7 @@ class SafetyStage:
             failed=intent.failed,
             arrest=intent.arrest,
             reason=intent.reason,
+            progress=intent.progress,
         )
         if view.estop or intent.stop:
             self.v_prev[:] = 0.0
@@ -77,8 +78,16 @@ class SafetyStage:
             exempt[:, -1] = intent.touch
         stale = view.stale | ~view.present
         motion = [None] * len(self.obstacles) + [view.object_velocity]
+        overlap = np.full(self.n, intent.overlap)
         res = self.filter.filter(
-            view.poses[:, :2], vel, polys, exempt=exempt, stale=stale, motion=motion
+            view.poses[:, :2],
+            vel,
+            polys,
+            exempt=exempt,
+            stale=stale,
+            motion=motion,
+            overlap=overlap,
+            hold=intent.touch if intent.cage else None,
         )
         if res.stopped.any():
             self.counters.infeasible += 1
@@ -86,6 +95,10 @@ class SafetyStage:
             out.events.append(("safety_stop", {"robots": robots}))
         self.v_prev = res.velocities
         cmds = track_reversible(view.poses, res.velocities, self.limits)
+        if intent.steady is not None:
+            # a differential robot holding a contact resists sideways with its tyres and along
+            # its axis with its motor; turning toward a few mm of error only lets go
+            cmds[intent.steady, 2] = 0.0
         if intent.hold is not None:
             cmds[intent.hold] = 0.0
         cmds[stale] = 0.0

@@ -82,7 +82,11 @@ def track_velocity(
 
 
 def track_reversible(
-    poses: np.ndarray, v_world: np.ndarray, limits: RobotLimits, heading_gain: float = 4.0
+    poses: np.ndarray,
+    v_world: np.ndarray,
+    limits: RobotLimits,
+    heading_gain: float = 4.0,
+    turn_deadband: float = 0.03,
 ) -> np.ndarray:
     """Like :func:`controller.mission.track_velocity`, but a differential robot may drive
     backwards: it aligns its axis (either way) with the desired velocity and drives with the
@@ -97,7 +101,9 @@ def track_reversible(
     body = world_to_body(th, v)
     err = np.arctan2(body[:, 1], body[:, 0])
     err = np.where(err > np.pi / 2, err - np.pi, np.where(err < -np.pi / 2, err + np.pi, err))
-    moving = speed > 0.01
+    # below ``turn_deadband`` m/s a differential robot does not turn (only drives along its
+    # axis): turning toward a few mm/s of noise makes it spin in place against its contact
+    moving = speed > turn_deadband
     wz = np.where(moving, heading_gain * err, 0.0)
     fwd = body[:, 0] * np.abs(np.cos(err))
     fwd = np.clip(fwd, -limits.max_speed[diff], limits.max_speed[diff])

@@ -81,12 +81,16 @@ class Intent:
     events: list[Event] = field(default_factory=list)
     object_pose: np.ndarray | None = None
     touch: np.ndarray | None = None
+    overlap: float = 0.0  # m a ``touch`` robot's disc may overlap the object's estimate
+    cage: bool = False  # ``touch`` robots hold their ground: they never yield to the object
+    steady: np.ndarray | None = None  # (N,) robots that must not turn (a caging diff robot)
     hold: np.ndarray | None = None
     stop: bool = False
     done: bool = False
     failed: bool = False
     reason: str = ""
     arrest: bool = False
+    progress: dict[str, Any] = field(default_factory=dict)  # for the progress line
 
 
 @dataclass
@@ -100,6 +104,7 @@ class MissionOutput:
     failed: bool = False
     arrest: bool = False
     reason: str = ""
+    progress: dict[str, Any] = field(default_factory=dict)
 
 
 class Mission(Protocol):

@@ -277,3 +277,27 @@ def ray_first_hit(origins: np.ndarray, dirs: np.ndarray, poly: np.ndarray) -> np
         u = (ap[..., 0] * dirs[:, None, 1] - ap[..., 1] * dirs[:, None, 0]) / den
     hit = (np.abs(den) > 1e-12) & (u >= 0) & (u <= 1) & (t > 1e-6)
     return np.where(hit, t, np.inf).min(axis=1)
+
+
+def interception_times(
+    robots: np.ndarray,
+    targets: np.ndarray,
+    target_velocity: np.ndarray,
+    speed: np.ndarray,
+    horizon: float,
+) -> np.ndarray:
+    """Earliest times (s) at which robots (N, 2) at ``speed`` (N,) m/s can meet targets (M, 2)
+    moving at constant ``target_velocity`` (M, 2): the positive root of
+    ``|d + v T| = s T`` with ``d`` the target's offset; ``horizon`` where a target outruns the
+    robot (or is further than that). Returns (M, N)."""
+    d = targets[:, None, :] - robots[None, :, :]  # (M, N, 2)
+    v = np.broadcast_to(target_velocity[:, None, :], d.shape)
+    s2 = np.asarray(speed, float)[None, :] ** 2
+    a = np.sum(v * v, axis=-1) - s2
+    b = 2.0 * np.sum(d * v, axis=-1)
+    c = np.sum(d * d, axis=-1)
+    disc = b * b - 4.0 * a * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a)
+    ok = (a < -1e-12) & (disc >= 0) & np.isfinite(t) & (t >= 0)
+    return np.where(ok, np.minimum(t, horizon), horizon)

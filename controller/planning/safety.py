@@ -5,7 +5,10 @@ Decision variable u (2N,), world-frame velocities (m/s). Minimise |u - u_nom|^2 
 - robot-robot: 2 d_ij . (u_i - u_j) >= -gamma * h_ij, h_ij = |d_ij|^2 - (r_i + r_j + margin)^2;
 - robot-polygon (obstacles, the object, stale robots as discs): n . u_i >= -gamma * (dist - r -
   margin), n the outward direction from the polygon's closest point;
-- world bounds and speed: a box on each component.
+- world bounds and speed: a box on each component (the walls and ``max_speed``) and the two
+  diagonals, ``|u_x ± u_y| / √2 ≤ max_speed``: an octagon around the speed disc, so a robot
+  keeps at least its full speed in every direction (a box of ``max_speed / √2`` would cut it to
+  71 % along the axes); the tracking law and the agent clamp the 8 % the corners exceed.
 
 The sparsity pattern is built once for N robots and P polygons; each call only updates values
 (``Ax``, ``q``, ``l``, ``u``) and warm-starts. Differential robots are filtered as single
@@ -72,9 +75,13 @@ class SafetyFilter:
         rb = npair + n * self.n_polygons + np.arange(2 * n)
         rows.append(rb)
         cols.append(np.arange(2 * n))
+        rd = npair + n * self.n_polygons + 2 * n + np.arange(2 * n)  # diagonals: 2 per robot
+        for k in range(2):
+            rows.append(rd)
+            cols.append(2 * np.repeat(np.arange(n), 2) + k)
         self._rows = np.concatenate(rows)
         self._cols = np.concatenate(cols)
-        self.m = npair + n * self.n_polygons + 2 * n
+        self.m = npair + n * self.n_polygons + 4 * n
         tag = sparse.csc_matrix(
             (np.arange(1, len(self._rows) + 1, dtype=float), (self._rows, self._cols)),
             shape=(self.m, 2 * n),
@@ -110,6 +117,8 @@ class SafetyFilter:
         exempt: np.ndarray | None = None,
         stale: np.ndarray | None = None,
         motion: list | None = None,
+        overlap: np.ndarray | None = None,
+        hold: np.ndarray | None = None,
     ) -> FilterResult:
         """Filter nominal world velocities (N, 2) at robot centres (N, 2).
 
@@ -118,7 +127,11 @@ class SafetyFilter:
         in on its own contact point: margin 0, never inside); ``stale`` robots are held at zero
         and the others avoid them. ``motion`` (one entry per polygon, None for static ones)
         gives a moving polygon's (vx, vy, wz) about its centroid: its barrier then holds
-        relative to that motion.
+        relative to that motion. ``overlap`` (N,) m lets an exempt robot's disc overlap the
+        polygon's estimate by that much (a robot preloading its contact pushes into it; the
+        physics stops it at the surface, the estimates may overlap by their noise). ``hold``
+        (N,) robots hold their ground against moving polygons: their barrier ignores the
+        polygon's motion (a robot caging the object must not yield to its push).
         """
         n, npoly = self.n, self.n_polygons
         stale = np.zeros(n, bool) if stale is None else np.asarray(stale, bool)
@@ -149,19 +162,25 @@ class SafetyFilter:
             # not enter it: margin 0 instead of the safety margin
             margin = self.margin
             if exempt is not None:
-                margin = np.where(exempt[:, k], 0.0, self.margin)
+                touch = 0.0 if overlap is None else -np.asarray(overlap, float)
+                margin = np.where(exempt[:, k], touch, self.margin)
             lo_poly[:, k] = -self.gamma * (sd - self.radii - margin)
             if motion is not None and k < len(motion) and motion[k] is not None:
                 vx, vy, wz = (float(v) for v in motion[k])
                 rel = c - geometry.centroid(poly)
                 v_c = np.stack([vx - wz * rel[:, 1], vy + wz * rel[:, 0]], 1)
-                lo_poly[:, k] += np.sum(nv * v_c, axis=1)  # ∇h·(v_i − v_poly) ≥ −γh
+                relative = np.sum(nv * v_c, axis=1)  # ∇h·(v_i − v_poly) ≥ −γh
+                if hold is not None:
+                    relative = np.where(hold, 0.0, relative)
+                lo_poly[:, k] += relative
         flat = nrm.reshape(-1, 2)
         vals += [flat[:, 0], flat[:, 1]]
         vals.append(np.ones(2 * n))
+        h = np.sqrt(0.5)
+        vals += [np.full(2 * n, h), np.tile([h, -h], n)]  # diagonals (u_x ± u_y) / √2
         ax = np.concatenate(vals)
         # box: speed and world bounds (stay in by gamma * distance to the wall)
-        vmax = np.repeat(self.max_speed / np.sqrt(2.0), 2)
+        vmax = np.repeat(self.max_speed, 2)
         lo_b = -vmax.copy()
         hi_b = vmax.copy()
         (x0, y0), (x1, y1) = self.bounds
@@ -174,9 +193,11 @@ class SafetyFilter:
         st = np.repeat(stale, 2)
         lo_b[st] = 0.0
         hi_b[st] = 0.0
+        diag = vmax.copy()
+        diag[st] = 0.0
         # stale robots: others see them as fixed; the pair row stays (u_stale = 0)
-        lo = np.concatenate([lo_pair, lo_poly.reshape(-1), lo_b])
-        hi = np.concatenate([np.full(len(lo_pair) + n * npoly, INF), hi_b])
+        lo = np.concatenate([lo_pair, lo_poly.reshape(-1), lo_b, -diag])
+        hi = np.concatenate([np.full(len(lo_pair) + n * npoly, INF), hi_b, diag])
         lo = np.minimum(lo, hi)
         q = -u_nom.reshape(-1).astype(float)
         if self._prob is None or not self.warm:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from controller import wire
+from controller import geometry, wire
 from controller.config import FleetConfig
 from controller.io.bus import Bus
 from controller.io.recorder import McapRecorder, config_metadata
@@ -31,14 +31,19 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class VerdictRules:
-    """The hardware contract a run is judged by (Robotarium's "will / will NOT run on hardware"):
-    the robot discs never overlap (gap ≥ ``min_robot_gap_m``), no robot enters the object deeper
-    than ``max_object_penetration_m`` (contact is allowed, a contact patch of a centimetre is the
-    solver's), no robot touches a static obstacle or a wall."""
+    """The hardware contract a run is judged by (Robotarium's "will / will NOT run on hardware"),
+    from ground truth: the robot discs never overlap (gap ≥ ``min_robot_gap_m``); no robot enters
+    the object deeper than ``max_object_penetration_m`` (contact is allowed, a contact patch of a
+    centimetre is the solver's); no robot touches a static obstacle or a wall; an arrested object
+    stays put (it moves at most ``max_hold_displacement_m``, any vertex, from the start of the
+    hold until transport begins: more is an escape); the object never overlaps an obstacle or
+    leaves the room by more than ``object_clearance_slack_m``."""
 
     min_robot_gap_m: float = 0.0
     max_object_penetration_m: float = 0.01
     max_obstacle_contacts: int = 0
+    max_hold_displacement_m: float = 0.05
+    object_clearance_slack_m: float = 0.01
 
 
 RULES = VerdictRules()
@@ -47,48 +52,129 @@ RULES = VerdictRules()
 def judge(figures: Mapping[str, Any], rules: VerdictRules = RULES) -> list[dict[str, Any]]:
     """The one verdict: what in a run's figures breaks the contract (an empty list: clean).
 
-    ``figures`` holds ``min_clearance_m`` (None: fewer than two robots or unknown),
-    ``max_object_penetration_m`` (None: unknown) and ``obstacle_contacts`` (robot ids): the keys
-    of ``fleet run --json`` and ``fleet replay --json``. Each failure is ``{reason, detail}``
-    with reason ``collision``, ``penetration`` or ``obstacle_contact``.
+    ``figures`` holds the keys of ``fleet run --json`` and ``fleet replay --json``:
+    ``min_clearance_m`` (None: fewer than two robots or unknown), ``max_object_penetration_m``,
+    ``obstacle_contacts`` (robot ids), ``hold_displacement_m`` and ``object_min_clearance_m``
+    (None: unknown). Each failure is ``{reason, detail}`` with reason ``collision``,
+    ``penetration``, ``obstacle_contact``, ``escaped`` or ``object_collision``.
     """
     out: list[dict[str, Any]] = []
+
+    def fail(reason: str, detail: str) -> None:
+        out.append({"reason": reason, "detail": detail})
+
     gap = figures.get("min_clearance_m")
     if gap is not None and gap < rules.min_robot_gap_m:
-        out.append({"reason": "collision", "detail": f"robot-robot gap {gap:.4g} m"})
+        fail("collision", f"robot-robot gap {gap:.4g} m")
     depth = figures.get("max_object_penetration_m")
     if depth is not None and depth > rules.max_object_penetration_m:
-        out.append({"reason": "penetration", "detail": f"a robot {depth:.4g} m inside the object"})
+        fail("penetration", f"a robot {depth:.4g} m inside the object")
     contacts = list(figures.get("obstacle_contacts") or [])
     if len(contacts) > rules.max_obstacle_contacts:
-        out.append({"reason": "obstacle_contact", "detail": f"robots {contacts} hit an obstacle"})
+        fail("obstacle_contact", f"robots {contacts} hit an obstacle or a wall")
+    moved = figures.get("hold_displacement_m")
+    if moved is not None and moved > rules.max_hold_displacement_m:
+        fail("escaped", f"the arrested object moved {moved:.3f} m (truth)")
+    clear = figures.get("object_min_clearance_m")
+    if clear is not None and clear < -rules.object_clearance_slack_m:
+        fail("object_collision", f"the object overlapped an obstacle or a wall by {-clear:.3f} m")
     return out
 
 
 @dataclass
 class Verdict:
-    """What the dry run measured against the hardware contract, accumulated over the run."""
+    """What the dry run measured against the hardware contract, accumulated over the run, with
+    the sim time each figure was reached (for the failure's ``t``)."""
 
     min_clearance_m: float = math.inf
     max_object_penetration_m: float = 0.0
     obstacle_contacts: set[str] = field(default_factory=set)
+    object_min_clearance_m: float = math.inf
     missed_ticks: int = 0
     watchdog_stops: int = 0
     clamped_commands: int = 0
     vy_dropped: int = 0
+    when: dict[str, float] = field(default_factory=dict)
 
-    def update(self, check) -> None:
-        self.min_clearance_m = min(self.min_clearance_m, check.min_clearance)
-        self.max_object_penetration_m = max(self.max_object_penetration_m, check.object_penetration)
+    def update(self, t: float, check) -> None:
+        if check.min_clearance < self.min_clearance_m:
+            self.min_clearance_m = check.min_clearance
+            self.when["collision"] = t
+        if check.object_penetration > self.max_object_penetration_m:
+            self.max_object_penetration_m = check.object_penetration
+            self.when["penetration"] = t
+        if set(check.obstacle_contacts) - self.obstacle_contacts:
+            self.when.setdefault("obstacle_contact", t)
         self.obstacle_contacts.update(check.obstacle_contacts)
+        if check.object_clearance < self.object_min_clearance_m:
+            self.object_min_clearance_m = check.object_clearance
+            self.when["object_collision"] = t
+
+
+class ArrestScore:
+    """The arrest scored from ground truth: each contact robot's true gap to the object when
+    the arrest is declared, and how far the object (any vertex) moves from the start of the
+    hold that led to it until transport begins."""
+
+    AFTER = {"route", "rearrange", "transport"}  # phases after which the object is carried
+
+    def __init__(self, cfg: FleetConfig) -> None:
+        self.poly = geometry.ensure_ccw(cfg.object_polygon())
+        self.radius = {r.id: r.radius for r in cfg.robots}
+        self.hold_start: np.ndarray | None = None
+        self.phase = ""
+        self.gaps: dict[str, float] | None = None
+        self.displacement: float | None = None
+        self.arrest_t: float | None = None
+        self.carried = False
+
+    def tick(self, t: float, out, world) -> None:
+        if out is None:
+            return
+        poly = geometry.transform(self.poly, world.object_pose())
+        if out.phase == "hold" and self.phase != "hold":
+            self.hold_start, self.displacement = poly, 0.0  # a new hold (after an escape too)
+        self.carried |= out.phase in self.AFTER
+        if self.hold_start is not None and not self.carried:
+            moved = float(np.max(np.linalg.norm(poly - self.hold_start, axis=1)))
+            self.displacement = max(self.displacement or 0.0, moved)
+        for kind, data in out.events:
+            if kind == "arrest" and self.arrest_t is None:
+                self.arrest_t = t
+                robots = [c["robot"] for c in data.get("contacts", [])]
+                self.gaps = {
+                    rid: float(
+                        geometry.polygon_signed_distance(world.robot_pose(rid)[None, :2], poly)[0]
+                        - self.radius[rid]
+                    )
+                    for rid in robots
+                }
+        self.phase = out.phase
 
 
 def _add(a: dict[str, int], b: dict[str, int]) -> dict[str, int]:
     return {k: a.get(k, 0) + b.get(k, 0) for k in a.keys() | b.keys()}
 
 
+def failure_of(result: Mapping[str, Any], verdict: Verdict, mission_failure: dict | None):
+    """The run's failure, ``{reason, t, detail}``, or None: the mission's own failure first,
+    then the first verdict failure, then a run that never finished."""
+    if mission_failure is not None:
+        return mission_failure
+    if result["verdict"]:
+        first = min(result["verdict"], key=lambda f: verdict.when.get(f["reason"], math.inf))
+        return {**first, "t": verdict.when.get(first["reason"])}
+    if not result.get("done"):
+        reason = "estop" if result.get("estop") else "timeout"
+        detail = f"sim time ran out ({result['sim_time_s']} s) in phase {result['mission_phase']}"
+        return {"reason": reason, "t": result["sim_time_s"], "detail": detail}
+    return None
+
+
 class DryRun:
     """The pybullet (or ideal) dry run of a config, end to end over zenoh."""
+
+    progress_every = 5.0  # sim seconds between progress lines on stderr
 
     def __init__(
         self,
@@ -104,16 +190,16 @@ class DryRun:
         self.gui = gui
         self.max_time = cfg.sim.max_time if max_time is None else max_time
         self.verdict = Verdict()
+        self.score = ArrestScore(cfg)
+        self.mission_failure: dict[str, Any] | None = None
+        self._next_progress = 0.0
 
     def run(self) -> dict[str, Any]:
         cfg = self.cfg
         wall0 = time.monotonic()
-        control_dt = 1.0 / cfg.fleet.rate_hz
         hub = make_hub(cfg, self.gui)
-        world = hub.world
         recorder = McapRecorder(self.out, cfg.fleet.name, cfg.log.flush_interval)
         recorder.metadata("fleet.config", config_metadata(cfg, f"run/{cfg.sim.backend}"))
-        arrested_at: list[float] = []
         result: dict[str, Any] = {}
         try:
             with (
@@ -126,90 +212,122 @@ class DryRun:
                     lease_s=cfg.fleet.liveliness_lease,
                 ) as robot_bus,
             ):
-                ctl_bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
-                node = ControllerNode(
-                    cfg,
-                    ctl_bus,
-                    self.mission,
-                    make_estimator(cfg),
-                    lossless_commands=True,
-                    extra_drops=recorder.drops,
-                    clock=time.perf_counter,
-                )
-                drivers, emulators = make_sim_drivers(cfg, hub)
-                commands_arrived = threading.Condition()
-                agents = [
-                    Agent(
-                        robot_bus,
-                        drv,
-                        AgentParams(r.id, cfg.fleet.name, cfg.fleet.cmd_ttl),
-                        commands_arrived,
-                    )
-                    for r, drv in zip(cfg.robots, drivers, strict=True)
-                ]
-                coord = LockstepCoordinator(
-                    robot_bus, hub, agents, control_dt, cfg.sim.tick_timeout, commands_arrived
-                )
-                ctl = ControllerLockstep(node, ctl_bus, wait_inputs=cfg.sim.tick_timeout)
-
-                def arrest() -> None:
-                    if not world.arrested:
-                        world.arrest()
-                        arrested_at.append(world.t)
-
-                coord.on_arrest = arrest
-                self._handshake(node, agents, coord)
-                ctl.thread.start()
-                try:
-                    while coord.t <= self.max_time:
-                        coord.tick()
-                        self.verdict.update(world.check())
-                        if ctl.error is not None:
-                            raise RuntimeError("controller loop failed") from ctl.error
-                        out = node.last_output
-                        if out is not None and (out.done or out.failed):
-                            break
-                        if cfg.sim.realtime:
-                            lag = coord.t - (time.monotonic() - wall0)
-                            if lag > 0:
-                                time.sleep(lag)
-                finally:
-                    ctl.stop.set()
-                    ctl.thread.join(timeout=10)
-                for a in agents:
-                    self.verdict.watchdog_stops += a.counters.watchdog_stops
-                    self.verdict.clamped_commands += a.counters.clamped
-                    self.verdict.vy_dropped += a.counters.vy_dropped
-                    a.close()
-                for e in emulators:
-                    e.stop()
-                self.verdict.missed_ticks = coord.counters.missed
-                out = node.last_output
-                summary = {**getattr(self.mission, "summary", dict)(), **node.timing_summary()}
-                result = {
-                    "phase": node.phase,
-                    "done": bool(out.done) if out else False,
-                    "failed": bool(out.failed) if out else False,
-                    "arrested": world.arrested,
-                    "arrest_time_s": arrested_at[0] if arrested_at else None,
-                    "arrival_spread_s": summary.get("arrival_spread_s"),
-                    "sim_time_s": round(coord.t, 4),
-                    "ticks": coord.counters.ticks,
-                    "node": dict(vars(node.counters)),
-                    "bad_payloads": ctl_bus.stats.total + robot_bus.stats.total,
-                    "drops": _add(node.drops(), robot_bus.drops()),
-                    "final_object_pose": [float(v) for v in world.object_pose()],
-                    "mission": summary,
-                }
+                result = self._run(hub, recorder, ctl_bus, robot_bus, wall0)
         finally:
-            world.close()
+            hub.world.close()
             recorder.close()
+        return self._finish(result, recorder, wall0)
+
+    def _run(self, hub, recorder, ctl_bus: Bus, robot_bus: Bus, wall0: float) -> dict[str, Any]:
+        cfg = self.cfg
+        ctl_bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
+        node = ControllerNode(
+            cfg,
+            ctl_bus,
+            self.mission,
+            make_estimator(cfg),
+            lossless_commands=True,
+            extra_drops=recorder.drops,
+            clock=time.perf_counter,
+        )
+        drivers, emulators = make_sim_drivers(cfg, hub)
+        commands_arrived = threading.Condition()
+        agents = [
+            Agent(
+                robot_bus,
+                drv,
+                AgentParams(r.id, cfg.fleet.name, cfg.fleet.cmd_ttl),
+                commands_arrived,
+            )
+            for r, drv in zip(cfg.robots, drivers, strict=True)
+        ]
+        coord = LockstepCoordinator(
+            robot_bus, hub, agents, 1.0 / cfg.fleet.rate_hz, cfg.sim.tick_timeout, commands_arrived
+        )
+        ctl = ControllerLockstep(node, ctl_bus, wait_inputs=cfg.sim.tick_timeout)
+        self._handshake(node, agents, coord)
+        ctl.thread.start()
+        try:
+            self._loop(coord, ctl, node, hub.world, wall0)
+        finally:
+            ctl.stop.set()
+            ctl.thread.join(timeout=10)
+        for a in agents:
+            self.verdict.watchdog_stops += a.counters.watchdog_stops
+            self.verdict.clamped_commands += a.counters.clamped
+            self.verdict.vy_dropped += a.counters.vy_dropped
+            a.close()
+        for e in emulators:
+            e.stop()
+        self.verdict.missed_ticks = coord.counters.missed
+        return self._summary(node, coord, ctl, hub.world, ctl_bus, robot_bus)
+
+    def _loop(self, coord, ctl, node: ControllerNode, world, wall0: float) -> None:
+        """Tick until the mission is done or failed, or sim time runs out."""
+        while coord.t <= self.max_time:
+            coord.tick()
+            self.verdict.update(coord.t, world.check())
+            if ctl.error is not None:
+                raise RuntimeError("controller loop failed") from ctl.error
+            out = node.last_output
+            self.score.tick(coord.t, out, world)
+            self._progress(coord.t, out, world)
+            if out is not None and out.failed:
+                self.mission_failure = _mission_failure(out, coord.t)
+            if out is not None and (out.done or out.failed):
+                break
+            if self.cfg.sim.realtime:
+                lag = coord.t - (time.monotonic() - wall0)
+                if lag > 0:
+                    time.sleep(lag)
+
+    def _progress(self, t: float, out, world) -> None:
+        """A progress line every few sim seconds: phase, distances, object speed."""
+        if t < self._next_progress or out is None:
+            return
+        self._next_progress = t + self.progress_every
+        p = out.progress
+        speed = float(np.hypot(*world.object_velocity()[:2]))
+        extra = " ".join(f"{k} {v:.3f}" for k, v in p.items() if isinstance(v, float))
+        log.info("t %6.1f s  %-9s %s  object %.2f m/s", t, out.phase, extra, speed)
+
+    def _summary(self, node, coord, ctl, world, ctl_bus: Bus, robot_bus: Bus) -> dict[str, Any]:
+        out = node.last_output
+        mission = {**getattr(self.mission, "summary", dict)(), **node.timing_summary()}
+        estimator = getattr(node.est, "log_summary", dict)()
+        return {
+            "mission_phase": node.phase,
+            "done": bool(out.done) if out else False,
+            "failed": bool(out.failed) if out else False,
+            "estop": bool(node.estop),
+            "arrest_declared": self.score.arrest_t is not None,
+            "arrest_time_s": self.score.arrest_t,
+            "arrival_spread_s": mission.get("arrival_spread_s"),
+            "contact_gaps_at_arrest_m": self.score.gaps,
+            "hold_displacement_m": self.score.displacement,
+            "object_gave_up_at_s": world.object_gave_up_at,
+            "sim_time_s": round(coord.t, 4),
+            "ticks": coord.counters.ticks,
+            "input_timeouts": ctl.lag_waits,
+            "node": dict(vars(node.counters)),
+            "bad_payloads": ctl_bus.stats.total + robot_bus.stats.total,
+            "drops": _add(node.drops(), robot_bus.drops()),
+            "estimator": estimator,
+            "final_object_pose": [float(v) for v in world.object_pose()],
+            "mission": mission,
+        }
+
+    def _finish(self, result: dict[str, Any], recorder, wall0: float) -> dict[str, Any]:
         v = self.verdict
+        inf = math.isinf
         result.update(
             {
-                "min_clearance_m": None if math.isinf(v.min_clearance_m) else v.min_clearance_m,
+                "min_clearance_m": None if inf(v.min_clearance_m) else v.min_clearance_m,
                 "max_object_penetration_m": v.max_object_penetration_m,
                 "obstacle_contacts": sorted(v.obstacle_contacts),
+                "object_min_clearance_m": None
+                if inf(v.object_min_clearance_m)
+                else v.object_min_clearance_m,
                 "missed_ticks": v.missed_ticks,
                 "watchdog_stops": v.watchdog_stops,
                 "clamped_commands": v.clamped_commands,
@@ -220,8 +338,13 @@ class DryRun:
             }
         )
         result["verdict"] = judge(result)
-        ok = result.get("done") and not result.get("failed") and not result["verdict"]
-        result["status"] = "ok" if ok else "failed"
+        failure = failure_of(result, v, self.mission_failure)
+        held = result.get("hold_displacement_m")
+        escaped = held is not None and held > RULES.max_hold_displacement_m
+        result["arrested"] = bool(result.get("arrest_declared")) and not escaped
+        result["failure"] = failure
+        result["status"] = "ok" if failure is None else "failed"
+        result["phase"] = "failed" if failure is not None else result.get("mission_phase")
         return result
 
     def _handshake(self, node: ControllerNode, agents, coord, timeout: float = 20.0) -> None:
@@ -240,3 +363,9 @@ class DryRun:
                     f"{up} of {len(agents)} robots came up; unmatched keys: {unmatched}"
                 )
             time.sleep(0.01)
+
+
+def _mission_failure(out, t: float) -> dict[str, Any]:
+    """The mission's own failure (its reason, and the detail of its ``failure`` event)."""
+    detail = next((d.get("detail", "") for k, d in out.events if k == "failure"), "")
+    return {"reason": out.reason or "failed", "t": t, "detail": detail}

@@ -23,7 +23,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 
 from controller import wire
@@ -72,8 +71,6 @@ class LockstepCoordinator:
         }
         self._seq = 0
         self._answered = -1
-        self.arrest_requested = False
-        self.on_arrest: Callable[[], None] | None = None  # the dry run arrests its world
         self._commands_due = 0
 
     def publishers_for_handshake(self) -> list:
@@ -132,7 +129,6 @@ class LockstepCoordinator:
                 return False
             self._answered = max(self._answered, item.msg.step)
             self._commands_due = max(self._commands_due, item.msg.commands)
-            self.arrest_requested = self.arrest_requested or item.msg.arrest
             if self._answered >= step:
                 return self._wait_commands(deadline)
 
@@ -170,8 +166,6 @@ class LockstepCoordinator:
         if not ok:
             self.counters.missed += 1
             log.warning("controller missed tick %d (t=%.2f s)", self.step_index, now)
-        if self.arrest_requested and self.on_arrest is not None:
-            self.on_arrest()  # before the step: the object stops with the robots' last stop
         for agent in self.agents:
             agent.handle_inputs(now)
             agent.enforce(now)

@@ -252,7 +252,6 @@ class ControllerNode:
                     seq=step,
                     step=step,
                     commands=self.counters.commands,
-                    arrest=self.arrested,
                 )
             )
 

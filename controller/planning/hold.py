@@ -1,0 +1,126 @@
+"""Can the robots hold the object? Holding capacity of a set of frictionless contacts under force
+limits, and the reinforcement of a capture set until it can hold.
+
+Form closure (Sharma et al. 2007, §2; ``controller.planning.capture``) says that *some* positive
+contact forces resist every disturbance; it says nothing of how large they must be. A set of
+points in closure whose moment arms are short can need several times the push it resists
+(seen: the GA's 4-point set on the L crate needs up to 32 N at a contact to resist a 4 N push),
+and velocity-controlled robots resist only up to their ``max_force``. The live object pushes
+with up to ``capture.hold_force`` N (and a torque of that force times its radius of gyration),
+so the cage holds only if, for every such disturbance, the contact-force LP
+
+    find f:  W f = -w,  0 ≤ f_i ≤ max_force_i        (W: the contacts' unit wrenches)
+
+is feasible. ``holding_capacity`` is the largest scale ``s`` for which every disturbance
+``s·w_d`` of a polytope around the disturbance set is resisted: one LP over all of them (HiGHS);
+``s ≥ 1`` holds. ``reinforce`` adds contact points (greedily, with a look-ahead of two) from the
+capture's candidate nodes until the set holds or no robots are left.
+
+Pure: arrays in, results out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linprog
+
+FloatArray = NDArray[np.float64]
+DIRECTIONS = 16  # force directions of the disturbance polytope (each with -τ, 0, +τ)
+MAX_SCALE = 100.0
+
+
+def contact_wrenches(points: FloatArray, normals: FloatArray, centroid: FloatArray) -> FloatArray:
+    """Unit wrenches (3, n) of robots pushing at ``points`` along ``-normals`` (outward normals),
+    moments about ``centroid``."""
+    f = -np.asarray(normals, float)
+    rel = np.asarray(points, float) - np.asarray(centroid, float)
+    return np.vstack([f.T, rel[:, 0] * f[:, 1] - rel[:, 1] * f[:, 0]])
+
+
+def disturbances(force: float, torque: float, directions: int = DIRECTIONS) -> FloatArray:
+    """Vertices (k, 3) of a polytope around {|F| ≤ force, |τ| ≤ torque}: ``directions`` forces
+    on a circle circumscribing the disc, each with -torque, 0 and +torque."""
+    ang = np.linspace(0.0, 2.0 * np.pi, directions, endpoint=False)
+    r = force / np.cos(np.pi / directions)
+    out = [[r * np.cos(a), r * np.sin(a), s * torque] for a in ang for s in (-1.0, 0.0, 1.0)]
+    return np.asarray(out, float)
+
+
+def holding_profile(wrenches: FloatArray, max_force: FloatArray, load: FloatArray) -> FloatArray:
+    """Per disturbance ``d`` the largest ``s_d`` (capped at ``MAX_SCALE``) such that ``s_d·load[d]``
+    is resisted by contact forces in ``[0, max_force]`` (0: that direction cannot be resisted at
+    all). The directions are independent, so one LP maximising their sum gives each its own."""
+    w = np.asarray(wrenches, float)
+    n = w.shape[1]
+    k = len(load)
+    if n == 0:
+        return np.zeros(k)
+    nv = k * n + k
+    a = np.zeros((3 * k, nv))
+    for d in range(k):
+        a[3 * d : 3 * d + 3, d * n : (d + 1) * n] = w
+        a[3 * d : 3 * d + 3, k * n + d] = load[d]
+    bounds = [(0.0, float(f)) for f in np.tile(np.asarray(max_force, float), k)]
+    bounds += [(0.0, MAX_SCALE)] * k
+    c = np.zeros(nv)
+    c[k * n :] = -1.0
+    res = linprog(c, A_eq=a, b_eq=np.zeros(3 * k), bounds=bounds, method="highs")
+    return np.asarray(res.x[k * n :], float) if res.status == 0 else np.zeros(k)
+
+
+def holding_capacity(wrenches: FloatArray, max_force: FloatArray, load: FloatArray) -> float:
+    """The largest ``s`` such that every disturbance ``s·load[d]`` is resisted by contact forces
+    in ``[0, max_force]``: ``s ≥ 1`` holds; 0 when some direction cannot be resisted at all (the
+    set is not in closure)."""
+    return float(holding_profile(wrenches, max_force, load).min(initial=MAX_SCALE))
+
+
+@dataclass(frozen=True)
+class Reinforced:
+    """A capture set reinforced to hold: node indices, their capacity, and whether it holds."""
+
+    chosen: np.ndarray
+    capacity: float
+    holds: bool
+    added: int
+
+
+def reinforce(
+    points: FloatArray,
+    normals: FloatArray,
+    centroid: FloatArray,
+    chosen: np.ndarray,
+    allowed: NDArray[np.bool_],
+    conflict: NDArray[np.bool_],
+    max_force: float,
+    load: FloatArray,
+    robots: int,
+) -> Reinforced:
+    """Add candidate nodes (indices into ``points``) to ``chosen`` until the set holds ``load``
+    (capacity ≥ 1) or it has ``robots`` points. Each round adds the node that raises the worst
+    direction's capacity most, ties broken by the mean over the directions (so a node that only
+    pays with a partner still ranks); a node must be ``allowed`` and clear of the chosen ones
+    (``conflict``: robot discs too close)."""
+    idx = [int(i) for i in chosen]
+
+    def score(sel: list[int]) -> tuple[float, float]:
+        w = contact_wrenches(points[sel], normals[sel], centroid)
+        prof = holding_profile(w, np.full(len(sel), max_force), load)
+        return float(prof.min()), float(prof.mean())
+
+    cap = score(idx)
+    added = 0
+    while cap[0] < 1.0 and len(idx) < robots:
+        free = [j for j in np.flatnonzero(allowed) if j not in idx and not conflict[j, idx].any()]
+        if not free:
+            break
+        best = max(((score(idx + [int(j)]), int(j)) for j in free), key=lambda s: s[0])
+        if best[0] <= cap:
+            break
+        cap, j = best
+        idx.append(j)
+        added += 1
+    return Reinforced(np.asarray(idx, int), cap[0], cap[0] >= 1.0, added)
