@@ -280,3 +280,37 @@ def convex_hull(points: ArrayLike) -> FloatArray:
     lower = half(pts)
     upper = half(pts[::-1])
     return np.array(lower[:-1] + upper[:-1])
+
+
+def _crosses_convex(a: FloatArray, b: FloatArray, hull: FloatArray) -> bool:
+    """Whether the open segment a-b passes through the interior of a convex CCW polygon."""
+    mid = np.linspace(a, b, 9)[1:-1]
+    if np.any(points_in_polygon(mid, hull) & (polygon_boundary_distance(mid, hull) > 1e-9)):
+        return True
+    return False
+
+
+def distance_around_convex(starts: ArrayLike, goals: ArrayLike, hull: ArrayLike) -> FloatArray:
+    """Shortest path lengths (S, G) m from points to points that may not cross the interior of a
+    convex CCW polygon (a visibility graph through its vertices). Points inside it are treated as
+    on its boundary (they leave along the straight line)."""
+    from scipy.sparse.csgraph import shortest_path
+
+    h = np.asarray(hull, dtype=float)
+    s = np.atleast_2d(np.asarray(starts, dtype=float))
+    g = np.atleast_2d(np.asarray(goals, dtype=float))
+    n_h = len(h)
+    grown = h + 1e-6 * (h - h.mean(axis=0))  # vertices just outside: their chords stay inside
+    nodes = np.vstack([grown, s, g])
+    n = len(nodes)
+    w = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i + 1, n):
+            if i < n_h and j < n_h and abs(i - j) not in (1, n_h - 1):
+                continue  # a chord of the hull crosses it
+            if not _crosses_convex(nodes[i], nodes[j], h):
+                w[i, j] = w[j, i] = float(np.linalg.norm(nodes[i] - nodes[j]))
+    dist = shortest_path(w, method="D", directed=False, indices=range(n_h, n_h + len(s)))
+    out = dist[:, n_h + len(s) :]
+    straight = np.linalg.norm(s[:, None] - g[None], axis=-1)
+    return np.where(np.isfinite(out), out, straight)

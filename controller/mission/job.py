@@ -17,7 +17,7 @@ from scipy.optimize import linear_sum_assignment
 from controller import geometry
 from controller.config import FleetConfig
 from controller.mission.types import FleetView, Intent, MissionOutput, Phase
-from controller.planning.approach import interception_times
+from controller.planning.approach import envelope, interception_times
 
 
 class MissionError(RuntimeError):
@@ -118,6 +118,14 @@ class CaptureJob:
         speed = np.array([r.max_speed for r in self.cfg.robots])
         horizon = max(self.cfg.approach.intercept_horizon, 1.0) * 10.0
         cost = interception_times(view.poses[:, :2], stations, vel, speed, horizon)
+        # a robot behind the object goes around it: scale by the detour around its envelope
+        hull = envelope(
+            geometry.transform(geometry.ensure_ccw(self.cfg.object_polygon()), view.object_pose),
+            radius,
+        )
+        around = geometry.distance_around_convex(stations, view.poses[:, :2], hull)
+        straight = np.linalg.norm(stations[:, None] - view.poses[None, :, :2], axis=-1)
+        cost = cost * around / np.maximum(straight, 1e-9)
         rows, cols = linear_sum_assignment(cost)
         out = np.empty(len(stations), dtype=int)
         out[rows] = cols

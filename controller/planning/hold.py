@@ -98,29 +98,59 @@ def reinforce(
     max_force: float,
     load: FloatArray,
     robots: int,
+    max_passes: int = 4,
 ) -> Reinforced:
     """Add candidate nodes (indices into ``points``) to ``chosen`` until the set holds ``load``
-    (capacity ≥ 1) or it has ``robots`` points. Each round adds the node that raises the worst
-    direction's capacity most, ties broken by the mean over the directions (so a node that only
-    pays with a partner still ranks); a node must be ``allowed`` and clear of the chosen ones
-    (``conflict``: robot discs too close)."""
-    idx = [int(i) for i in chosen]
+    (capacity ≥ 1) or it has ``robots`` points; if it still does not hold, move one point at a
+    time to another node while that raises the capacity (at most ``max_passes`` passes).
 
+    Points are ranked by the worst direction's capacity, ties broken by the mean over the
+    directions (so a node that only pays with a partner still ranks); a node must be
+    ``allowed`` and clear of the others (``conflict``: robot discs too close)."""
+    idx = [int(i) for i in chosen]
+    score = _scorer(points, normals, centroid, max_force, load)
+    cap = score(idx)
+    added = 0
+    while cap[0] < 1.0 and len(idx) < robots:
+        free = _free(idx, allowed, conflict)
+        best = max(((score(idx + [j]), j) for j in free), default=None, key=lambda s: s[0])
+        if best is None or best[0] <= cap:
+            break
+        cap, j = best
+        idx.append(j)
+        added += 1
+    for _ in range(max_passes):
+        if cap[0] >= 1.0:
+            break
+        idx, better = _swap_pass(idx, cap, score, allowed, conflict)
+        if better <= cap:
+            break
+        cap = better
+    return Reinforced(np.asarray(idx, int), cap[0], cap[0] >= 1.0, added)
+
+
+def _scorer(points, normals, centroid, max_force, load):
     def score(sel: list[int]) -> tuple[float, float]:
         w = contact_wrenches(points[sel], normals[sel], centroid)
         prof = holding_profile(w, np.full(len(sel), max_force), load)
         return float(prof.min()), float(prof.mean())
 
-    cap = score(idx)
-    added = 0
-    while cap[0] < 1.0 and len(idx) < robots:
-        free = [j for j in np.flatnonzero(allowed) if j not in idx and not conflict[j, idx].any()]
-        if not free:
-            break
-        best = max(((score(idx + [int(j)]), int(j)) for j in free), key=lambda s: s[0])
-        if best[0] <= cap:
-            break
-        cap, j = best
-        idx.append(j)
-        added += 1
-    return Reinforced(np.asarray(idx, int), cap[0], cap[0] >= 1.0, added)
+    return score
+
+
+def _free(idx: list[int], allowed, conflict) -> list[int]:
+    return [int(j) for j in np.flatnonzero(allowed) if j not in idx and not conflict[j, idx].any()]
+
+
+def _swap_pass(idx, cap, score, allowed, conflict):
+    """One pass of single-point moves, keeping every one that raises the capacity."""
+    best = cap
+    for i in range(len(idx)):
+        others = idx[:i] + idx[i + 1 :]
+        for j in _free(others, allowed, conflict):
+            trial = others[:i] + [j] + others[i:]
+            s = score(trial)
+            if s > best:
+                idx, best = trial, s
+                break
+    return idx, best

@@ -127,11 +127,14 @@ class ArrestScore:
         self.displacement: float | None = None
         self.arrest_t: float | None = None
         self.carried = False
+        self.phases: list[dict[str, Any]] = []  # each phase entered, with its sim time
 
     def tick(self, t: float, out, world) -> None:
         if out is None:
             return
         poly = geometry.transform(self.poly, world.object_pose())
+        if out.phase != self.phase:
+            self.phases.append({"phase": str(out.phase), "t": round(t, 3)})
         if out.phase == "hold" and self.phase != "hold":
             self.hold_start, self.displacement = poly, 0.0  # a new hold (after an escape too)
         self.carried |= out.phase in self.AFTER
@@ -305,6 +308,7 @@ class DryRun:
             "arrival_spread_s": mission.get("arrival_spread_s"),
             "contact_gaps_at_arrest_m": self.score.gaps,
             "hold_displacement_m": self.score.displacement,
+            "phases": self.score.phases,
             "object_gave_up_at_s": world.object_gave_up_at,
             "sim_time_s": round(coord.t, 4),
             "ticks": coord.counters.ticks,
