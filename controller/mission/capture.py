@@ -187,11 +187,10 @@ def advance(st: CaptureState, m: Measures, s: CaptureSettings) -> Step:
     failed, reason = False, ""
     if st.phase in (Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD) and m.t - st.t0 > s.timeout:
         reason = Reason.ESCAPED if st.escapes else Reason.TIMEOUT
+        detail = _timeout_detail(st, m, s)
         st = go(st, Phase.FAILED)
         failed = True
-        events.append(
-            ("failure", {"reason": str(reason), "t": m.t, "detail": _timeout_detail(st, m, s)})
-        )
+        events.append(("failure", {"reason": str(reason), "t": m.t, "detail": detail}))
     return Step(st, events, arrest, done, failed, reason)
 
 

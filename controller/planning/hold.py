@@ -63,12 +63,16 @@ def holding_profile(wrenches: FloatArray, max_force: FloatArray, load: FloatArra
     for d in range(k):
         a[3 * d : 3 * d + 3, d * n : (d + 1) * n] = w
         a[3 * d : 3 * d + 3, k * n + d] = load[d]
-    bounds = [(0.0, float(f)) for f in np.tile(np.asarray(max_force, float), k)]
+    bounds = [(0.0, _upper(f)) for f in np.tile(np.asarray(max_force, float), k)]
     bounds += [(0.0, MAX_SCALE)] * k
     c = np.zeros(nv)
     c[k * n :] = -1.0
     res = linprog(c, A_eq=a, b_eq=np.zeros(3 * k), bounds=bounds, method="highs")
     return np.asarray(res.x[k * n :], float) if res.status == 0 else np.zeros(k)
+
+
+def _upper(f: float) -> float | None:
+    return float(f) if np.isfinite(f) else None  # a wall pushes as hard as it is pushed
 
 
 def holding_capacity(wrenches: FloatArray, max_force: FloatArray, load: FloatArray) -> float:
@@ -99,6 +103,7 @@ def reinforce(
     load: FloatArray,
     robots: int,
     max_passes: int = 4,
+    fixed: FloatArray | None = None,
 ) -> Reinforced:
     """Add candidate nodes (indices into ``points``) to ``chosen`` until the set holds ``load``
     (capacity ≥ 1) or it has ``robots`` points; if it still does not hold, move one point at a
@@ -106,9 +111,11 @@ def reinforce(
 
     Points are ranked by the worst direction's capacity, ties broken by the mean over the
     directions (so a node that only pays with a partner still ranks); a node must be
-    ``allowed`` and clear of the others (``conflict``: robot discs too close)."""
+    ``allowed`` and clear of the others (``conflict``: robot discs too close). ``fixed`` (3, k)
+    are unit wrenches of contacts that are always there and push as hard as needed (walls the
+    object is pressed against)."""
     idx = [int(i) for i in chosen]
-    score = _scorer(points, normals, centroid, max_force, load)
+    score = _scorer(points, normals, centroid, max_force, load, fixed)
     cap = score(idx)
     added = 0
     while cap[0] < 1.0 and len(idx) < robots:
@@ -129,10 +136,13 @@ def reinforce(
     return Reinforced(np.asarray(idx, int), cap[0], cap[0] >= 1.0, added)
 
 
-def _scorer(points, normals, centroid, max_force, load):
+def _scorer(points, normals, centroid, max_force, load, fixed=None):
+    extra = np.zeros((3, 0)) if fixed is None else np.asarray(fixed, float)
+
     def score(sel: list[int]) -> tuple[float, float]:
-        w = contact_wrenches(points[sel], normals[sel], centroid)
-        prof = holding_profile(w, np.full(len(sel), max_force), load)
+        w = np.hstack([contact_wrenches(points[sel], normals[sel], centroid), extra])
+        limits = np.r_[np.full(len(sel), max_force), np.full(extra.shape[1], np.inf)]
+        prof = holding_profile(w, limits, load)
         return float(prof.min()), float(prof.mean())
 
     return score
@@ -154,3 +164,51 @@ def _swap_pass(idx, cap, score, allowed, conflict):
                 idx, best = trial, s
                 break
     return idx, best
+
+
+def wall_contacts(
+    polygon_world: FloatArray,
+    obstacles: list[FloatArray],
+    bounds: FloatArray | None,
+    tolerance: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Where static things touch the object: its vertices within ``tolerance`` m of an obstacle
+    or a wall, each with the direction (unit, world frame) the obstacle pushes it (away from
+    the obstacle). A frictionless wall resists only along that normal. Returns (k, 2), (k, 2)."""
+    from controller import geometry
+
+    pts, pushes = [], []
+    for v in np.asarray(polygon_world, float):
+        for o in obstacles:
+            o = np.asarray(o, float)
+            d, closest = geometry.point_segment_distance(v[None], o, np.roll(o, -1, axis=0))
+            j = int(np.argmin(d[0]))
+            if d[0, j] <= tolerance:
+                away = v - closest[0, j]
+                nrm = np.linalg.norm(away)
+                if nrm < 1e-9:  # on the boundary: the edge's outward normal
+                    e = np.roll(o, -1, axis=0)[j] - o[j]
+                    away = np.array([e[1], -e[0]])
+                    if geometry.signed_area(o) < 0:
+                        away = -away
+                pts.append(v)
+                pushes.append(away / np.linalg.norm(away))
+        if bounds is not None:
+            (x0, y0), (x1, y1) = np.asarray(bounds, float)
+            for dist, push in (
+                (v[0] - x0, (1.0, 0.0)),
+                (x1 - v[0], (-1.0, 0.0)),
+                (v[1] - y0, (0.0, 1.0)),
+                (y1 - v[1], (0.0, -1.0)),
+            ):
+                if dist <= tolerance:
+                    pts.append(v)
+                    pushes.append(np.array(push))
+    return np.reshape(pts, (-1, 2)), np.reshape(pushes, (-1, 2))
+
+
+def push_wrenches(points: FloatArray, pushes: FloatArray, centroid: FloatArray) -> FloatArray:
+    """Unit wrenches (3, k) of forces along ``pushes`` applied at ``points`` (same frame)."""
+    f = np.asarray(pushes, float).reshape(-1, 2)
+    rel = np.asarray(points, float).reshape(-1, 2) - np.asarray(centroid, float)
+    return np.vstack([f.T, rel[:, 0] * f[:, 1] - rel[:, 1] * f[:, 0]])
