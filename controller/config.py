@@ -182,9 +182,9 @@ class TransportSection:
     stall_timeout: float = _rule(10.0, gt=0, max=1e5)
     intervals: int = _rule(8, min=1, max=1000)
     interval: float = _rule(0.5, gt=0, max=60)  # s, shortest interval (else t_subgoal / n)
-    iterations: int = _rule(2000, min=1, max=10**7)
-    initial_temperature: float = _rule(1.0, gt=0, max=1e6)
-    cooling: float = _rule(0.995, gt=0, max=1)
+    iterations: int = _rule(100, min=1, max=10**7)  # per plan (each control interval)
+    initial_temperature: float = _rule(0.3, gt=0, max=1e6)
+    cooling: float = _rule(0.95, gt=0, max=1)  # per iteration (geometric schedule)
     schedule: str = _rule("geometric", choices=TRANSPORT_SCHEDULES)
     initial_actions: str = _rule("hold", choices=TRANSPORT_INITIAL)
     block_moves: float = _rule(0.5, min=0, max=1)  # share of proposals V[j:, i] = x

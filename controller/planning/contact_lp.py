@@ -100,7 +100,7 @@ def twist_for_wrench(
         moves = bool(np.linalg.norm(w) > 0)
         return np.array([w[0], w[1], w[2] / max(mean_radius, 1e-9) ** 2]), moves
     level = (w[0] ** 2 + w[1] ** 2) / f_max**2 + w[2] ** 2 / t_max**2
-    return np.array([w[0] / f_max**2, w[1] / f_max**2, w[2] / t_max**2]), bool(level >= 1.0)
+    return np.array([w[0] / f_max**2, w[1] / f_max**2, w[2] / t_max**2]), bool(level >= 1.0 - 1e-9)
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,6 +218,19 @@ class ContactForceLP:
     active-set re-solve; ``max_iter``: osqp iterations before the HiGHS fallback.
     """
 
+    #: osqp settings (measured on random instances; alpha = 1 and a fixed rho interval cut the
+    #: iterations of these LPs by about a third against osqp's defaults)
+    SETTINGS: dict = dict(  # noqa: RUF012
+        verbose=False,
+        polishing=False,  # osqp's own polish fails on LPs with many optimal answers
+        warm_starting=True,
+        adaptive_rho_interval=25,
+        alpha=1.0,
+        check_termination=10,
+        eps_prim_inf=1e-6,
+        eps_dual_inf=1e-6,
+    )
+
     def __init__(
         self,
         max_contacts: int,
@@ -285,24 +298,9 @@ class ContactForceLP:
             a.data = ax
             nv = len(self._q)
             self._prob = osqp.OSQP()
-            self._prob.setup(
-                P=sparse.csc_matrix((nv, nv)),
-                q=self._q,
-                A=a,
-                l=lo,
-                u=hi,
-                verbose=False,
-                polishing=False,
-                warm_starting=True,
-                adaptive_rho_interval=25,
-                alpha=1.0,
-                check_termination=10,
-                eps_abs=self.eps,
-                eps_rel=self.eps,
-                eps_prim_inf=1e-6,
-                eps_dual_inf=1e-6,
-                max_iter=self.max_iter,
-            )
+            settings = dict(self.SETTINGS)
+            settings.update(eps_abs=self.eps, eps_rel=self.eps, max_iter=self.max_iter)
+            self._prob.setup(P=sparse.csc_matrix((nv, nv)), q=self._q, A=a, l=lo, u=hi, **settings)
         else:
             self._prob.update(l=lo, u=hi, Ax=ax)
         return self._prob.solve(raise_error=False)

@@ -25,9 +25,10 @@ centroid's (x, y) distance from the path.
    out to the lane, along the lane the shorter way, and in to the target (object frame). A
    robot told to relocate while it sits on its target pushes there (a relocation ends in a
    push at the point the scan chose for pushing).
-3. The commanded twist: toward the *carrot*, the route point ``lookahead`` (pose arc) past the
-   centroid's projection but never past the subgoal, at ``speed`` in pose-arc metres per second
-   (exactly onto the carrot when it is closer than speed·dt); scaled down so that no attached
+3. The commanded twist: toward the *carrot*, the route point max(``lookahead``, speed·dt)
+   (pose arc) past the centroid's match on the route but never past the subgoal, at
+   ``speed`` in pose-arc metres per second (exactly onto the carrot when it is closer than
+   speed·dt); scaled down so that no attached
    robot (push, follow, slide) must move faster than its max_speed (sliders: minus the slide).
 4. The LP: the pushers (action push, in contact) must make the limit-surface wrench of that
    twist within their max_force. Feasible: the object moves by the twist for dt (heading by
@@ -68,7 +69,6 @@ from controller.planning.contact_lp import (
     required_wrench,
 )
 from controller.planning.transport_types import (
-    ACTIONS,
     ATTACHED,
     FOLLOW,
     IDLE,
@@ -444,12 +444,6 @@ def _rot(th: float) -> FloatArray:
     return np.array([[c, -s], [s, c]])
 
 
-_IS_ATTACHED = np.zeros(len(ACTIONS), bool)
-_IS_ATTACHED[list(ATTACHED)] = True
-_IS_SLIDE = np.zeros(len(ACTIONS), bool)
-_IS_SLIDE[[SLIDE_LEFT, SLIDE_RIGHT]] = True
-
-
 class Rollout:
     """Rolls action matrices out from one :class:`TransportState` (see the module docstring).
 
@@ -480,6 +474,9 @@ class Rollout:
         self._rel = m.nodes - m.centroid  # node positions about the centroid
         self._centres = self._rel[None] + self.radii[:, None, None] * m.normals[None]
         self._rel_list = self._rel.tolist()
+        self._centres_list = self._centres.tolist()
+        self._next_cw = m.next_cw.tolist()
+        self._next_ccw = m.next_ccw.tolist()
         self._pi, self._pj = np.triu_indices(self.k, 1)
         gap = self.radii[self._pi] + self.radii[self._pj] - params.contact_tolerance
         self._pair_gap2 = np.maximum(gap, 0.0) ** 2
@@ -530,7 +527,8 @@ class Rollout:
         """Commanded world twist of the centroid (vx, vy m/s, ω rad/s) toward the carrot, before
         the robots' speed limits."""
         p, rbar = self.params, self.model.mean_radius
-        tx, ty, tz = self.route.at(min(sim.s + p.lookahead, self.route.s_subgoal)).tolist()
+        ahead = max(p.lookahead, p.speed * self.dt)  # never closer than one interval's travel
+        tx, ty, tz = self.route.at(min(sim.s + ahead, self.route.s_subgoal)).tolist()
         ex, ey, ez = tx - sim.pose[0], ty - sim.pose[1], tz - rbar * sim.pose[2]
         dist = math.sqrt(ex * ex + ey * ey + ez * ez)
         if dist < 1e-6:
@@ -546,11 +544,13 @@ class Rollout:
         c, s = math.cos(th), math.sin(th)
         scale = 1.0
         slide = self.params.slide_speed
-        for i in np.flatnonzero(att).tolist():
+        for i in range(self.k):
+            if not att[i]:
+                continue
             x, y = self._rel_list[nodes[i]]
             rx, ry = c * x - s * y, s * x + c * y
             vp = math.hypot(v0 - w * ry, v1 + w * rx)
-            room = self._vmax_list[i] - (slide if _IS_SLIDE[eff[i]] else 0.0)
+            room = self._vmax_list[i] - (slide if eff[i] in (SLIDE_LEFT, SLIDE_RIGHT) else 0.0)
             if vp > 1e-12:
                 scale = min(scale, max(room, 0.0) / vp)
         return scale
@@ -665,34 +665,26 @@ class Rollout:
 
     def _step(self, sim: _Sim, row: IntArray, override: FloatArray | None):
         self.steps += 1
-        eff = self.effective(sim, row)
-        eff_a = np.array(eff, np.int64)
-        nodes = np.array(sim.nodes, np.int64)
+        eff = list(self.effective(sim, row))
+        nodes = list(sim.nodes)
         transit = list(sim.transit)
-        for i in np.flatnonzero(eff_a == RELOCATE):
-            if transit[i] is None:
-                target = self.relocation_target(int(i))
-                if target == nodes[i]:  # already where the scan wants it: it pushes there
-                    eff_a[i] = PUSH
-                    continue
-                transit[i] = _Transit(self._path(int(i), sim, target), 0, target)
-                nodes[i] = -1
-        eff = tuple(eff_a.tolist())
-        att = _IS_ATTACHED[eff_a] & (nodes >= 0)
+        self._start_relocations(sim, eff, nodes, transit)
+        att = [nodes[i] >= 0 and eff[i] in ATTACHED for i in range(self.k)]
         want = self.carrot_twist(sim) if override is None else override
-        want = want * self._speed_scale(sim.pose[2], eff_a, nodes, att, want)
-        push = np.flatnonzero((eff_a == PUSH) & (nodes >= 0))
-        lp = self.forces(sim.pose[2], push, nodes, want)
+        want = want * self._speed_scale(sim.pose[2], eff, nodes, att, want)
+        push = np.array([i for i in range(self.k) if eff[i] == PUSH and nodes[i] >= 0], np.int64)
+        lp = self.forces(sim.pose[2], push, np.array(nodes, np.int64), want)
         moved = want if lp.feasible else np.zeros(3)
         dt = self.dt
         x, y, th = sim.pose
         pose = (x + float(moved[0]) * dt, y + float(moved[1]) * dt, th + float(moved[2]) * dt)
-        pos, hit = self._move_robots(sim, pose, eff_a, nodes, att, transit, bool(np.any(moved)))
-        if np.any(moved):
-            s_new, dev, _ = self.route.locate(self._q(pose))
-        else:
+        still = pose == sim.pose
+        pos, hit = self._move_robots(sim, pose, eff, nodes, att, transit, not still)
+        if still:
             s_new, dev = sim.s, sim.dev
-        new = _Sim(pose, tuple(nodes.tolist()), pos, tuple(transit), s_new, dev)
+        else:
+            s_new, dev, _ = self.route.locate(self._q(pose))
+        new = _Sim(pose, tuple(nodes), pos, tuple(transit), s_new, dev)
         per_robot = np.zeros(self.k)
         force = 0.0
         if lp.feasible and len(push):
@@ -705,24 +697,25 @@ class Rollout:
             deviation=dev,
             forces=per_robot,
         )
-        return new, eff, terms, moved, lp
+        return new, tuple(eff), terms, moved, lp
+
+    def _start_relocations(self, sim: _Sim, eff: list, nodes: list, transit: list) -> None:
+        """Robots told to relocate leave their contact for the scan's node (in place)."""
+        for i in range(self.k):
+            if eff[i] != RELOCATE or transit[i] is not None:
+                continue
+            target = self.relocation_target(i)
+            if target == nodes[i]:  # already where the scan wants it: it pushes there
+                eff[i] = PUSH
+                continue
+            transit[i] = _Transit(self._path(i, sim, target), 0, target)
+            nodes[i] = -1
 
     def _move_robots(self, sim: _Sim, pose, eff, nodes, att, transit, moved: bool):
         """Moves robots (nodes and transit updated in place); returns (positions, hit)."""
-        m, p = self.model, self.params
         cx, cy, th = pose
         c, s = math.cos(th), math.sin(th)
-        left, right = att & (eff == SLIDE_LEFT), att & (eff == SLIDE_RIGHT)
-        if left.any() or right.any():
-            for _ in range(self._slide_steps):
-                nodes[left] = m.next_cw[nodes[left]]  # the robot's left facing the object: CW
-                nodes[right] = m.next_ccw[nodes[right]]
-        pos = sim.pos.copy()
-        idx = np.flatnonzero(att)
-        if len(idx):
-            q = self._centres[idx, nodes[idx]]
-            pos[idx, 0] = cx + c * q[:, 0] - s * q[:, 1]
-            pos[idx, 1] = cy + s * q[:, 0] + c * q[:, 1]
+        pos = sim.pos.tolist()
         free = []
         for i in range(self.k):
             tr = transit[i]
@@ -733,18 +726,40 @@ class Rollout:
                 else:
                     transit[i] = _Transit(tr.path, tr.done + 1, tr.target)
                 x, y = stops[min(tr.done, len(stops) - 1)]
-                pos[i] = (cx + c * x - s * y, cy + s * x + c * y)
-            elif not att[i]:
+            elif att[i]:
+                nodes[i] = self._slide(nodes[i], eff[i])
+                x, y = self._centres_list[i][nodes[i]]
+            else:
                 free.append(i)
+                continue
+            pos[i] = [cx + c * x - s * y, cy + s * x + c * y]
+        out = np.array(pos)
         if not (moved and free):
-            return pos, False
+            return out, False
+        return out, self._idle_contacts(out, free, nodes, (cx, cy, c, s))
+
+    def _slide(self, node: int, a: int) -> int:
+        if a == SLIDE_LEFT:  # the robot's left as it faces the object: clockwise
+            for _ in range(self._slide_steps):
+                node = self._next_cw[node]
+        elif a == SLIDE_RIGHT:
+            for _ in range(self._slide_steps):
+                node = self._next_ccw[node]
+        return node
+
+    def _idle_contacts(self, pos: FloatArray, free: list, nodes: list, frame) -> bool:
+        """Robots standing still next to the moved object: those it left lose contact; returns
+        whether it moved into one."""
+        cx, cy, c, s = frame
+        m = self.model
         idle = np.array(free)
         rel = pos[idle] - np.array([cx, cy])
         local = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
         sd = geometry.polygon_signed_distance(local + m.centroid, m.polygon) - self.radii[idle]
-        tol = p.contact_tolerance
-        nodes[idle[sd > tol]] = -1
-        return pos, bool(np.any(sd < -tol))
+        tol = self.params.contact_tolerance
+        for i in idle[sd > tol].tolist():
+            nodes[i] = -1
+        return bool(np.any(sd < -tol))
 
     def _collides(self, sim: _Sim) -> bool:
         pos = sim.pos
@@ -785,6 +800,10 @@ class Rollout:
         """Roll ``matrix`` out again from interval j of ``trace`` (which rolled out a matrix
         equal to this one before interval j); stops early once a state repeats."""
         n = len(matrix)
+        if np.ndim(matrix) != 2 or np.shape(matrix)[1] != self.k:
+            raise ValueError(
+                f"action matrix: expected (intervals, {self.k}), got {np.shape(matrix)}"
+            )
         if trace is None:
             sims, eff, terms, tw, lps = [self.start], [], [], [], []
             j = 0

@@ -108,9 +108,9 @@ class TransportParams:
     strategy: str = "sa"
     intervals: int = 8
     interval: float = 0.5
-    iterations: int = 2000
-    initial_temperature: float = 1.0
-    cooling: float = 0.995
+    iterations: int = 100
+    initial_temperature: float = 0.3
+    cooling: float = 0.95
     schedule: str = "geometric"
     initial_actions: str = "hold"
     block_moves: float = 0.5

@@ -93,15 +93,40 @@ def random_lp(rng: np.random.Generator, n: int, contact_friction: float = 0.0):
     mass, mu = rng.uniform(1, 8), rng.uniform(0.1, 0.5)
     fmax = rng.uniform(0.3, 1.2, n) * mu * mass * 9.81 * rng.uniform(0.5, 2.0)
     active = rng.random(n) < 0.85
-    twist = rng.normal(size=3)
-    twist[2] *= rng.uniform(0, 2)
     rbar = 0.25 * (w + h)
+    if rng.random() < 0.5 and active.any():
+        # a wrench the active contacts can make in direction; the forces may not suffice
+        lam = rng.exponential(size=n) * active
+        f = lam[:, None] * nrm
+        wrench = np.array(
+            [f[:, 0].sum(), f[:, 1].sum(), np.sum(pts[:, 0] * f[:, 1] - pts[:, 1] * f[:, 0])]
+        )
+        wrench *= mu * mass * 9.81 / max(np.linalg.norm(wrench[:2]), 1e-9)
+    else:
+        twist = rng.normal(size=3)
+        twist[2] *= rng.uniform(0, 2)
+        wrench = required_wrench(twist, mass, mu, rbar)
     return dict(
         points=pts,
         normals=nrm,
         max_force=fmax,
         active=active,
-        wrench=required_wrench(twist, mass, mu, rbar),
+        wrench=wrench,
         contact_friction=contact_friction,
         length=rbar,
     )
+
+
+DIAMOND = np.array([[0.0, -0.35], [0.35, 0.0], [0.0, 0.35], [-0.35, 0.0]], dtype=float)
+
+
+def diamond_case(max_force: float = 10.0, mass: float = 2.0, length: float = 3.0) -> TransportState:
+    """A square turned 45° (a diamond) to be carried along +x by two robots on its two rear
+    faces: each pushes through the centroid, one toward the left of the route, one toward the
+    right (Sharma's two serpentine groups)."""
+    model = ObjectModel.build(DIAMOND, mass, 0.2, 0.0, 0.1)
+    pose = np.array([2.0, 3.0, 0.0])
+    nodes = [node_near(model, (-0.175, -0.175)), node_near(model, (-0.175, 0.175))]
+    robots = robots_at(model, pose, nodes, max_force=max_force)
+    route = RouteSegment(straight_route(pose, (2.0 + length, 3.0, 0.0)))
+    return TransportState(model, pose, robots, route)
