@@ -166,11 +166,16 @@ class _Scaled:
 def _scaled(
     pts: FloatArray, nrm: FloatArray, upper: FloatArray, w: FloatArray, mu: float, length: float
 ) -> _Scaled:
-    tang = _tangents(nrm)
+    n = len(pts)
     s = float(upper.max())
-    cols_n = np.vstack([nrm[:, 0], nrm[:, 1], _cross(pts, nrm) / length])
-    cols_t = np.vstack([tang[:, 0], tang[:, 1], _cross(pts, tang) / length])
-    rhs = np.array([w[0], w[1], w[2] / length]) / s
+    cols_n = np.empty((3, n))
+    cols_n[:2] = nrm.T
+    cols_n[2] = (pts[:, 0] * nrm[:, 1] - pts[:, 1] * nrm[:, 0]) / length
+    cols_t = np.empty((3, n))  # t = n turned +90°: (−n_y, n_x); p × t = p · n
+    cols_t[0] = -nrm[:, 1]
+    cols_t[1] = nrm[:, 0]
+    cols_t[2] = (pts[:, 0] * nrm[:, 0] + pts[:, 1] * nrm[:, 1]) / length
+    rhs = np.array([w[0] / s, w[1] / s, w[2] / (length * s)])
     return _Scaled(cols_n, cols_t, rhs, upper / s, mu, s)
 
 
@@ -366,11 +371,12 @@ class ContactForceLP:
 def _inputs(points, normals, max_force, active, wrench):
     pts = np.asarray(points, float).reshape(-1, 2)
     nrm = np.asarray(normals, float).reshape(-1, 2)
-    n = len(pts)
-    nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
-    act = np.asarray(active, bool).reshape(-1)
-    upper = np.where(act, np.maximum(np.asarray(max_force, float).reshape(-1), 0.0), 0.0)
-    return pts, nrm, upper, np.asarray(wrench, float).reshape(3), n
+    norm = np.sqrt(nrm[:, 0] ** 2 + nrm[:, 1] ** 2)
+    if not np.all(np.abs(norm - 1.0) < 1e-12):
+        nrm = nrm / np.maximum(norm, 1e-12)[:, None]
+    upper = np.asarray(max_force, float).reshape(-1) * np.asarray(active, bool).reshape(-1)
+    upper = np.maximum(upper, 0.0)
+    return pts, nrm, upper, np.asarray(wrench, float).reshape(3), len(pts)
 
 
 def _trivial(w: FloatArray, upper: FloatArray, n: int) -> LPResult | None:
