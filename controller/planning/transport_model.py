@@ -475,8 +475,6 @@ class Rollout:
         self._centres = self._rel[None] + self.radii[:, None, None] * m.normals[None]
         self._rel_list = self._rel.tolist()
         self._centres_list = self._centres.tolist()
-        self._next_cw = m.next_cw.tolist()
-        self._next_ccw = m.next_ccw.tolist()
         self._pi, self._pj = np.triu_indices(self.k, 1)
         gap = self.radii[self._pi] + self.radii[self._pj] - params.contact_tolerance
         self._pair_gap2 = np.maximum(gap, 0.0) ** 2
@@ -502,6 +500,10 @@ class Rollout:
         t_s = max(self.route.s_subgoal - s0, 0.0) / params.speed
         self.dt = max(params.interval, t_s / params.intervals)
         self._slide_steps = max(1, int(round(params.slide_speed * self.dt / m.node_spacing)))
+        cw, ccw = np.arange(len(m.nodes)), np.arange(len(m.nodes))
+        for _ in range(self._slide_steps):  # where one interval of sliding ends, per node
+            cw, ccw = m.next_cw[cw], m.next_ccw[ccw]
+        self._slid_cw, self._slid_ccw = cw.tolist(), ccw.tolist()
         self.previous = tuple(-1 if r.action is None else action_code(r.action) for r in robots)
         self._lp_cache: dict[tuple, LPResult] = {}
         self._memo: dict[tuple, tuple] = {}
@@ -740,11 +742,9 @@ class Rollout:
 
     def _slide(self, node: int, a: int) -> int:
         if a == SLIDE_LEFT:  # the robot's left as it faces the object: clockwise
-            for _ in range(self._slide_steps):
-                node = self._next_cw[node]
-        elif a == SLIDE_RIGHT:
-            for _ in range(self._slide_steps):
-                node = self._next_ccw[node]
+            return self._slid_cw[node]
+        if a == SLIDE_RIGHT:
+            return self._slid_ccw[node]
         return node
 
     def _idle_contacts(self, pos: FloatArray, free: list, nodes: list, frame) -> bool:
