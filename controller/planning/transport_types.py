@@ -78,6 +78,16 @@ class RouteSegment:
     waypoints: FloatArray
     subgoal: int = -1
 
+    @classmethod
+    def toward(cls, waypoints: FloatArray, subgoal_pose: FloatArray) -> RouteSegment:
+        """The segment whose subgoal is the waypoint nearest to ``subgoal_pose`` (e.g. one of
+        the route planner's ``RouteResult.subgoals``, which are waypoints)."""
+        wp = np.asarray(waypoints, float)
+        g = np.asarray(subgoal_pose, float)
+        d = np.linalg.norm(wp[:, :2] - g[:2], axis=1)
+        d = d + 1e-3 * np.abs((wp[:, 2] - g[2] + np.pi) % (2 * np.pi) - np.pi)
+        return cls(wp, int(np.argmin(d)))
+
 
 @dataclass(frozen=True, eq=False)
 class TransportState:

@@ -439,6 +439,14 @@ def test_first_interval_commands_and_targets():
     json.dumps(plan.to_dict(), allow_nan=False)
 
 
+def test_route_segment_toward_a_subgoal_pose():
+    from controller.planning.transport_types import RouteSegment
+
+    wp = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1.5], [1, 1, 1.5], [2, 1, 1.5]], float)
+    assert RouteSegment.toward(wp, [1.0, 0.0, 1.5]).subgoal == 2  # the turn, not its start
+    assert RouteSegment.toward(wp, wp[-1]).subgoal == 4
+
+
 def test_at_the_subgoal_nothing_is_planned():
     st = push_case(8)
     done = dataclasses.replace(st, route=dataclasses.replace(st.route, subgoal=0))
