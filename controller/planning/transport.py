@@ -7,10 +7,13 @@ filtered object pose (closed loop: the mission executes the first interval and p
   matrix out on the kinematic model (:mod:`controller.planning.transport_model`, incremental
   from the changed interval) and accepts it if the energy does not rise, else with probability
   exp(−ΔE/T). Schedules: geometric T_r = T_0·cooling^r, or logarithmic T_r = c/log(1 + r)
-  (Vass Eq. 4) with c = T_0·log 2 so that both start at T_0 (r counts from 1). The plan is the
-  lowest-energy matrix seen. The start matrix: each robot holding its last action ("hold"),
-  the previous plan shifted by one interval when given, or uniformly random ("random", as in
-  Code 1 line 2).
+  (Vass Eq. 4) with c = T_0·log 2 so that both start at T_0. The plan is the lowest-energy
+  matrix seen (never worse than the start). Proposals: with probability ``block_moves`` the
+  new action replaces the robot's whole row from the chosen interval on (V[j:, i] = x: one
+  action change instead of two, our addition), else the single entry (Code 1). The start
+  matrix: the previous plan shifted by the intervals elapsed (when given), else "hold": each
+  robot repeats its last action (one without: push if its push has a component along the
+  force the object needs, else follow; idle without contact), or "random" (Code 1 line 2).
 - ``downhill``: the same proposals and energy, accepting only ΔE ≤ 0 (SA at T → 0; Vass §5).
 - ``serpentine`` (Sharma et al. §4.3): the robots in contact that push forward are split into
   two groups, those pushing toward the left of the route and those pushing toward the right
