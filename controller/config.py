@@ -32,7 +32,9 @@ MAVLINK_PROFILES = ("ardurover", "px4")
 MOTION_KINDS = ("line", "sine", "evade", "static")
 CLOSURE_MODES = ("exact", "paper")
 HEURISTICS = ("euclid", "wavefront", "skeleton")
-TRANSPORT_STRATEGIES = ("sa", "serpentine")
+TRANSPORT_STRATEGIES = ("sa", "serpentine", "downhill")
+TRANSPORT_SCHEDULES = ("geometric", "logarithmic")
+TRANSPORT_INITIAL = ("hold", "random")
 SIM_BACKENDS = ("pybullet", "ideal")
 FILTERS = ("ekf", "ukf")
 ZENOH_MODES = ("peer", "client", "router")
@@ -192,13 +194,35 @@ class RouteSection:
 
 @dataclass(frozen=True, kw_only=True)
 class TransportSection:
+    """Carrying the arrested object (controller/planning/transport*.py). Weights k_* are the
+    energy's K constants (Vass Eq. 3 plus route deviation and progress), per unit named."""
+
     strategy: str = _rule("sa", choices=TRANSPORT_STRATEGIES)
     tolerance: float = _rule(0.2, gt=0, max=10)
+    heading_tolerance_deg: float = _rule(10.0, gt=0, max=180)
+    stall_timeout: float = _rule(10.0, gt=0, max=1e5)
     intervals: int = _rule(8, min=1, max=1000)
-    iterations: int = _rule(2000, min=1, max=10**7)
-    initial_temperature: float = _rule(1.0, gt=0, max=1e6)
-    cooling: float = _rule(0.995, gt=0, max=1)
+    interval: float = _rule(0.5, gt=0, max=60)  # s, shortest interval (else t_subgoal / n)
+    iterations: int = _rule(100, min=1, max=10**7)  # per plan (each control interval)
+    initial_temperature: float = _rule(0.3, gt=0, max=1e6)
+    cooling: float = _rule(0.95, gt=0, max=1)  # per iteration (geometric schedule)
+    schedule: str = _rule("geometric", choices=TRANSPORT_SCHEDULES)
+    initial_actions: str = _rule("hold", choices=TRANSPORT_INITIAL)
+    block_moves: float = _rule(0.5, min=0, max=1)  # share of proposals V[j:, i] = x
     seed: int = _rule(0, min=0)
+    speed: float = _rule(0.15, gt=0, max=10)  # m/s, object (centroid + mean radius x yaw rate)
+    lookahead: float = _rule(0.3, gt=0, max=100)  # m along the route
+    slide_speed: float = _rule(0.2, gt=0, max=10)  # m/s along the boundary
+    push_bias: float = _rule(0.02, min=0, max=1)  # m/s into the object for pushers
+    relocation_spacing: float = _rule(0.1, gt=0, max=10)  # m between scanned nodes
+    k_collision: float = _rule(100.0, min=0, max=1e9)  # per interval with a collision
+    k_equilibrium: float = _rule(100.0, min=0, max=1e9)  # per interval whose LP is infeasible
+    k_force: float = _rule(0.01, min=0, max=1e9)  # per N of contact force per interval
+    k_change: float = _rule(0.05, min=0, max=1e9)  # per change of a robot's action
+    k_deviation: float = _rule(1.0, min=0, max=1e9)  # per m of deviation per interval
+    k_progress: float = _rule(10.0, min=0, max=1e9)  # per m of progress along the route
+    serpentine_deviation: float = _rule(0.15, gt=0, max=100)  # m, switch threshold at start
+    serpentine_min_deviation: float = _rule(0.03, gt=0, max=100)  # m, near the goal
 
 
 @dataclass(frozen=True, kw_only=True)

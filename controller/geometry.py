@@ -85,6 +85,21 @@ def polar_moment_per_mass(poly: ArrayLike) -> float:
     return float((ixx + iyy) / a)
 
 
+def mean_radius(poly: ArrayLike, n: int = 200) -> float:
+    """Mean distance (m) from the area centroid over the polygon's area (n x n grid quadrature).
+
+    The pybullet world puts the object's floor skids at this radius, so spinning the object on
+    the floor takes the torque floor_friction * m * g * mean_radius (a uniform-pressure disc).
+    """
+    p = np.asarray(poly, dtype=float)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    u = (np.arange(n) + 0.5) / n
+    gx, gy = np.meshgrid(lo[0] + u * (hi[0] - lo[0]), lo[1] + u * (hi[1] - lo[1]))
+    pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    inside = points_in_polygon(pts, p)
+    return float(np.mean(np.linalg.norm(pts[inside] - centroid(p), axis=1)))
+
+
 def edges(poly: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Edge start points (n, 2) and edge vectors (n, 2); edge i runs from p[i] to p[i+1]."""
     p = np.asarray(poly, dtype=float)

@@ -1,0 +1,360 @@
+"""Local transport planners: Vass's simulated annealing, its downhill ablation, Sharma's
+serpentine baseline. Entry point: :func:`plan_local`, called every control interval from the
+filtered object pose (closed loop: the mission executes the first interval and plans again).
+
+- ``sa`` (Vass et al. §4, Code 1): the action matrix V (intervals × robots) over ``ACTIONS``;
+  each iteration picks one entry at random, gives it a different random action, rolls the new
+  matrix out on the kinematic model (:mod:`controller.planning.transport_model`, incremental
+  from the changed interval) and accepts it if the energy does not rise, else with probability
+  exp(−ΔE/T). Schedules: geometric T_r = T_0·cooling^r, or logarithmic T_r = c/log(1 + r)
+  (Vass Eq. 4) with c = T_0·log 2 so that both start at T_0. The plan is the lowest-energy
+  matrix seen (never worse than the start). Proposals: with probability ``block_moves`` the
+  new action replaces the robot's whole row from the chosen interval on (V[j:, i] = x: one
+  action change instead of two, our addition), else the single entry (Code 1). The start
+  matrix: the previous plan shifted by the intervals elapsed (when given), else "hold": each
+  robot repeats its last action (one without: push if its push has a component along the
+  force the object needs, else follow; idle without contact), or "random" (Code 1 line 2).
+- ``downhill``: the same proposals and energy, accepting only ΔE ≤ 0 (SA at T → 0; Vass §5).
+- ``serpentine`` (Sharma et al. §4.3): the robots in contact that push forward are split into
+  two groups, those pushing toward the left of the route and those pushing toward the right
+  (robots pushing straight along it even out the counts). One group pushes (every member at
+  its max_force along its normal), the other follows. The object moves along the normal of the
+  limit surface at the group's wrench (:func:`controller.planning.contact_lp.twist_for_wrench`)
+  at ``speed``; it moves only if that wrench reaches the limit surface (else the interval is
+  infeasible). The groups switch when the centroid is more than
+  h = max(h_min, h_0 · remaining / route length) to the side the active group pushes toward,
+  h_0 = ``serpentine_deviation``, h_min = ``serpentine_min_deviation``: the threshold shrinks
+  toward the goal. Its plan is rolled out on the same model and scored with the same energy
+  (the LP then gives the least forces for the motion the group makes).
+
+Randomness only through the passed ``numpy.random.Generator``; the same state, parameters and
+seed give the same plan.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from controller import geometry
+from controller.planning.contact_lp import ContactForceLP, twist_for_wrench
+from controller.planning.transport_model import Rollout, Trace, hold_matrix
+from controller.planning.transport_types import (
+    ACTIONS,
+    FOLLOW,
+    IDLE,
+    PUSH,
+    Energy,
+    FloatArray,
+    IntArray,
+    LocalPlan,
+    TransportParams,
+    TransportState,
+)
+
+
+def temperature(params: TransportParams, r: int) -> float:
+    """The annealing temperature at iteration r (0-based)."""
+    if params.schedule == "logarithmic":
+        return params.initial_temperature * math.log(2.0) / math.log(2.0 + r)
+    return params.initial_temperature * params.cooling**r
+
+
+def accept(delta: float, temp: float, downhill: bool, rng: np.random.Generator) -> bool:
+    """Code 1, lines 9-12: a move that does not raise the energy is taken; an uphill one with
+    probability exp(−ΔE/T) (never in the downhill ablation)."""
+    if delta <= 0.0:
+        return True
+    if downhill or temp <= 0.0:
+        return False
+    return bool(rng.random() < math.exp(-delta / temp))
+
+
+def initial_matrix(
+    roll: Rollout,
+    rng: np.random.Generator,
+    previous: LocalPlan | None = None,
+    shift: int = 1,
+) -> IntArray:
+    """The annealer's start: the previous plan shifted by ``shift`` intervals (its last row
+    repeated; if its shape fits), else each robot holding its last action, or a uniformly
+    random matrix (``initial_actions``)."""
+    params = roll.params
+    n, k = params.intervals, roll.k
+    if (
+        previous is not None
+        and previous.matrix.shape == (n, k)
+        and previous.strategy != "serpentine"
+    ):
+        shift = min(max(int(shift), 0), n - 1)
+        m = previous.matrix
+        return np.vstack([m[shift:], np.repeat(m[-1:], shift, axis=0)]).astype(np.int64)
+    if params.initial_actions == "random":
+        return rng.integers(0, len(ACTIONS), size=(n, k)).astype(np.int64)
+    return hold_matrix(roll, n)
+
+
+def anneal(
+    roll: Rollout, start: Trace, params: TransportParams, rng: np.random.Generator, downhill: bool
+) -> tuple[Trace, int]:
+    """Vass's Code 1 over ``params.iterations`` proposals; returns the lowest-energy trace seen
+    and the number of accepted moves."""
+    cur = start
+    e_cur = roll.energy(cur).total
+    best, e_best = cur, e_cur
+    n, k = cur.matrix.shape
+    n_act = len(ACTIONS)
+    accepted = 0
+    for r in range(params.iterations):
+        j = int(rng.integers(n))
+        i = int(rng.integers(k))
+        x = int(rng.integers(n_act - 1))
+        x += int(x >= cur.matrix[j, i])  # a different action
+        m = cur.matrix.copy()
+        if params.block_moves > 0 and rng.random() < params.block_moves:
+            m[j:, i] = x  # the robot switches to x from interval j on
+        else:
+            m[j, i] = x  # Code 1: one entry
+        cand = roll.rerun(cur, m, j)
+        e_new = roll.energy(cand).total
+        if accept(e_new - e_cur, temperature(params, r), downhill, rng):
+            cur, e_cur = cand, e_new
+            accepted += 1
+            if e_cur < e_best:
+                best, e_best = cur, e_cur
+    return best, accepted
+
+
+# --------------------------------------------------------------------------- serpentine
+
+
+def serpentine_groups(roll: Rollout) -> IntArray:
+    """Per robot: 0 (pushes toward the left of the route), 1 (toward the right), −1 (no
+    contact, or its push has no forward component: it only follows)."""
+    st, m = roll.start, roll.model
+    d = roll.route.tangent(roll._q(st.pose))
+    left = np.array([-d[1], d[0]])
+    rot = geometry.rot(st.pose[2])
+    groups = np.full(roll.k, -1, np.int64)
+    lateral = np.zeros(roll.k)
+    for i, node in enumerate(st.nodes):
+        if node < 0:
+            continue
+        push = rot @ (-m.normals[node])
+        if push @ d <= 1e-6:
+            continue
+        lateral[i] = push @ left
+        groups[i] = 0 if lateral[i] > 1e-6 else (1 if lateral[i] < -1e-6 else 2)
+    for i in np.flatnonzero(groups == 2):  # straight pushers even out the counts
+        groups[i] = 0 if np.sum(groups == 0) <= np.sum(groups == 1) else 1
+    return groups
+
+
+def serpentine_threshold(roll: Rollout, s: float, params: TransportParams) -> float:
+    """Switch distance (m): shrinks with the route left to the goal."""
+    remaining = max(roll.route.length - s, 0.0)
+    frac = remaining / roll.route.length if roll.route.length > 0 else 0.0
+    h = params.serpentine_deviation * min(1.0, frac)
+    return max(params.serpentine_min_deviation, h)
+
+
+def serpentine_switch(group: int | None, signed_dev: float, h: float, groups: IntArray) -> int:
+    """The active group after the deviation rule (signed_dev > 0: left of the route)."""
+    if group is None:
+        group = 1 if signed_dev > 0 else 0
+    elif group == 0 and signed_dev > h:
+        group = 1
+    elif group == 1 and signed_dev < -h:
+        group = 0
+    if not np.any(groups == group) and np.any(groups == 1 - group):
+        group = 1 - group  # one side has no pushers: the other pushes alone
+    return group
+
+
+def _group_twist(roll: Rollout, sim, members: IntArray) -> FloatArray:
+    """World twist direction the group's wrench (all at max_force) drives, at ``speed`` in
+    pose-arc metres per second, never past the subgoal."""
+    m, p = roll.model, roll.params
+    if len(members) == 0:
+        return np.zeros(3)
+    nodes = np.array([sim.nodes[i] for i in members])
+    rel = m.nodes[nodes] - m.centroid
+    push = -m.normals[nodes]
+    f = roll.fmax[members]
+    wrench = np.array(
+        [
+            f @ push[:, 0],
+            f @ push[:, 1],
+            f @ (rel[:, 0] * push[:, 1] - rel[:, 1] * push[:, 0]),
+        ]
+    )
+    t, _ = twist_for_wrench(wrench, m.mass, m.floor_friction, m.mean_radius)
+    v = geometry.rot(sim.pose[2]) @ t[:2]
+    w = np.array([v[0], v[1], t[2]])
+    norm = math.sqrt(v[0] ** 2 + v[1] ** 2 + (m.mean_radius * t[2]) ** 2)
+    if norm < 1e-12:
+        return np.zeros(3)
+    left = max(roll.route.s_subgoal - sim.s, 0.0)
+    return w / norm * min(p.speed, left / roll.dt)
+
+
+def serpentine(roll: Rollout, group: int | None) -> tuple[Trace, int | None]:
+    """Sharma's broken serpentine over the plan's intervals; returns the trace and the group
+    pushing in the first interval."""
+    p = roll.params
+    groups = serpentine_groups(roll)
+    sim = roll.start
+    rows, sims, eff, terms, tws, lps = [], [sim], [], [], [], []
+    first = None
+    for _ in range(p.intervals):
+        _, dev, side = roll.route.locate(roll._q(sim.pose))
+        group = serpentine_switch(group, dev * side, serpentine_threshold(roll, sim.s, p), groups)
+        first = group if first is None else first
+        row = np.array(
+            [
+                PUSH if groups[i] == group else (FOLLOW if sim.nodes[i] >= 0 else IDLE)
+                for i in range(roll.k)
+            ],
+            np.int64,
+        )
+        members = np.flatnonzero((groups == group) & (np.array(sim.nodes) >= 0))
+        sim, e, t, w, lp = roll.step(sim, row, _group_twist(roll, sim, members))
+        for lst, v in ((rows, row), (sims, sim), (eff, e), (terms, t), (tws, w), (lps, lp)):
+            lst.append(v)
+    matrix = np.array(rows, np.int64).reshape(p.intervals, roll.k)
+    trace = Trace(matrix, tuple(sims), tuple(eff), tuple(terms), tuple(tws), tuple(lps))
+    return trace, (first if np.any(groups >= 0) else None)
+
+
+# --------------------------------------------------------------------------- the plan
+
+
+def _first_interval(roll: Rollout, trace: Trace) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """World velocity commands (k, 2) for the first interval and the contact each robot should
+    hold at its end (object-frame point and inward normal, NaN if none)."""
+    m, p, st = roll.model, roll.params, roll.state
+    s1 = trace.sims[1]
+    now = np.array([np.asarray(r.position, float) for r in st.robots]).reshape(roll.k, 2)
+    vel = (s1.pos - now) / roll.dt
+    pts = np.full((roll.k, 2), np.nan)
+    nrm = np.full((roll.k, 2), np.nan)
+    rot = geometry.rot(s1.pose[2])
+    for i in range(roll.k):
+        node = s1.nodes[i]
+        if node < 0 and s1.transit[i] is not None:
+            node = s1.transit[i].target
+        if node >= 0:
+            pts[i], nrm[i] = m.nodes[node], -m.normals[node]
+        if trace.effective[0][i] == PUSH and s1.nodes[i] >= 0:
+            vel[i] += p.push_bias * (rot @ nrm[i])
+        speed = float(np.linalg.norm(vel[i]))
+        if speed > roll.vmax[i]:
+            vel[i] *= roll.vmax[i] / speed
+    return vel, pts, nrm
+
+
+def make_plan(
+    roll: Rollout,
+    trace: Trace,
+    start_energy: Energy,
+    status: str,
+    iterations: int = 0,
+    accepted: int = 0,
+    group: int | None = None,
+) -> LocalPlan:
+    """Package a trace as the :class:`LocalPlan` the mission reads."""
+    vel, pts, nrm = _first_interval(roll, trace)
+    eff = np.array(trace.effective, np.int64).reshape(len(trace.terms), roll.k)
+    return LocalPlan(
+        strategy=roll.params.strategy,
+        status=status,
+        interval=roll.dt,
+        matrix=trace.matrix.copy(),
+        effective=eff,
+        first_actions=tuple(ACTIONS[int(a)] for a in eff[0]),
+        velocities=vel,
+        contact_points=pts,
+        contact_normals=nrm,
+        object_poses=np.array([roll.object_pose(s) for s in trace.sims]),
+        object_twists=np.array(trace.twists),
+        forces=np.array([t.forces for t in trace.terms]).reshape(len(trace.terms), roll.k),
+        lp_status=tuple(lp.status for lp in trace.lps),
+        lp_reason=tuple(lp.reason for lp in trace.lps),
+        energy=roll.energy(trace),
+        start_energy=start_energy,
+        iterations=iterations,
+        accepted=accepted,
+        serpentine_group=group,
+        relocation_targets={i: roll.model.nodes[n].copy() for i, n in roll.targets.items()},
+    )
+
+
+def plan_local(
+    state: TransportState,
+    params: TransportParams,
+    rng: np.random.Generator,
+    previous: LocalPlan | None = None,
+    shift: int = 1,
+    lp: ContactForceLP | None = None,
+    scans: dict | None = None,
+) -> LocalPlan:
+    """One local plan from the current (filtered) state with ``params.strategy``.
+
+    ``previous``: the last plan; its matrix shifted by ``shift`` intervals (the intervals
+    elapsed since) starts the annealer. ``lp``: a :class:`ContactForceLP` to reuse (keeps its
+    osqp workspace and warm start); ``scans``: a dict caching relocation scans across calls
+    (:class:`TransportPlanner` keeps both). Never raises for an infeasible situation: the LP
+    statuses and the energy say what is wrong; ``status`` is "at_subgoal" when the object
+    already sits on the subgoal (nothing is optimised then; robots in contact follow).
+    """
+    if not state.robots:
+        raise ValueError("state.robots: expected at least one robot")
+    roll = Rollout(state, params, lp, scans)
+    if not np.any(roll.carrot_twist(roll.start)):
+        row = [IDLE if r.contact is None else FOLLOW for r in state.robots]
+        trace = roll.run(np.tile(np.array(row, np.int64), (params.intervals, 1)))
+        return make_plan(roll, trace, roll.energy(trace), "at_subgoal")
+    if params.strategy == "serpentine":
+        trace, group = serpentine(roll, state.serpentine_group)
+        e = roll.energy(trace)
+        return make_plan(roll, trace, e, "ok", group=group)
+    start = roll.run(initial_matrix(roll, rng, previous, shift))
+    best, accepted = anneal(roll, start, params, rng, downhill=params.strategy == "downhill")
+    return make_plan(roll, best, roll.energy(start), "ok", params.iterations, accepted)
+
+
+class TransportPlanner:
+    """What one mission's local planning keeps from tick to tick: the LP's osqp workspace,
+    the relocation scans, the previous plan (warm start) and the serpentine group.
+
+    ``plan(state, rng, elapsed)``: ``elapsed`` seconds since the previous plan decide how far
+    its matrix is shifted (whole intervals). ``reset()`` forgets the previous plan and the
+    serpentine group (call it when the subgoal changes or the robots re-arrange).
+    """
+
+    def __init__(self, params: TransportParams):
+        self.params = params
+        self.lp: ContactForceLP | None = None
+        self.scans: dict = {}
+        self.previous: LocalPlan | None = None
+
+    def reset(self) -> None:
+        self.previous = None
+        self.scans.clear()
+
+    def plan(
+        self, state: TransportState, rng: np.random.Generator, elapsed: float = 0.0
+    ) -> LocalPlan:
+        if self.previous is not None and state.serpentine_group is None:
+            state = dataclasses.replace(state, serpentine_group=self.previous.serpentine_group)
+        dt = self.params.interval if self.previous is None else self.previous.interval
+        shift = int(math.floor(elapsed / dt + 1e-9))
+        k = len(state.robots)
+        friction = state.model.contact_friction > 0
+        if self.lp is None or self.lp.n_max < k or self.lp.friction != friction:
+            self.lp = ContactForceLP(max(k, 1), friction=friction)
+        plan = plan_local(state, self.params, rng, self.previous, shift, self.lp, self.scans)
+        self.previous = plan
+        return plan
