@@ -16,6 +16,7 @@ import difflib
 import math
 import re
 import tomllib
+import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -131,7 +132,8 @@ class ObjectSection:
     contact_friction: float = _rule(0.0, min=0, max=2)
     height: float = _rule(0.2, gt=0, max=10)
     start: Pose = _rule()
-    goal: Pose = _rule()
+    # where the robots carry the object after the arrest; without it the job is the capture
+    goal: Pose | None = _rule(None)
     motion: MotionSection = _rule(MotionSection())
 
 
@@ -201,6 +203,9 @@ class TransportSection:
     tolerance: float = _rule(0.2, gt=0, max=10)
     heading_tolerance_deg: float = _rule(10.0, gt=0, max=180)
     stall_timeout: float = _rule(10.0, gt=0, max=1e5)
+    # s the fleet keeps holding the arrested object before carrying it: a live object fights
+    # a hold for object.motion.give_up_after s, then goes limp (the paper's "compromised")
+    start_after: float = _rule(5.0, min=0, max=1e4)
     intervals: int = _rule(8, min=1, max=1000)
     interval: float = _rule(0.5, gt=0, max=60)  # s, shortest interval (else t_subgoal / n)
     iterations: int = _rule(100, min=1, max=10**7)  # per plan (each control interval)
@@ -394,6 +399,10 @@ def _convert(tp: Any, value: Any, path: str, src: str) -> Any:
         return _build(tp, value, path, src)
     if typing.get_origin(tp) is tuple:
         return _tuple(tp, value, path, src)
+    if isinstance(tp, types.UnionType):  # an optional key (T | None): present means T
+        inner = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(inner) == 1:
+            return _convert(inner[0], value, path, src)
     raise TypeError(f"unsupported config type {tp}")
 
 
@@ -524,6 +533,8 @@ def _validate_object_placement(cfg: FleetConfig, obj: ObjectSection, src: str) -
     """The object placed at its start and at its goal stays inside the room."""
     (x0, y0), (x1, y1) = cfg.world.bounds
     for key in ("start", "goal"):
+        if getattr(obj, key) is None:
+            continue
         world_poly = geometry.transform(np.asarray(obj.polygon), getattr(obj, key))
         lo, hi = world_poly.min(axis=0), world_poly.max(axis=0)
         if lo[0] < x0 or hi[0] > x1 or lo[1] < y0 or hi[1] > y1:

@@ -67,6 +67,7 @@ class SafetyStage:
             arrest=intent.arrest,
             reason=intent.reason,
             progress=intent.progress,
+            object_push=intent.object_push,
         )
         if view.estop or intent.stop:
             self.v_prev[:] = 0.0

@@ -8,6 +8,8 @@ contacts can hold the object's push (``capture.hold_force``) with the robots' fo
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -174,6 +176,8 @@ class CaptureJob:
         self.blocked_ticks = 0
         self.replans = 0
         self.failed = False
+        self.transport: Any = None
+        self.arrest_t: float | None = None
 
     def _assign(self, view: FleetView) -> np.ndarray:
         radius = self.cfg.max_robot_radius
@@ -204,6 +208,8 @@ class CaptureJob:
         if self.failed:
             zero = np.zeros((self.n, 2))
             return Intent(zero, Phase.FAILED, stop=True, failed=True, reason=Reason.PINNED)
+        if self.transport is not None:
+            return self.transport.plan(view)
         if self.inner is None:
             ready = view.object_pose is not None and bool(np.all(view.present & ~view.stale))
             if not ready:
@@ -212,15 +218,42 @@ class CaptureJob:
         intent = self.inner.plan(view)
         if self._blocked(view):
             return self._replan(view, intent)
+        if intent.arrest:
+            self.arrest_t = view.t
+        wait = self.cfg.transport.start_after
+        waited = self.arrest_t is not None and view.t - self.arrest_t >= wait
+        if waited and self.cfg.object.goal is not None:
+            self._start_transport()
         return intent
+
+    def _start_transport(self) -> None:
+        """The object is arrested: from the next tick on, carry it to its goal."""
+        from controller.mission.transport import TransportMission
+
+        self.transport = TransportMission(
+            self.cfg,
+            self.rng,
+            self.inner.guard,
+            self.assignment,
+            self.capture.points,
+            self.capture.normals,
+        )
 
     def _start(self, view: FleetView, pinned: bool) -> Intent:
         """Assign robots to the capture set and start the approach (the capture event first)."""
-        from controller.mission.capture import CaptureMission
+        from controller.mission.capture import CaptureMission, CaptureSettings
 
         self.assignment = self._assign(view)
+        settings = CaptureSettings.from_config(self.cfg)
+        if self.cfg.object.goal is not None:  # the arrested object is carried, not let go
+            settings = dataclasses.replace(settings, settle_s=math.inf)
         self.inner = CaptureMission(
-            self.capture.points, self.capture.normals, self.assignment, self.cfg, self.rng
+            self.capture.points,
+            self.capture.normals,
+            self.assignment,
+            self.cfg,
+            self.rng,
+            settings=settings,
         )
         data = {
             "points": self.capture.points.round(4).tolist(),
@@ -280,6 +313,8 @@ class CaptureJob:
         return self._start(view, pinned=True)
 
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
+        if self.transport is not None:
+            return self.transport.safety(view, intent)
         if self.inner is None or self.failed:
             return MissionOutput(
                 np.zeros((self.n, 3)),
@@ -303,4 +338,6 @@ class CaptureJob:
         }
         if self.inner is not None and hasattr(self.inner, "summary"):
             out.update(self.inner.summary())
+        if self.transport is not None:
+            out.update(self.transport.summary())
         return out

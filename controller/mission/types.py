@@ -91,6 +91,8 @@ class Intent:
     reason: str = ""
     arrest: bool = False
     progress: dict[str, Any] = field(default_factory=dict)  # for the progress line
+    # the world twist (vx, vy, wz of the object frame's origin) the robots push the object with
+    object_push: np.ndarray | None = None
 
 
 @dataclass
@@ -105,6 +107,7 @@ class MissionOutput:
     arrest: bool = False
     reason: str = ""
     progress: dict[str, Any] = field(default_factory=dict)
+    object_push: np.ndarray | None = None
 
 
 class Mission(Protocol):

@@ -321,6 +321,11 @@ def plan_local(
         e = roll.energy(trace)
         return make_plan(roll, trace, e, "ok", group=group)
     start = roll.run(initial_matrix(roll, rng, previous, shift))
+    if previous is not None and params.initial_actions == "hold":
+        # the previous plan shifted, or the least-force pushing set now: the better start
+        fresh = roll.run(hold_matrix(roll, params.intervals))
+        if roll.energy(fresh).total < roll.energy(start).total:
+            start = fresh
     best, accepted = anneal(roll, start, params, rng, downhill=params.strategy == "downhill")
     return make_plan(roll, best, roll.energy(start), "ok", params.iterations, accepted)
 

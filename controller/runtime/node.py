@@ -227,6 +227,8 @@ class ControllerNode:
         if out.arrest and not self.arrested:
             self.arrested = True
             self.est.set_object_arrested(True)
+        if out.object_push is not None and hasattr(self.est, "push_object"):
+            self.est.push_object(now, *(float(v) for v in out.object_push))
         self.phase = out.phase
         self.counters.ticks += 1
         ttl = self.cfg.fleet.cmd_ttl

@@ -1,0 +1,566 @@
+"""TransportMission: carry the arrested object to ``object.goal`` (Sharma §4, Yamashita §3-4,
+Vass §4), in the same closed loop as the capture.
+
+Phases (each transition a ``phase`` event):
+
+- ``route``: the object route (weighted A*, ``controller.planning.route``) from the object's
+  estimated pose to the goal, cut into subgoals where the travel direction or the heading
+  changes (event ``route``). No route: ``failed`` with reason ``no_route``, every robot stops
+  where it is and the object is not pushed.
+- ``rearrange``: for each segment's travel direction D, the robots' contacts must be able to
+  push the object along it (the contact-force LP with their force limits,
+  ``controller.planning.contact_lp``). If they cannot, Sharma's Eq. 5 (``plan_push_arrangement``)
+  picks the contacts that push hardest along D, robots are matched to them (least travel
+  around the object), the robots whose contact changes move there along the lane around the
+  object while the others hold still, and the LP confirms the new set.
+- ``transport``: every interval the local planner (``transport.strategy``: Vass's simulated
+  annealing, its downhill ablation, or Sharma's serpentine; ``controller.planning.transport``)
+  plans from the filtered object pose and the robots execute its first interval (event
+  ``transport`` with the actions, energy and LP status). A subgoal reached moves to the next;
+  an object that leaves the route's corridor re-plans the route.
+- ``done`` when the object is within ``transport.tolerance`` m and
+  ``transport.heading_tolerance_deg`` of the goal: the robots back off and stop. ``failed``
+  with reason ``no_route`` or ``stalled`` (no progress for ``transport.stall_timeout`` s).
+
+Pure: the planners are pure; time comes from the view.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from controller import geometry
+from controller.config import FleetConfig
+from controller.mission.guard import SafetyStage
+from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
+from controller.planning.contact_lp import ContactForceLP, required_wrench
+from controller.planning.transport import TransportPlanner
+from controller.planning.transport_model import ObjectModel, relocation_path
+from controller.planning.transport_types import (
+    ATTACHED,
+    PUSH,
+    RELOCATE,
+    SLIDE_LEFT,
+    SLIDE_RIGHT,
+    LocalPlan,
+    RobotState,
+    RouteSegment,
+    TransportParams,
+    TransportState,
+    action_code,
+)
+
+
+@dataclass(frozen=True)
+class TransportSettings:
+    """The transport mission's constants (SI). From ``[transport]``: ``tolerance`` (m) and
+    ``heading_tolerance`` (rad) at the goal, ``stall_timeout`` (s). Internal: ``subgoal_tolerance``
+    (m, rad: a subgoal counts as reached), ``corridor`` (m: farther from the route re-plans it),
+    ``progress_step`` (m of progress that resets the stall clock), ``contact_tolerance`` (m: a
+    robot this close to its contact point is in contact), ``back_off`` (m the robots withdraw
+    from the delivered object), ``rearrange_timeout`` (s), ``waypoint_reached`` (m)."""
+
+    tolerance: float = 0.2
+    heading_tolerance: float = math.radians(10.0)
+    stall_timeout: float = 10.0
+    subgoal_tolerance: float = 0.1
+    subgoal_heading: float = math.radians(8.0)
+    corridor: float = 0.4
+    progress_step: float = 0.05
+    contact_tolerance: float = 0.08
+    back_off: float = 0.25
+    rearrange_timeout: float = 60.0
+    waypoint_reached: float = 0.08
+    contact_gain: float = 1.5  # 1/s, pull back onto the contact point
+    max_route_replans: int = 5
+
+    @classmethod
+    def from_config(cls, cfg: FleetConfig) -> TransportSettings:
+        t = cfg.transport
+        return cls(
+            tolerance=t.tolerance,
+            heading_tolerance=math.radians(t.heading_tolerance_deg),
+            stall_timeout=t.stall_timeout,
+        )
+
+
+@dataclass
+class Contact:
+    """A robot's contact on the object (object frame): a point and the inward push direction."""
+
+    point: np.ndarray
+    inward: np.ndarray
+
+
+class TransportMission:
+    """Carries the object from where the capture left it. ``robots`` (K,) indices of the robots
+    that hold it, ``contacts`` their contact points and outward normals (K, 2), object frame."""
+
+    def __init__(
+        self,
+        cfg: FleetConfig,
+        rng: np.random.Generator,
+        guard: SafetyStage,
+        robots: np.ndarray,
+        points: np.ndarray,
+        normals: np.ndarray,
+    ) -> None:
+        self.cfg = cfg
+        self.rng = rng
+        self.guard = guard
+        self.s = TransportSettings.from_config(cfg)
+        self.n = len(cfg.robots)
+        self.robots = np.asarray(robots, int)
+        o = cfg.object
+        self.model = ObjectModel.build(
+            cfg.object_polygon(), o.mass, o.floor_friction, o.contact_friction, cfg.max_robot_radius
+        )
+        self.params = TransportParams.from_config(cfg.transport)
+        self.planner = TransportPlanner(self.params)
+        self.lp = ContactForceLP(max(len(self.robots), 1), friction=o.contact_friction > 0)
+        self.contacts: dict[int, Contact | None] = {
+            int(i): Contact(np.asarray(p, float), -np.asarray(nv, float))
+            for i, p, nv in zip(self.robots, points, normals, strict=True)
+        }
+        self.actions: dict[int, str | None] = {int(i): None for i in self.robots}
+        self.phase = Phase.ROUTE
+        self.t0: float | None = None
+        self.route: Any = None
+        self.subgoal = 0
+        self.plan_t: float | None = None
+        self.last_plan: LocalPlan | None = None
+        self.best_remaining = math.inf
+        self.progress_t = 0.0
+        self.route_replans = 0
+        self.rearrangements = 0
+        self.relocations = 0
+        self.moves: dict[int, list[np.ndarray]] = {}  # robot -> object-frame path (rearranging)
+        self.targets: dict[int, Contact] = {}
+        self.rearrange_t = 0.0
+        self.done_t: float | None = None
+        self.failure: dict[str, Any] | None = None
+        self.plans = 0
+        self.plan_energy: list[float] = []
+        self.forces: list[float] = []
+
+    # --- the plan stage -----------------------------------------------------------------------
+    def plan(self, view: FleetView) -> Intent:
+        zero = np.zeros((self.n, 2))
+        if view.object_pose is None or view.estop:
+            return Intent(zero, self.phase, stop=True)
+        pose = np.asarray(view.object_pose, float)
+        events: list[Event] = []
+        if self.t0 is None:
+            self.t0 = self.progress_t = view.t
+        handler = {
+            Phase.ROUTE: self._route,
+            Phase.REARRANGE: self._rearrange,
+            Phase.TRANSPORT: self._transport,
+            Phase.DONE: self._done,
+            Phase.FAILED: self._failed,
+        }[self.phase]
+        return handler(view, pose, events)
+
+    def _go(self, phase: str, t: float, events: list[Event]) -> None:
+        self.phase = phase
+        events.append(("phase", {"phase": str(phase), "t": t}))
+
+    def _fail(self, reason: str, detail: str, view: FleetView, events: list[Event]) -> Intent:
+        self._go(Phase.FAILED, view.t, events)
+        self.failure = {"reason": str(reason), "t": view.t, "detail": detail}
+        events.append(("failure", dict(self.failure)))
+        return Intent(
+            np.zeros((self.n, 2)), self.phase, events, stop=True, failed=True, reason=reason
+        )
+
+    def _failed(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+        reason = self.failure["reason"] if self.failure else ""
+        zero = np.zeros((self.n, 2))
+        return Intent(zero, self.phase, events, stop=True, failed=True, reason=reason)
+
+    # --- route --------------------------------------------------------------------------------
+    def _route(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+        from controller.planning.route import plan_route
+
+        cfg = self.cfg
+        res = plan_route(
+            cfg.bounds_array(),
+            cfg.obstacle_polygons(),
+            cfg.object_polygon(),
+            cfg.max_robot_radius,
+            pose,
+            np.asarray(cfg.object.goal, float),
+            cfg.route,
+        )
+        if not res.ok:
+            return self._fail(Reason.NO_ROUTE, res.reason, view, events)
+        self.route = res
+        self.subgoal = 0
+        self.best_remaining = math.inf
+        self.progress_t = view.t
+        events.append(
+            (
+                "route",
+                {
+                    "t": view.t,
+                    "waypoints": np.round(res.waypoints, 4).tolist(),
+                    "subgoals": np.round(res.subgoals, 4).tolist(),
+                    "length_m": res.length_m,
+                    "cost_s": res.cost,
+                    "replans": self.route_replans,
+                },
+            )
+        )
+        return self._begin_segment(view, pose, events)
+
+    def _begin_segment(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+        """A new segment: re-arrange if the contacts cannot push along it, else transport."""
+        self.planner.reset()
+        self.last_plan = None
+        if self._can_push(pose):
+            self._go(Phase.TRANSPORT, view.t, events)
+            return self._transport(view, pose, events)
+        self._start_rearrangement(view, pose, events)
+        return self._rearrange(view, pose, events)
+
+    def _segment(self) -> RouteSegment:
+        wp = self.route.waypoints
+        return RouteSegment.toward(wp, self.route.subgoals[self.subgoal])
+
+    def _direction(self, pose: np.ndarray) -> np.ndarray:
+        """The twist (object frame, centroid) the current segment asks for, unit speed."""
+        goal = self.route.subgoals[self.subgoal]
+        c = geometry.transform(self.model.centroid[None], pose)[0]
+        cg = geometry.transform(self.model.centroid[None], goal)[0]
+        d = np.r_[cg - c, self.model.mean_radius * geometry.wrap_angle(goal[2] - pose[2])]
+        norm = float(np.linalg.norm(d))
+        if norm < 1e-9:
+            return np.zeros(3)
+        d /= norm
+        local = geometry.rot(float(pose[2])).T @ d[:2]
+        return np.r_[local, d[2] / self.model.mean_radius]
+
+    def _can_push(self, pose: np.ndarray) -> bool:
+        """Whether the robots in contact can push the object along the segment (the LP)."""
+        twist = self._direction(pose) * self.params.speed
+        if not np.any(twist):
+            return True
+        w = required_wrench(
+            twist, self.model.mass, self.model.floor_friction, self.model.mean_radius
+        )
+        pts, nrm, fmax = self._contact_arrays()
+        if len(pts) == 0:
+            return False
+        res = self.lp.solve(
+            pts - self.model.centroid, nrm, fmax, np.ones(len(pts), bool), w,
+            self.model.contact_friction, self.model.mean_radius,
+        )  # fmt: skip
+        return res.status == "optimal"
+
+    def _contact_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        pts, nrm, fmax = [], [], []
+        for i, c in self.contacts.items():
+            if c is not None:
+                pts.append(c.point)
+                nrm.append(c.inward)
+                fmax.append(self.cfg.robots[i].max_force)
+        return np.reshape(pts, (-1, 2)), np.reshape(nrm, (-1, 2)), np.asarray(fmax, float)
+
+    # --- rearrange ----------------------------------------------------------------------------
+    def _start_rearrangement(self, view: FleetView, pose: np.ndarray, events: list[Event]):
+        """Sharma Eq. 5 for the segment's direction, robots matched to the new contacts."""
+        from controller.planning.capture import CaptureParams, plan_push_arrangement
+
+        self._go(Phase.REARRANGE, view.t, events)
+        self.rearrangements += 1
+        self.rearrange_t = view.t
+        d = self._direction(pose)[:2]
+        if not np.any(d):
+            d = np.array([1.0, 0.0])
+        k = len(self.robots)
+        idx, value = plan_push_arrangement(
+            self.cfg.object_polygon(),
+            self.cfg.max_robot_radius,
+            d,
+            k,
+            CaptureParams.from_config(self.cfg.capture),
+            self.rng,
+        )
+        from controller.planning.capture import candidate_nodes
+
+        cand = candidate_nodes(
+            geometry.ensure_ccw(self.cfg.object_polygon()),
+            self.cfg.max_robot_radius,
+            self.cfg.capture.spacing,
+            self.cfg.capture.clearance,
+        )
+        new_pts, new_nrm = cand.points[idx], cand.normals[idx]
+        cur = np.array(
+            [
+                c.point if c is not None else geometry.inverse_transform(
+                    view.poses[i, None, :2], pose
+                )[0]
+                for i, c in self.contacts.items()
+            ]
+        )  # fmt: skip
+        cost = np.linalg.norm(cur[:, None] - new_pts[None], axis=-1)
+        rows, cols = linear_sum_assignment(cost)
+        self.targets.clear()
+        self.moves.clear()
+        ids = list(self.contacts)
+        for r, c in zip(rows, cols, strict=True):
+            i = ids[r]
+            target = Contact(new_pts[c], -new_nrm[c])
+            self.targets[i] = target
+            if cost[r, c] > self.s.contact_tolerance:
+                start = geometry.inverse_transform(view.poses[i, None, :2], pose)[0]
+                end = new_pts[c] + self.cfg.robots[i].radius * new_nrm[c]
+                self.moves[i] = list(relocation_path(self.model, start, end))
+                self.contacts[i] = None
+                self.relocations += 1
+        events.append(
+            (
+                "rearrange",
+                {
+                    "t": view.t,
+                    "direction": np.round(d, 4).tolist(),
+                    "eq5_value": float(value),
+                    "moving": [view.ids[i] for i in self.moves],
+                    "contacts": {
+                        view.ids[i]: np.round(c.point, 4).tolist() for i, c in self.targets.items()
+                    },
+                },
+            )
+        )
+
+    def _rearrange(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+        """Movers follow their path around the object; the others hold still."""
+        vel = np.zeros((self.n, 2))
+        hold = np.ones(self.n, bool)
+        for i, path in list(self.moves.items()):
+            here = view.poses[i, :2]
+            world = geometry.transform(np.asarray(path), pose)
+            while len(world) > 1 and np.linalg.norm(world[0] - here) < self.s.waypoint_reached:
+                path.pop(0)
+                world = world[1:]
+            err = world[0] - here
+            dist = float(np.linalg.norm(err))
+            if len(world) == 1 and dist < self.s.contact_tolerance:
+                del self.moves[i]
+                self.contacts[i] = self.targets[i]
+                continue
+            speed = min(1.5 * dist, self.cfg.robots[i].max_speed)
+            vel[i] = err / max(dist, 1e-9) * speed
+            hold[i] = False
+        if not self.moves:
+            for i, c in self.targets.items():
+                self.contacts[i] = c
+            if self._can_push(pose):
+                self._go(Phase.TRANSPORT, view.t, events)
+                return self._transport(view, pose, events)
+            return self._fail(
+                Reason.STALLED, "the re-arranged contacts cannot push the object", view, events
+            )
+        if view.t - self.rearrange_t > self.s.rearrange_timeout:
+            return self._fail(Reason.STALLED, "re-arrangement timed out", view, events)
+        touch = np.zeros(self.n, bool)
+        for i, c in self.contacts.items():
+            touch[i] = c is not None
+        return self._intent(vel, events, pose, touch, hold)
+
+    # --- transport ----------------------------------------------------------------------------
+    def _transport(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+        goal = np.asarray(self.cfg.object.goal, float)
+        if self._at(pose, goal, self.s.tolerance, self.s.heading_tolerance):
+            self.done_t = view.t
+            self._go(Phase.DONE, view.t, events)
+            events.append(("delivered", {"t": view.t, "pose": np.round(pose, 4).tolist()}))
+            return self._done(view, pose, events)
+        stall = self._stalled(view, pose)
+        if stall:
+            return self._fail(Reason.STALLED, stall, view, events)
+        if self._off_route(pose):
+            if self.route_replans >= self.s.max_route_replans:
+                return self._fail(Reason.STALLED, "left the route corridor too often", view, events)
+            self.route_replans += 1
+            self._go(Phase.ROUTE, view.t, events)
+            return self._route(view, pose, events)
+        if self._subgoal_reached(pose):
+            self.subgoal += 1
+            return self._begin_segment(view, pose, events)
+        due = self.plan_t is None or self.last_plan is None
+        due = due or view.t - self.plan_t >= self.last_plan.interval - 1e-9
+        if due:
+            self._local_plan(view, pose, events)
+        return self._execute(view, pose, events)
+
+    def _at(self, pose: np.ndarray, goal: np.ndarray, tol: float, tol_th: float) -> bool:
+        return bool(
+            np.linalg.norm(pose[:2] - goal[:2]) <= tol
+            and abs(geometry.wrap_angle(pose[2] - goal[2])) <= tol_th
+        )
+
+    def _subgoal_reached(self, pose: np.ndarray) -> bool:
+        if self.subgoal >= len(self.route.subgoals) - 1:
+            return False
+        g = self.route.subgoals[self.subgoal]
+        return self._at(pose, g, self.s.subgoal_tolerance, self.s.subgoal_heading)
+
+    def _remaining(self, pose: np.ndarray) -> float:
+        goal = np.asarray(self.cfg.object.goal, float)
+        d = float(np.linalg.norm(pose[:2] - goal[:2]))
+        return d + self.model.mean_radius * abs(geometry.wrap_angle(pose[2] - goal[2]))
+
+    def _stalled(self, view: FleetView, pose: np.ndarray) -> str:
+        rem = self._remaining(pose)
+        if rem < self.best_remaining - self.s.progress_step:
+            self.best_remaining = rem
+            self.progress_t = view.t
+        if view.t - self.progress_t > self.s.stall_timeout:
+            return f"no progress for {self.s.stall_timeout:g} s, {rem:.2f} m from the goal"
+        return ""
+
+    def _off_route(self, pose: np.ndarray) -> bool:
+        wp = self.route.waypoints
+        d = geometry.polygon_boundary_distance(pose[None, :2], wp[:, :2]) if len(wp) > 2 else None
+        if d is None:
+            return False
+        seg_a, seg_b = wp[:-1, :2], wp[1:, :2]
+        dist, _ = geometry.point_segment_distance(pose[None, :2], seg_a, seg_b)
+        return bool(dist.min() > self.s.corridor)
+
+    def _robot_states(self, view: FleetView) -> tuple[RobotState, ...]:
+        out = []
+        pose = np.asarray(view.object_pose, float)
+        for i in self.robots:
+            r = self.cfg.robots[i]
+            c = self.contacts[int(i)]
+            if c is not None:
+                centre = geometry.transform((c.point - r.radius * c.inward)[None], pose)[0]
+                if np.linalg.norm(centre - view.poses[i, :2]) > self.s.contact_tolerance:
+                    c = None  # it lost its contact: the planner knows it as free
+            out.append(
+                RobotState(
+                    position=view.poses[i, :2].copy(),
+                    radius=r.radius,
+                    max_force=r.max_force,
+                    max_speed=r.max_speed,
+                    contact=None if c is None else (c.point, c.inward),
+                    action=self.actions[int(i)],
+                    id=r.id,
+                )
+            )
+        return tuple(out)
+
+    def _local_plan(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> None:
+        cfg = self.cfg
+        state = TransportState(
+            self.model,
+            pose,
+            self._robot_states(view),
+            self._segment(),
+            tuple(cfg.obstacle_polygons()),
+            cfg.bounds_array(),
+        )
+        elapsed = 0.0 if self.plan_t is None else view.t - self.plan_t
+        plan = self.planner.plan(state, self.rng, elapsed)
+        self.plan_t = view.t
+        self.last_plan = plan
+        self.plans += 1
+        self.plan_energy.append(plan.energy.total)
+        for k, i in enumerate(self.robots):
+            action = plan.first_actions[k]
+            self.actions[int(i)] = action
+            if action_code(action) == RELOCATE and self.contacts[int(i)] is not None:
+                self.relocations += 1
+            p, nv = plan.contact_points[k], plan.contact_normals[k]
+            if np.all(np.isfinite(p)) and action_code(action) in ATTACHED:
+                self.contacts[int(i)] = Contact(p.copy(), nv.copy())
+            elif action_code(action) == RELOCATE:
+                self.contacts[int(i)] = None
+        f = plan.forces[0]
+        self.forces.extend(float(x) for x in f if x > 0)
+        events.append(("transport", {"t": view.t, **plan.to_dict()}))
+
+    def _execute(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+        """The plan's first interval, closed every tick: a robot holding a contact moves with
+        the object's planned twist at its contact point plus a pull back onto the point (and,
+        pushing, ``push_bias`` into the object); a relocating or idle one takes the plan's
+        velocity."""
+        plan = self.last_plan
+        vel = np.zeros((self.n, 2))
+        touch = np.zeros(self.n, bool)
+        twist = plan.object_twists[0] if len(plan.object_twists) else np.zeros(3)
+        centroid = geometry.transform(self.model.centroid[None], pose)[0]
+        rot = geometry.rot(float(pose[2]))
+        for k, i in enumerate(self.robots):
+            code = action_code(plan.first_actions[k])
+            c = self.contacts[int(i)]
+            if code not in ATTACHED or c is None or code in (SLIDE_LEFT, SLIDE_RIGHT):
+                vel[i] = plan.velocities[k]
+                touch[i] = code in ATTACHED
+                continue
+            r = self.cfg.robots[i].radius
+            centre = geometry.transform((c.point - r * c.inward)[None], pose)[0]
+            rel = centre - centroid
+            v = twist[:2] + twist[2] * np.array([-rel[1], rel[0]])
+            v = v + self.s.contact_gain * (centre - view.poses[i, :2])
+            if code == PUSH:
+                v = v + self.params.push_bias * (rot @ c.inward)
+            speed = float(np.linalg.norm(v))
+            vmax = self.cfg.robots[i].max_speed
+            vel[i] = v if speed <= vmax else v * vmax / speed
+            touch[i] = True
+        return self._intent(vel, events, pose, touch, None, twist)
+
+    # --- done ---------------------------------------------------------------------------------
+    def _done(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+        """Back off from the delivered object, then stop."""
+        vel = np.zeros((self.n, 2))
+        c = geometry.transform(self.model.centroid[None], pose)[0]
+        if view.t - self.done_t < self.s.back_off / 0.1:
+            for i in self.robots:
+                away = view.poses[i, :2] - c
+                vel[i] = 0.1 * away / max(float(np.linalg.norm(away)), 1e-9)
+        intent = self._intent(vel, events, pose, np.zeros(self.n, bool), None)
+        intent.done = view.t - self.done_t >= self.s.back_off / 0.1
+        return intent
+
+    def _intent(self, vel, events, pose, touch, hold, twist=None) -> Intent:
+        return Intent(
+            vel,
+            self.phase,
+            events,
+            object_pose=pose,
+            touch=touch,
+            overlap=float(self.cfg.max_robot_radius) if np.any(touch) else 0.0,
+            cage=True,
+            hold=hold,
+            progress={
+                "phase": str(self.phase),
+                "to_goal_m": self._remaining(pose),
+                "subgoal": float(self.subgoal),
+            },
+            object_push=None if twist is None else np.asarray(twist, float),
+        )
+
+    def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
+        return self.guard.apply(view, intent)
+
+    def summary(self) -> dict[str, Any]:
+        f = np.asarray(self.forces) if self.forces else np.zeros(0)
+        return {
+            "transport_phase": str(self.phase),
+            "route_length_m": None if self.route is None else self.route.length_m,
+            "route_replans": self.route_replans,
+            "rearrangements": self.rearrangements,
+            "relocations": self.relocations,
+            "local_plans": self.plans,
+            "planned_force_mean_n": float(f.mean()) if len(f) else None,
+            "transport_failure": self.failure,
+        }
