@@ -39,7 +39,9 @@ TRANSPORT_INITIAL = ("hold", "random")
 SIM_BACKENDS = ("pybullet", "ideal")
 FILTERS = ("ekf", "ukf")
 ZENOH_MODES = ("peer", "client", "router")
-MISSION_KINDS = ("capture", "stage", "hold")  # what fleet daemon --mission and build_mission run
+# what fleet daemon --mission and build_mission run ("transport": carry an object the robots
+# already hold, from where they stand; "capture": the whole job)
+MISSION_KINDS = ("capture", "transport", "stage", "hold")
 
 Point = tuple[float, float]
 Pose = tuple[float, float, float]
