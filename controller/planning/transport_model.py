@@ -874,22 +874,39 @@ def count_changes(effective: IntArray, previous: tuple[int, ...]) -> int:
 
 
 def hold_matrix(roll: Rollout, intervals: int) -> IntArray:
-    """The start of the search: a robot in the middle of a relocation or a slide keeps at it;
-    the robots in contact push if the contact-force LP with all of them as candidates gives them
-    a force for the twist the route asks for now (the least-force pushing set: a start that
-    already moves the object, where single changes from "everyone follows" would all be
-    uphill), else follow; if that LP has no answer, a robot pushes if its push has a component
-    along the needed force; a robot without contact idles."""
+    """Each robot repeats its last action; a robot without one pushes if its push has a
+    component along the force the object needs now (else it follows), or idles without
+    contact."""
     m, st = roll.model, roll.start
     twist = roll.carrot_twist(st)
     need = _rot(-st.pose[2]) @ twist[:2]
+    row = []
+    for i, r in enumerate(roll.state.robots):
+        if r.action is not None:
+            row.append(action_code(r.action))
+        elif st.nodes[i] < 0:
+            row.append(IDLE)
+        else:
+            row.append(PUSH if float(-m.normals[st.nodes[i]] @ need) > 1e-9 else FOLLOW)
+    return np.tile(np.array(row, np.int64), (intervals, 1))
+
+
+def lp_matrix(roll: Rollout, intervals: int) -> IntArray:
+    """The least-force pushing set as the start: a robot in the middle of a relocation or a
+    slide keeps at it; the robots in contact push if the contact-force LP with all of them as
+    candidates gives them a force for the twist the route asks for now, else follow (a start
+    that already moves the object, where every single change from "everyone follows" is
+    uphill); without an LP answer, :func:`hold_matrix`."""
+    st = roll.start
+    twist = roll.carrot_twist(st)
     contact = np.array([i for i in range(roll.k) if st.nodes[i] >= 0], np.int64)
-    lp_force = np.zeros(roll.k)
+    force = np.zeros(roll.k)
     if len(contact) and np.any(twist):
         res = roll.forces(st.pose[2], contact, np.asarray(st.nodes, np.int64), twist)
         if res.status == "optimal":
-            lp_force[contact] = res.normal
-    lp_ok = bool(np.any(lp_force > 1e-6))
+            force[contact] = res.normal
+    if not np.any(force > 1e-6):
+        return hold_matrix(roll, intervals)
     row = []
     for i, r in enumerate(roll.state.robots):
         last = None if r.action is None else action_code(r.action)
@@ -897,8 +914,6 @@ def hold_matrix(roll: Rollout, intervals: int) -> IntArray:
             row.append(last)
         elif st.nodes[i] < 0:
             row.append(IDLE)
-        elif lp_ok:
-            row.append(PUSH if lp_force[i] > 1e-6 else FOLLOW)
         else:
-            row.append(PUSH if float(-m.normals[st.nodes[i]] @ need) > 1e-9 else FOLLOW)
+            row.append(PUSH if force[i] > 1e-6 else FOLLOW)
     return np.tile(np.array(row, np.int64), (intervals, 1))

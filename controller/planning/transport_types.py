@@ -125,7 +125,7 @@ class TransportParams:
     initial_temperature: float = 0.3
     cooling: float = 0.95
     schedule: str = "geometric"
-    initial_actions: str = "hold"
+    initial_actions: str = "lp"
     block_moves: float = 0.5
     speed: float = 0.15
     lookahead: float = 0.3
