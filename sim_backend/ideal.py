@@ -169,6 +169,10 @@ class IdealWorld:
     def object_velocity(self) -> np.ndarray:
         return self._obj_vel.copy()
 
+    def contact_forces(self) -> dict[str, float]:
+        """No forces in a kinematic world."""
+        return {}
+
     def check(self) -> WorldCheck:
         return check_discs(
             self._ids,
