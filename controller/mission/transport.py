@@ -79,6 +79,7 @@ class TransportSettings:
     contact_gain: float = 1.5  # 1/s, pull back onto the contact point
     arrival_tolerance: float = 0.03  # m: a relocating robot this close to its contact arrived
     max_route_replans: int = 5
+    settle_margin: float = 0.6  # the estimate must be this share of the tolerances from the goal
     stuck_plans: int = 3
     max_rearrangements: int = 12  # local plans in a row that cannot push: re-arrange
 
@@ -372,7 +373,8 @@ class TransportMission:
     # --- transport ----------------------------------------------------------------------------
     def _transport(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         goal = np.asarray(self.cfg.object.goal, float)
-        if self._at(pose, goal, self.s.tolerance, self.s.heading_tolerance):
+        m = self.s.settle_margin  # stop well inside: the estimate is a centimetre and a degree off
+        if self._at(pose, goal, m * self.s.tolerance, m * self.s.heading_tolerance):
             self.done_t = view.t
             self._go(Phase.DONE, view.t, events)
             events.append(("delivered", {"t": view.t, "pose": np.round(pose, 4).tolist()}))
