@@ -81,7 +81,9 @@ class TransportSettings:
     max_route_replans: int = 5
     settle_margin: float = 0.6  # the estimate must be this share of the tolerances from the goal
     stuck_plans: int = 3
-    max_rearrangements: int = 12  # local plans in a row that cannot push: re-arrange
+    park_margin: float = 0.05  # m beyond the lane's band where idle robots wait
+    turn_margin: float = 1.5  # a set chosen to turn the object produces this times the wrench
+    max_rearrangements: int = 4  # re-arrangements in a row without progress, then stalled
 
     @classmethod
     def from_config(cls, cfg: FleetConfig) -> TransportSettings:
@@ -142,6 +144,7 @@ class TransportMission:
         self.progress_t = 0.0
         self.route_replans = 0
         self.rearrangements = 0
+        self.futile = 0  # re-arrangements since the object last made progress
         self.relocations = 0
         self.moves: dict[int, list[np.ndarray]] = {}  # robot -> object-frame path (rearranging)
         self.targets: dict[int, Contact] = {}
@@ -278,32 +281,25 @@ class TransportMission:
 
     # --- rearrange ----------------------------------------------------------------------------
     def _start_rearrangement(self, view: FleetView, pose: np.ndarray, events: list[Event]):
-        """Sharma Eq. 5 for the segment's direction D: the fewest pushers that can overcome the
-        floor friction (plus one for the torque) at the nodes pushing hardest along D; the
-        robots nearest to them move there, the others keep their contacts (one too close to a
-        new contact lets go)."""
-        from controller.planning.capture import (
-            CaptureParams,
-            candidate_nodes,
-            plan_push_arrangement,
-        )
-
+        """New contacts for the segment (Eq. 5 along its direction, or a turning set when it
+        mostly turns the object); the robots nearest to them move there, the others keep their
+        contacts (one too close to a new contact lets go)."""
         self._go(Phase.REARRANGE, view.t, events)
         self.rearrangements += 1
+        self.futile += 1
         self.rearrange_t = view.t
-        d = self._direction(pose)[:2]
+        twist = self._direction(pose)
+        d = twist[:2]
         if not np.any(d):
             d = np.array([1.0, 0.0])
-        cfg, m = self.cfg, self.model
-        weakest = min(cfg.robots[i].max_force for i in self.robots)
-        friction = m.floor_friction * m.mass * 9.81
-        n_push = int(min(len(self.robots), math.ceil(friction / weakest) + 1))
+        cfg = self.cfg
         r = cfg.max_robot_radius
-        poly = geometry.ensure_ccw(cfg.object_polygon())
-        params = CaptureParams.from_config(cfg.capture)
-        idx, value = plan_push_arrangement(poly, r, d, n_push, params, self.rng)
-        cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
-        new_pts, new_nrm = cand.points[idx], cand.normals[idx]
+        # a segment that turns the object more than a little: Eq. 5 knows no torque
+        turning = abs(twist[2]) * self.model.mean_radius > 0.3  # its share of the unit twist
+        if turning:
+            new_pts, new_nrm, value, n_push = self._turning_set(twist)
+        else:
+            new_pts, new_nrm, value, n_push = self._pushing_set(d)
         ids = list(self.contacts)
         here = geometry.inverse_transform(view.poses[ids, :2], pose)
         cost = np.linalg.norm(here[:, None] - (new_pts + r * new_nrm)[None], axis=-1)
@@ -317,7 +313,7 @@ class TransportMission:
             self.targets[i] = Contact(new_pts[col], -new_nrm[col])
             if cost[row, col] > self.s.arrival_tolerance:
                 end = new_pts[col] + cfg.robots[i].radius * new_nrm[col]
-                self.moves[i] = list(relocation_path(m, here[row], end))
+                self.moves[i] = list(relocation_path(self.model, here[row], end))
                 self.contacts[i] = None
                 self.relocations += 1
         centres = new_pts + r * new_nrm
@@ -335,6 +331,7 @@ class TransportMission:
                     "t": view.t,
                     "direction": np.round(d, 4).tolist(),
                     "pushers": n_push,
+                    "basis": "turn_capacity" if turning else "eq5",
                     "eq5_value": float(value),
                     "moving": [view.ids[i] for i in self.moves],
                     "contacts": {
@@ -342,6 +339,58 @@ class TransportMission:
                     },
                 },
             )
+        )
+
+    def _pushing_set(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
+        """Sharma Eq. 5 along D: the fewest pushers that overcome the floor friction (plus one
+        for the torque), at the candidate nodes pushing hardest along D."""
+        from controller.planning.capture import (
+            CaptureParams,
+            candidate_nodes,
+            plan_push_arrangement,
+        )
+
+        cfg, m = self.cfg, self.model
+        weakest = min(cfg.robots[i].max_force for i in self.robots)
+        friction = m.floor_friction * m.mass * 9.81
+        n_push = int(min(len(self.robots), math.ceil(friction / weakest) + 1))
+        r = cfg.max_robot_radius
+        poly = geometry.ensure_ccw(cfg.object_polygon())
+        params = CaptureParams.from_config(cfg.capture)
+        idx, value = plan_push_arrangement(poly, r, d, n_push, params, self.rng)
+        cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
+        return cand.points[idx], cand.normals[idx], float(value), n_push
+
+    def _turning_set(self, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
+        """A segment that mostly turns the object: Eq. 5 has no torque, so the set is the
+        fewest candidate nodes whose contact forces (within ``max_force``) produce the wrench
+        the turn needs with a margin (the capacity LP of ``planning.hold``, greedy with swaps);
+        the value reported is that capacity (≥ 1: the set can turn the object)."""
+        from controller.planning.capture import CaptureParams, make_problem
+        from controller.planning.hold import reinforce
+
+        cfg, m = self.cfg, self.model
+        r = cfg.max_robot_radius
+        poly = geometry.ensure_ccw(cfg.object_polygon())
+        prob = make_problem(poly, r, CaptureParams.from_config(cfg.capture))
+        need = required_wrench(twist * self.params.speed, m.mass, m.floor_friction, m.mean_radius)
+        weakest = min(cfg.robots[i].max_force for i in self.robots)
+        res = reinforce(
+            prob.cand.points,
+            prob.cand.normals,
+            m.centroid,
+            np.zeros(0, int),
+            np.ones(len(prob.cand.points), bool),
+            prob.conflict,
+            weakest,
+            -self.s.turn_margin * need[None],
+            len(self.robots),
+        )
+        return (
+            prob.cand.points[res.chosen],
+            prob.cand.normals[res.chosen],
+            float(res.capacity),
+            len(res.chosen),
         )
 
     def _rearrange(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
@@ -356,11 +405,12 @@ class TransportMission:
         for i, c in self.contacts.items():
             touch[i] = c is not None
         self._follow_paths(view, pose, vel, touch)
+        self._park(view, pose, vel, hold)
         if not self.moves:
             for i, c in self.targets.items():
                 self.contacts[i] = c
             self.targets.clear()
-            if self._can_push(pose) or self.rearrangements < self.s.max_rearrangements:
+            if self._can_push(pose) or self.futile < self.s.max_rearrangements:
                 self._go(Phase.TRANSPORT, view.t, events)
                 return self._transport(view, pose, events)
             return self._fail(
@@ -369,6 +419,29 @@ class TransportMission:
         if view.t - self.rearrange_t > self.s.rearrange_timeout:
             return self._fail(Reason.STALLED, "re-arrangement timed out", view, events)
         return self._intent(vel, events, pose, touch, hold)
+
+    def _park(self, view: FleetView, pose: np.ndarray, vel: np.ndarray, hold: np.ndarray) -> None:
+        """Robots without a contact or a path leave the relocation lane: each one whose disc
+        reaches into the lane's band backs straight away from the object until it is clear
+        (a robot left on the lane where its last path ended blocks every path that passes)."""
+        if not self.moves:
+            return
+        m, r = self.model, self.cfg.max_robot_radius
+        clear = 5.0 * r + self.s.park_margin  # the lane at 3r: its robots reach out to 4r
+        hull = geometry.convex_hull(m.polygon)
+        for i in self.robots:
+            i = int(i)
+            if i in self.moves or self.contacts[i] is not None:
+                continue
+            local = geometry.inverse_transform(view.poses[i, None, :2], pose)
+            d, closest = geometry.point_segment_distance(local, hull, np.roll(hull, -1, axis=0))
+            k = int(np.argmin(d[0]))
+            if d[0, k] >= clear or geometry.points_in_polygon(local, hull)[0]:
+                continue
+            out = (local[0] - closest[0, k]) / max(float(d[0, k]), 1e-9)
+            speed = min(1.5 * (clear - float(d[0, k])) + 0.05, self.cfg.robots[i].max_speed)
+            vel[i] = geometry.rot(float(pose[2])) @ out * speed
+            hold[i] = False
 
     # --- transport ----------------------------------------------------------------------------
     def _transport(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
@@ -380,8 +453,11 @@ class TransportMission:
             events.append(("delivered", {"t": view.t, "pose": np.round(pose, 4).tolist()}))
             return self._done(view, pose, events)
         stall = self._stalled(view, pose)
-        if stall:
+        if stall and self.futile >= self.s.max_rearrangements:
             return self._fail(Reason.STALLED, stall, view, events)
+        if stall or view.t - self.progress_t > self.s.stall_timeout / 2:
+            # receding-horizon plans can keep re-positioning without ever pushing: re-arrange
+            self.stuck = self.s.stuck_plans
         if self._off_route(pose):
             if self.route_replans >= self.s.max_route_replans:
                 return self._fail(Reason.STALLED, "left the route corridor too often", view, events)
@@ -416,23 +492,38 @@ class TransportMission:
         return self._at(pose, g, self.s.subgoal_tolerance, self.s.subgoal_heading)
 
     def _remaining(self, pose: np.ndarray) -> float:
+        """What is left of the route (m): the way to the nearest route segment, the rest of
+        that segment and every later one, turns counted as arc at the mean radius. (A straight
+        line to the goal would call a detour around an obstacle no progress.)"""
+        wp = self.route.waypoints
+        r = self.model.mean_radius
         goal = np.asarray(self.cfg.object.goal, float)
-        d = float(np.linalg.norm(pose[:2] - goal[:2]))
-        return d + self.model.mean_radius * abs(geometry.wrap_angle(pose[2] - goal[2]))
+        if len(wp) < 2:
+            return float(np.linalg.norm(pose[:2] - goal[:2])) + r * abs(
+                geometry.wrap_angle(pose[2] - goal[2])
+            )
+        step = np.linalg.norm(np.diff(wp[:, :2], axis=0), axis=1)
+        step = step + r * np.abs(geometry.wrap_angle(np.diff(wp[:, 2])))
+        tail = np.concatenate([np.cumsum(step[::-1])[::-1][1:], [0.0]])  # after segment j
+        dist, closest = geometry.point_segment_distance(pose[None, :2], wp[:-1, :2], wp[1:, :2])
+        j = int(np.argmin(dist[0]))
+        rest = float(np.linalg.norm(wp[j + 1, :2] - closest[0, j]))
+        turn = r * abs(geometry.wrap_angle(pose[2] - wp[j + 1, 2]))
+        return float(dist[0, j]) + rest + turn + float(tail[j])
 
     def _stalled(self, view: FleetView, pose: np.ndarray) -> str:
         rem = self._remaining(pose)
         if rem < self.best_remaining - self.s.progress_step:
             self.best_remaining = rem
             self.progress_t = view.t
+            self.futile = 0
         if view.t - self.progress_t > self.s.stall_timeout:
             return f"no progress for {self.s.stall_timeout:g} s, {rem:.2f} m from the goal"
         return ""
 
     def _off_route(self, pose: np.ndarray) -> bool:
         wp = self.route.waypoints
-        d = geometry.polygon_boundary_distance(pose[None, :2], wp[:, :2]) if len(wp) > 2 else None
-        if d is None:
+        if len(wp) < 2:
             return False
         seg_a, seg_b = wp[:-1, :2], wp[1:, :2]
         dist, _ = geometry.point_segment_distance(pose[None, :2], seg_a, seg_b)
