@@ -37,6 +37,9 @@ TRANSPORT_STRATEGIES = ("sa", "serpentine")
 SIM_BACKENDS = ("pybullet", "ideal")
 FILTERS = ("ekf", "ukf")
 ZENOH_MODES = ("peer", "client", "router")
+# The capture planner's node budget: candidate nodes on the object's boundary at capture.spacing
+# (its per-problem tables grow linearly with the count, the GA's work per generation too).
+CAPTURE_NODE_BUDGET = 20_000
 
 Point = tuple[float, float]
 Pose = tuple[float, float, float]
@@ -255,6 +258,7 @@ class FleetConfig:
     estimation: EstimationSection = EstimationSection()
     sim: SimSection = SimSection()
     source: str = ""
+    notes: tuple[str, ...] = ()  # what the loader changed (e.g. merged polygon vertices)
 
     def robot(self, robot_id: str) -> RobotConfig:
         for r in self.robots:
@@ -361,9 +365,12 @@ def _check_rules(meta: typing.Mapping[str, Any], value: Any, path: str, src: str
         )
 
 
+_NOT_KEYS = ("source", "notes")  # FleetConfig fields the loader fills, never TOML keys
+
+
 def _build(cls: type, table: dict[str, Any], path: str, src: str) -> Any:
     hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.name != "source"}
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.name not in _NOT_KEYS}
     for key in table:
         if key not in fields:
             where = f"{path}.{key}" if path else key
@@ -406,6 +413,87 @@ def _polygon(poly: Polygon, path: str, src: str) -> Polygon:
     return tuple((float(x), float(y)) for x, y in q)
 
 
+def edge_node_counts(polygon: Any, spacing: float) -> np.ndarray:
+    """Capture candidate nodes per edge at ``spacing``: max(1, floor(length / spacing)), as
+    floats (a tiny spacing gives huge counts, never an overflow)."""
+    p = np.asarray(polygon, dtype=float)
+    lengths = np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1)
+    with np.errstate(over="ignore"):
+        return np.maximum(1.0, np.floor(lengths / spacing + 1e-9))
+
+
+def capture_budget_error(polygon: Any, spacing: float) -> str | None:
+    """Why ``spacing`` gives the capture planner more nodes than its budget, or None."""
+    n = float(edge_node_counts(polygon, spacing).sum())
+    if n <= CAPTURE_NODE_BUDGET:
+        return None
+    p = np.asarray(polygon, dtype=float)
+    per = float(np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).sum())
+    least = per / (CAPTURE_NODE_BUDGET - len(p))
+    return (
+        f"{spacing:g} m gives {n:.4g} candidate nodes on the object's boundary (perimeter "
+        f"{per:.4g} m); the capture planner's budget is {CAPTURE_NODE_BUDGET}: "
+        f"use capture.spacing >= {least:.3g}"
+    )
+
+
+def merge_vertices(poly: Any, tol: float = 1e-9) -> tuple[np.ndarray, int, int]:
+    """The polygon without repeated vertices (closer than ``tol`` m, a closing copy of the first
+    one included) and without vertices in the middle of a straight edge (|sin| of the turn below
+    ``tol``, the edges going on the same way): (vertices, duplicates removed, collinear removed).
+    The shape is unchanged; what changes is what "one robot per edge" counts."""
+    p = np.asarray(poly, dtype=float)
+    dup = col = 0
+    changed = True
+    while changed and len(p) > 3:
+        changed = False
+        step = np.roll(p, -1, axis=0) - p  # edge i: p[i] -> p[i+1]
+        length = np.linalg.norm(step, axis=1)
+        if np.any(length <= tol):
+            i = int(np.argmax(length <= tol))
+            p = np.delete(p, i + 1 if i + 1 < len(p) else i, axis=0)  # keep the first vertex
+            dup, changed = dup + 1, True
+            continue
+        prev = np.roll(step, 1, axis=0)  # edge arriving at vertex i
+        cross = prev[:, 0] * step[:, 1] - prev[:, 1] * step[:, 0]
+        straight = (np.abs(cross) <= tol * np.roll(length, 1) * length) & (
+            (prev * step).sum(axis=1) > 0
+        )
+        if np.any(straight):
+            p = np.delete(p, int(np.argmax(straight)), axis=0)
+            col, changed = col + 1, True
+    return p, dup, col
+
+
+def _object(cfg: FleetConfig, src: str) -> tuple[ObjectSection, tuple[str, ...]]:
+    """The object section with its polygon merged (duplicate and collinear vertices, noted),
+    validated, within the capture planner's node budget, and inside the world at start and goal."""
+    merged, dup, col = merge_vertices(cfg.object.polygon)
+    notes = cfg.notes
+    if dup or col:
+        notes += (
+            f"object.polygon: merged {dup} duplicate and {col} collinear vertices "
+            f"({len(cfg.object.polygon)} -> {len(merged)}; the capture's one robot per edge "
+            "counts the merged edges)",
+        )
+    obj = dataclasses.replace(cfg.object, polygon=_polygon(merged, "object.polygon", src))
+    budget = capture_budget_error(obj.polygon, cfg.capture.spacing)
+    if budget:
+        raise ConfigError(src, "capture.spacing", budget)
+    (x0, y0), (x1, y1) = cfg.world.bounds
+    for key in ("start", "goal"):
+        pose = getattr(obj, key)
+        world_poly = geometry.transform(np.asarray(obj.polygon), pose)
+        if (
+            world_poly[:, 0].min() < x0
+            or world_poly[:, 0].max() > x1
+            or world_poly[:, 1].min() < y0
+            or world_poly[:, 1].max() > y1
+        ):
+            raise ConfigError(src, f"object.{key}", "the object placed there leaves world.bounds")
+    return obj, notes
+
+
 def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
     (x0, y0), (x1, y1) = cfg.world.bounds
     if not (x1 > x0 and y1 > y0):
@@ -416,9 +504,7 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
         dataclasses.replace(o, polygon=_polygon(o.polygon, f"obstacles[{i}].polygon", src))
         for i, o in enumerate(cfg.obstacles)
     )
-    obj = dataclasses.replace(
-        cfg.object, polygon=_polygon(cfg.object.polygon, "object.polygon", src)
-    )
+    obj, notes = _object(cfg, src)
     if not cfg.robots:
         raise ConfigError(src, "robots", "expected at least one [[robots]] entry")
     seen: dict[str, int] = {}
@@ -466,17 +552,7 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
                     f"{path}.kind",
                     'an ardurover robot never moves sideways in GUIDED: set kind = "diff"',
                 )
-    for key in ("start", "goal"):
-        pose = getattr(obj, key)
-        world_poly = geometry.transform(np.asarray(obj.polygon), pose)
-        if (
-            world_poly[:, 0].min() < x0
-            or world_poly[:, 0].max() > x1
-            or world_poly[:, 1].min() < y0
-            or world_poly[:, 1].max() > y1
-        ):
-            raise ConfigError(src, f"object.{key}", "the object placed there leaves world.bounds")
-    return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src)
+    return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src, notes=notes)
 
 
 def parse_config(data: dict[str, Any], source: str = "") -> FleetConfig:

@@ -14,12 +14,14 @@ from controller.mission.types import FleetView, MissionOutput
 
 
 class MissionError(ValueError):
-    """The mission cannot be built for this fleet (e.g. too few robots for the capture)."""
+    """The mission cannot be built for this fleet (e.g. no feasible capture plan: the message
+    gives the planner's reason)."""
 
 
 class CaptureJob:
     """The capture: the GA plan at construction, robot assignment once the first estimates are
-    in (robots and object), then the approach-and-arrest mission.
+    in (robots and object), then the approach-and-arrest mission. An infeasible plan (no
+    closure within the fleet, robots too large, ...) raises MissionError with the reason.
 
     Until every robot is present with a fresh estimate and the object has been seen, every robot
     holds still (phase ``plan``). The assignment minimises total travel time to the capture
@@ -32,24 +34,15 @@ class CaptureJob:
         rng: np.random.Generator | None = None,
         clock: Callable[[], float] | None = None,
     ) -> None:
-        from controller.planning.capture import CaptureParams, plan_capture
+        from controller.planning.capture import plan_for_fleet
 
         self.cfg = cfg
         self.clock = clock
         self.rng = rng if rng is not None else np.random.default_rng(cfg.capture.seed)
         self.n = len(cfg.robots)
-        self.plan = plan_capture(
-            cfg.object_polygon(),
-            cfg.max_robot_radius,
-            CaptureParams.from_config(cfg.capture),
-            self.rng,
-        )
-        if not self.plan.form_closure and cfg.capture.closure == "exact":
-            raise MissionError("the capture GA found no set of points in form closure")
-        if self.plan.robots_needed > self.n:
-            raise MissionError(
-                f"the capture needs {self.plan.robots_needed} robots; the fleet has {self.n}"
-            )
+        self.plan = plan_for_fleet(cfg, self.rng)
+        if not self.plan.feasible:
+            raise MissionError(f"no feasible capture plan: {self.plan.reason}")
         self.assignment: np.ndarray | None = None
         self.inner: Any = None
 
