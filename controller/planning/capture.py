@@ -52,6 +52,11 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 PENALTY = -1e20  # the paper's penalty on an infeasible string's objective
 INFEASIBLE_RANK = -1e30  # rank of an infeasible string: this times its violation count
+# The closure test's memory grows with n³ for a string of n robots: it runs on rows in chunks of
+# at most CLOSURE_CHUNK pair-against-wrench entries, and on strings of at most MAX_CLOSURE_SET
+# robots (a larger set counts as not closed; the fleet limit is the working cap).
+CLOSURE_CHUNK = 4_000_000
+MAX_CLOSURE_SET = 200
 # the constraints, in the order a diagnosis names them
 CONSTRAINTS = ("robots", "fleet", "moments", "translation", "one_per_edge", "spacing", "closure")
 
@@ -141,7 +146,7 @@ class Problem:
     robot_radius: float = 0.0
     max_robots: int | None = None  # the fleet size (None: no limit)
     n_robots_note: str = ""
-    table: FloatArray = field(default_factory=lambda: np.zeros((1, 8)))  # see node_table
+    table: FloatArray = field(default_factory=lambda: np.zeros((1, _COLUMNS)))  # node_table
 
     def __post_init__(self) -> None:
         self.table = node_table(self)
@@ -195,21 +200,23 @@ def make_problem(
 
 _STEPS = np.arange(CAPTURE_NODE_BUDGET + 1)[None]  # 0, 1, 2, ... (read only)
 # columns of the per-node table (one extra all-padding row at index K)
-_M, _ANGLE, _CX, _CY, _W, _EDGE = 0, 1, 2, 3, slice(4, 7), 7
+_ABSM, _SIGN, _ANGLE, _CX, _CY, _EDGE = 0, 1, 2, 3, 4, 5
+_W0, _W1, _W2 = 6, 7, 8  # the unit wrench
+_COLUMNS = 9
 
 
 def node_table(prob: Problem) -> FloatArray:
-    """(K + 1, 8): moment, push angle, robot centre x and y, unit wrench, edge per node; row K
-    pads strings to a common length (no moment, an angle that sorts last, no wrench, edge −1)."""
-    k = len(prob.cand.points)
-    t = np.zeros((k + 1, 8))
-    t[:k, _M], t[:k, _ANGLE], t[:k, _CX], t[:k, _CY] = (
-        prob.moments,
-        prob.angles,
-        prob.centres[:, 0],
-        prob.centres[:, 1],
-    )
-    t[:k, _W], t[:k, _EDGE] = prob.unit_wrench, prob.cand.edges
+    """(K + 1, 9) per node: |moment| (0 when |m| ≤ τ), its sign (−1, 0, 1), push angle, robot
+    centre x and y, edge, the unit wrench. Row K pads strings to a common length: no moment, an
+    angle that sorts last, edge −1, no wrench."""
+    k, tau = len(prob.cand.points), prob.params.tau
+    m = prob.moments
+    t = np.zeros((k + 1, _COLUMNS))
+    t[:k, _ABSM] = np.where(np.abs(m) > tau, np.abs(m), 0.0)
+    t[:k, _SIGN] = (m > tau).astype(float) - (m < -tau)
+    t[:k, _ANGLE], t[:k, _CX], t[:k, _CY] = prob.angles, prob.centres[:, 0], prob.centres[:, 1]
+    t[:k, _EDGE] = prob.cand.edges
+    t[:k, _W0 : _W2 + 1] = prob.unit_wrench
     t[k, _ANGLE], t[k, _EDGE] = 10.0, -1.0
     return t
 
@@ -245,15 +252,12 @@ class _Chosen:
 def _moment_sums(prob: Problem, ch: _Chosen) -> tuple[FloatArray, BoolArray]:
     """Eq. 3 for every string, and whether it resists moments only one way (or none)."""
     p = prob.params
-    m = ch.t[..., _M]
-    n_ccw, n_cw = (m > p.tau).sum(axis=1), (m < -p.tau).sum(axis=1)
-    a = np.abs(m)
-    f = (
-        np.where(a > p.tau, a, 0.0).sum(axis=1)
-        / np.maximum(ch.cnt, 1).astype(float) ** p.k
-        / (np.abs(n_cw - n_ccw) + p.epsilon)
-    )
-    return f, (n_ccw < 1) | (n_cw < 1)
+    sign = ch.t[..., _SIGN]
+    n_ccw, n_cw = (sign > 0).sum(axis=1), (sign < 0).sum(axis=1)
+    n = np.maximum(ch.cnt, 1).astype(float)
+    f = ch.t[..., _ABSM].sum(axis=1) / (n if p.k == 1 else n**p.k)
+    f /= np.abs(n_cw - n_ccw) + p.epsilon
+    return f, (n_ccw == 0) | (n_cw == 0)
 
 
 def _translation_ok(ch: _Chosen) -> BoolArray:
@@ -303,22 +307,33 @@ def _closest_pair(ch: _Chosen) -> FloatArray:
     return np.sqrt(np.where(real, d2, np.inf).min(axis=1, initial=np.inf))
 
 
-def _wrench_closure(ch: _Chosen, tol: float = 1e-9) -> BoolArray:
+def _wrench_closure(prob: Problem, ch: _Chosen, tol: float = 1e-9) -> BoolArray:
     """First-order form closure: the chosen wrenches positively span R³. A set fails iff some
     closed half-space holds them all; its boundary plane can be taken through two of them (a set
     of rank ≤ 2 lies in such a plane; rank ≤ 1 fails translation closure before this check).
     Work and memory per string grow with n³ (n its robot count), not with K."""
-    w = ch.t[..., _W]  # (P, n, 3); padding rows are zero: on every plane, on no side
-    a, b = _pairs(w.shape[1])
-    u, v = w[:, a], w[:, b]  # (P, m, 3): the pairs
-    y = u[..., _ROLL1] * v[..., _ROLL2] - u[..., _ROLL2] * v[..., _ROLL1]  # pair plane normals
-    plane = (y * y).sum(axis=-1) > 1e-18
-    side = np.einsum("pmk,pnk->pmn", y, w)  # every chosen wrench against every pair's plane
+    a, b = _pairs(ch.idx.shape[1])
+    ia, ib = ch.idx[:, a], ch.idx[:, b]  # (P, m): the pairs
+    w0, w1, w2 = prob.table[:, _W0], prob.table[:, _W1], prob.table[:, _W2]
+    u0, u1, u2, v0, v1, v2 = w0[ia], w1[ia], w2[ia], w0[ib], w1[ib], w2[ib]
+    y0, y1, y2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0  # pair plane normals
+    plane = y0 * y0 + y1 * y1 + y2 * y2 > 1e-18
+    side = (  # (P, m, n): every chosen wrench against every pair's plane (padding: 0)
+        y0[..., None] * ch.t[:, None, :, _W0]
+        + y1[..., None] * ch.t[:, None, :, _W1]
+        + y2[..., None] * ch.t[:, None, :, _W2]
+    )
     one_side = plane & ~(np.any(side < -tol, axis=-1) & np.any(side > tol, axis=-1))
     return (ch.cnt >= 4) & ~one_side.any(axis=1)
 
 
-_ROLL1, _ROLL2 = np.array([1, 2, 0]), np.array([2, 0, 1])
+def _closure_in_chunks(prob: Problem, ch: _Chosen) -> BoolArray:
+    n = ch.idx.shape[1]
+    step = max(1, CLOSURE_CHUNK // max(1, n * n * (n - 1) // 2))
+    if step >= len(ch.cnt):
+        return _wrench_closure(prob, ch)
+    rows = [ch.rows(_STEPS[0, : len(ch.cnt)] // step == c) for c in range(-(-len(ch.cnt) // step))]
+    return np.concatenate([_wrench_closure(prob, part) for part in rows])
 
 
 def constraint_flags(prob: Problem, x: BoolArray) -> tuple[FloatArray, dict[str, BoolArray]]:
@@ -341,9 +356,10 @@ def constraint_flags(prob: Problem, x: BoolArray) -> tuple[FloatArray, dict[str,
     if p.closure == "exact":
         rest = ~(flags["robots"] | flags["fleet"] | one_way | flags["translation"])
         rest &= ~(flags["one_per_edge"] | flags["spacing"])
+        rest &= ch.cnt <= MAX_CLOSURE_SET
         closed = none.copy()
         if np.any(rest):
-            closed[rest] = _wrench_closure(ch.rows(rest))
+            closed[rest] = _closure_in_chunks(prob, ch.rows(rest))
         flags["closure"] = ~closed
     return f, flags
 
@@ -708,8 +724,8 @@ def describe(
 
 def _need(p: CaptureParams) -> str:
     if p.closure == "exact":
-        return "first-order form closure needs at least 4 frictionless contacts"
-    return "the paper's closure needs at least 3 robots"
+        return "first-order form closure needs 4 robots at least (frictionless contacts)"
+    return "the paper's closure needs 3 robots at least"
 
 
 def packing_bound(prob: Problem) -> int:
@@ -897,7 +913,7 @@ def push_objective(
     f_push = -prob.cand.normals
     ch = _Chosen.of(prob, x)
     mask = ch.mask
-    proj = f_push @ d
+    proj = f_push[:, 0] * d[0] + f_push[:, 1] * d[1]  # (no BLAS call in the loop)
     val = np.where(mask, proj[np.minimum(ch.idx, len(proj) - 1)], 0.0).sum(axis=1)
     viol = (ch.cnt != n).astype(np.int64)
     viol += _too_close(prob, ch)

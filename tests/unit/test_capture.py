@@ -208,7 +208,7 @@ def test_too_few_robots_exits_1_naming_both_numbers(tmp_path, capsys):
     path = write_toml(tmp_path / "three.toml", cfg)
     assert main(["plan", "capture", "--config", str(path)]) == 1
     err = capsys.readouterr().err
-    assert "at least 4" in err and "the fleet has 3" in err
+    assert "needs 4" in err and "has 3" in err
 
 
 def test_plot_is_written(tmp_path):

@@ -57,6 +57,8 @@ def test_robots_too_large_for_a_small_crate_is_refused_with_the_reason(tmp_path,
     assert out["points"] == [] and out["robots_needed"] == 0 and out["objective"] == -1e20
     with pytest.raises(MissionError, match="robots too large"):
         CaptureJob(load_config(path))
+    assert main(["run", "--config", str(path), "--out", str(tmp_path / "run.mcap")]) == 1
+    assert "no feasible capture plan: robots too large" in capsys.readouterr().err
 
 
 def test_spacing_violation_is_named_with_the_distances():
@@ -76,7 +78,7 @@ def test_too_few_candidates_still_prints_its_json(tmp_path, capsys):
     path = config_with(tmp_path, {"object": {"polygon": tri}, "capture": {"spacing": 0.5}})
     status, out = plan_json(path, capsys)
     assert status == 1 and out["feasible"] is False and out["violated"] == ["robots"]
-    assert "capture.spacing" in out["reason"] and "at least 4" in out["reason"]
+    assert "capture.spacing" in out["reason"] and "needs 4 robots" in out["reason"]
 
 
 # --------------------------------------------------------------------------- 2: ranking
