@@ -576,11 +576,14 @@ def load_config(path: str | Path) -> FleetConfig:
 
 
 def config_to_dict(cfg: FleetConfig) -> dict[str, Any]:
-    """The config as plain data (for logs and --json); tuples become lists."""
+    """The config as plain data (for logs and --json); tuples become lists. The loader's notes
+    are left out (they are no config key: the data must load again)."""
 
     def conv(v: Any) -> Any:
         if dataclasses.is_dataclass(v):
-            return {f.name: conv(getattr(v, f.name)) for f in dataclasses.fields(v)}
+            return {
+                f.name: conv(getattr(v, f.name)) for f in dataclasses.fields(v) if f.name != "notes"
+            }
         if isinstance(v, tuple | list):
             return [conv(x) for x in v]
         return v

@@ -35,6 +35,7 @@ could not be met; an infeasible problem is never an exception.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 from collections.abc import Callable
@@ -780,7 +781,7 @@ def structural_reason(prob: Problem) -> tuple[str, list[str]]:
     if fit < need:
         return (
             f"robots too large for the object: at most {fit} robots of radius {r:g} m fit around "
-            f"it with centres {prob.min_gap:.3g} m (2·radius + capture.clearance) apart; {why}",
+            f"it with centres {prob.min_gap:.3g} m (2·radius + clearance) apart; {why}",
             ["spacing"],
         )
     return "", []
@@ -805,7 +806,7 @@ def _closest_reason(prob: Problem, res: GAResult) -> tuple[str, list[str]]:
         "translation": "the push directions leave a half-plane free (translation closure)",
         "one_per_edge": "two robots on one edge",
         "spacing": f"robot centres {gap:.3g} m apart where {prob.min_gap:.3g} m "
-        "(2·radius + capture.clearance) is needed",
+        "(2·radius + clearance) is needed",
         "closure": "the wrenches do not positively span R³ (first-order form closure)",
     }
     text = "; ".join(f"{b}: {detail[b]}" for b in bad)
@@ -861,11 +862,17 @@ def plan_capture(
 
 def plan_for_fleet(cfg: Any, rng: np.random.Generator | None = None) -> CapturePlan:
     """The capture plan for a config: its object, the fleet's largest robot radius, at most as
-    many robots as the fleet has, the ``[capture]`` parameters (``rng`` from capture.seed)."""
+    many robots as the fleet has, the ``[capture]`` parameters (``rng`` from capture.seed).
+
+    The robots' spacing uses the larger of ``capture.clearance`` and ``approach.safety_margin``:
+    the approach's safety filter keeps robot centres ``r_i + r_j + safety_margin`` apart, so
+    points closer than that could never all be reached."""
+    params = CaptureParams.from_config(cfg.capture)
+    clearance = max(params.clearance, cfg.approach.safety_margin)
     return plan_capture(
         cfg.object_polygon(),
         cfg.max_robot_radius,
-        CaptureParams.from_config(cfg.capture),
+        dataclasses.replace(params, clearance=clearance),
         rng if rng is not None else np.random.default_rng(cfg.capture.seed),
         max_robots=len(cfg.robots),
     )

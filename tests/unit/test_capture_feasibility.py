@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from controller.cli import main
-from controller.config import ConfigError, load_config, parse_config
+from controller.config import ConfigError, config_to_dict, load_config, parse_config
 from controller.mission.job import CaptureJob, MissionError
 from controller.planning.capture import (
     INFEASIBLE_RANK,
@@ -19,6 +19,7 @@ from controller.planning.capture import (
     evaluate,
     make_problem,
     plan_capture,
+    plan_for_fleet,
     rank_strings,
     run_ga,
 )
@@ -53,7 +54,8 @@ def test_robots_too_large_for_a_small_crate_is_refused_with_the_reason(tmp_path,
     status, out = plan_json(path, capsys)
     assert status == 1
     assert out["feasible"] is False and out["form_closure"] is False
-    assert "robots too large" in out["reason"] and "0.22" in out["reason"]
+    # 2r + clearance, the clearance no less than approach.safety_margin (0.05)
+    assert "robots too large" in out["reason"] and "0.25 m" in out["reason"]
     assert out["points"] == [] and out["robots_needed"] == 0 and out["objective"] == -1e20
     with pytest.raises(MissionError, match="robots too large"):
         CaptureJob(load_config(path))
@@ -169,6 +171,9 @@ def test_collinear_and_duplicate_vertices_are_merged_and_reported(tmp_path, caps
     merged = load_config(path)
     assert merged.object.polygon == plain.object.polygon and plain.notes == ()
     assert "merged 1 duplicate and 2 collinear" in merged.notes[0]
+    data = config_to_dict(merged)  # as logged: loads again, notes are no config key
+    data.pop("source")
+    assert parse_config(data).object.polygon == merged.object.polygon
     assert main(["check", "--config", str(path), "--json"]) == 0
     assert "merged" in json.loads(capsys.readouterr().out)["notes"][0]
     assert main(["check", "--config", str(path)]) == 0
@@ -194,3 +199,31 @@ def test_a_capture_needing_more_robots_than_the_fleet_says_how_many():
     plan = plan_capture(L_SHAPE, 0.1, params, np.random.default_rng(0), max_robots=3)
     assert not plan.feasible and plan.violated == ["fleet"]
     assert "needs 4 robots" in plan.reason and "the fleet has 3" in plan.reason
+
+
+def test_fleet_plans_keep_the_approach_safety_margin_between_robots(tmp_path):
+    # the U's notch holds two robots 0.224 m apart (2r + capture.clearance = 0.22) but the
+    # approach's safety filter keeps them 2r + approach.safety_margin = 0.25 m apart
+    u = [
+        [0.0, 0.0],
+        [1.0, 0.0],
+        [1.0, 0.8],
+        [0.7, 0.8],
+        [0.7, 0.3],
+        [0.3, 0.3],
+        [0.3, 0.8],
+        [0.0, 0.8],
+    ]
+    cfg = load_config(config_with(tmp_path, {"object": {"polygon": u}, "capture": {"seed": 1}}))
+    free = plan_capture(cfg.object_polygon(), 0.1, CaptureParams(), np.random.default_rng(1), 6)
+    plan = plan_for_fleet(cfg, np.random.default_rng(1))
+    gap = 2 * cfg.max_robot_radius + cfg.approach.safety_margin
+
+    def closest(p) -> float:
+        c = p.points + cfg.max_robot_radius * p.push_normals
+        return float(
+            np.linalg.norm(c[:, None] - c[None], axis=-1)[np.triu_indices(len(c), 1)].min()
+        )
+
+    assert free.feasible and closest(free) < gap  # the optimum on capture.clearance alone
+    assert plan.feasible and closest(plan) >= gap - 1e-9
