@@ -199,7 +199,7 @@ def make_problem(
 # --------------------------------------------------------------------------- evaluation
 
 
-_STEPS = np.arange(CAPTURE_NODE_BUDGET + 1)[None]  # 0, 1, 2, ... (read only)
+_STEPS = np.arange(CAPTURE_NODE_BUDGET + 1)[None]  # 0, 1, 2, ... per node or robot (read only)
 # columns of the per-node table (one extra all-padding row at index K)
 _ABSM, _SIGN, _ANGLE, _CX, _CY, _EDGE = 0, 1, 2, 3, 4, 5
 _W0, _W1, _W2 = 6, 7, 8  # the unit wrench
@@ -237,7 +237,7 @@ class _Chosen:
         cnt = np.count_nonzero(x, axis=1)
         size = int(cnt.max()) if len(x) else 0
         idx = np.full((len(x), size), k, np.int64)
-        idx[_STEPS[:, :size] < cnt[:, None]] = np.flatnonzero(x) % k  # row-major: in order
+        idx[_STEPS[:, :size] < cnt[:, None]] = x.ravel().nonzero()[0] % k  # row-major: in order
         return cls(idx, prob.table[idx], cnt)
 
     @property
@@ -266,9 +266,10 @@ def _translation_ok(ch: _Chosen) -> BoolArray:
     size = ch.idx.shape[1]
     if size < 3:
         return np.zeros(len(ch.cnt), bool)
-    a = np.sort(ch.t[..., _ANGLE], axis=1)  # padding (10) sorts last
-    inner = np.where(_STEPS[:, : size - 1] < ch.cnt[:, None] - 1, np.diff(a, axis=1), -np.inf)
-    last = np.take_along_axis(a, np.maximum(ch.cnt - 1, 0)[:, None], axis=1)[:, 0]
+    a = ch.t[..., _ANGLE].copy()
+    a.sort(axis=1)  # padding (10) sorts last
+    inner = np.where(_STEPS[:, : size - 1] < ch.cnt[:, None] - 1, a[:, 1:] - a[:, :-1], -np.inf)
+    last = a[np.arange(len(a)), np.maximum(ch.cnt - 1, 0)]
     wrap = a[:, 0] + 2 * np.pi - last
     return (ch.cnt >= 3) & (np.maximum(inner.max(axis=1), wrap) < np.pi - 1e-9)
 
@@ -277,8 +278,9 @@ def _shared_edge(ch: _Chosen) -> BoolArray:
     """Two robots on one edge."""
     if ch.idx.shape[1] < 2:
         return np.zeros(len(ch.cnt), bool)
-    e = np.sort(ch.t[..., _EDGE], axis=1)  # padding (−1) sorts first
-    return np.any((e[:, 1:] == e[:, :-1]) & (e[:, 1:] >= 0), axis=1)
+    e = ch.t[..., _EDGE].copy()
+    e.sort(axis=1)  # padding (−1) sorts first
+    return ((e[:, 1:] == e[:, :-1]) & (e[:, 1:] >= 0)).any(axis=1)
 
 
 @functools.lru_cache(maxsize=64)
@@ -299,7 +301,7 @@ def _pair_distances(ch: _Chosen) -> tuple[FloatArray, BoolArray]:
 
 def _too_close(prob: Problem, ch: _Chosen) -> BoolArray:
     d2, real = _pair_distances(ch)
-    return np.any(real & (d2 < (prob.min_gap - 1e-12) ** 2), axis=1)
+    return (real & (d2 < (prob.min_gap - 1e-12) ** 2)).any(axis=1)
 
 
 def _closest_pair(ch: _Chosen) -> FloatArray:
@@ -324,7 +326,7 @@ def _wrench_closure(prob: Problem, ch: _Chosen, tol: float = 1e-9) -> BoolArray:
         + y1[..., None] * ch.t[:, None, :, _W1]
         + y2[..., None] * ch.t[:, None, :, _W2]
     )
-    one_side = plane & ~(np.any(side < -tol, axis=-1) & np.any(side > tol, axis=-1))
+    one_side = plane & ~((side < -tol).any(axis=-1) & (side > tol).any(axis=-1))
     return (ch.cnt >= 4) & ~one_side.any(axis=1)
 
 
@@ -333,7 +335,7 @@ def _closure_in_chunks(prob: Problem, ch: _Chosen) -> BoolArray:
     step = max(1, CLOSURE_CHUNK // max(1, n * n * (n - 1) // 2))
     if step >= len(ch.cnt):
         return _wrench_closure(prob, ch)
-    rows = [ch.rows(_STEPS[0, : len(ch.cnt)] // step == c) for c in range(-(-len(ch.cnt) // step))]
+    rows = [ch.rows(np.arange(len(ch.cnt)) // step == c) for c in range(-(-len(ch.cnt) // step))]
     return np.concatenate([_wrench_closure(prob, part) for part in rows])
 
 
@@ -399,52 +401,55 @@ def certify_form_closure(points: FloatArray, normals: FloatArray, centroid: Floa
 
 
 def _initial(k: int, size: int, rng: np.random.Generator, lo: int = 3, hi: int = 6) -> np.ndarray:
+    """``size`` strings of ``lo``..``hi`` robots at distinct random nodes."""
+    order = rng.random((size, k)).argsort(axis=1)  # a random permutation per string
+    count = np.minimum(rng.integers(lo, hi + 1, size), k)
     x = np.zeros((size, k), bool)
-    for r in range(size):
-        x[r, rng.choice(k, size=min(k, int(rng.integers(lo, hi + 1))), replace=False)] = True
+    x[np.arange(size)[:, None], order] = _STEPS[:, :k] < count[:, None]
     return x
 
 
-def _mutate(x: np.ndarray, rate: float, rng: np.random.Generator) -> np.ndarray:
-    """Per child with probability ``rate``: move one robot 1–2 nodes along the boundary (70 %),
-    jump it anywhere (10 %), add one (10 %) or remove one (10 %; never below three).
-    Changes ``x`` in place and returns it."""
-    p, k = x.shape
-    rows = np.flatnonzero(rng.random(p) < rate)
-    if len(rows) == 0:
-        return x
-    sub = x[rows]
-    r = np.arange(len(rows))
-    draw = rng.random((len(rows), k + 1))
-    pick = np.argmax(draw[:, :k] * sub, axis=1)  # a random set bit
-    u = draw[:, k]
-    jump = rng.integers(0, 4 * k, len(rows))
-    target = np.where(u < 0.7, (pick + _SHIFTS[jump % 4]) % k, jump // 4)
-    move = (u < 0.8) & sub[r, pick]
-    add = ~move & ((u < 0.9) | (np.count_nonzero(sub, axis=1) <= 3))
-    sub[r[~add], pick[~add]] = False  # a move or a removal clears the picked robot
-    sub[r[move | add], target[move | add]] = True
-    x[rows] = sub
+def _mutate(x: np.ndarray, rows: list[int], rng: np.random.Generator) -> np.ndarray:
+    """For each of ``rows``: move one robot 1–2 nodes along the boundary (70 %), jump it
+    anywhere (10 %), add one (10 %) or remove one (10 %; never below three). Changes ``x`` in
+    place and returns it (a loop: only a few children mutate)."""
+    k = x.shape[1]
+    for r in rows:
+        on = x[r].nonzero()[0]
+        u, v, w = rng.random(3).tolist()
+        jump = int(w * 4 * k)
+        pick = int(on[int(v * len(on))]) if len(on) else -1  # a random robot
+        if u < 0.8 and pick >= 0:
+            x[r, pick] = False
+            x[r, (pick + _SHIFTS[jump % 4]) % k if u < 0.7 else jump // 4] = True
+        elif u < 0.9 or len(on) <= 3:
+            x[r, jump // 4] = True
+        else:
+            x[r, pick] = False
     return x
 
 
-_SHIFTS = np.array([-2, -1, 1, 2])
+_SHIFTS = (-2, -1, 1, 2)
 
 
 def _breed(
     pop: np.ndarray, key: FloatArray, n_child: int, p: CaptureParams, rng: np.random.Generator
 ) -> np.ndarray:
-    """Children by size-2 tournaments on ``key``, two-point crossover and mutation."""
+    """Children by size-2 tournaments on ``key``, two-point crossover (probability
+    ``p.crossover``) and mutation (probability ``p.mutation`` per child)."""
     n, k = pop.shape
-    t = rng.integers(n, size=(n_child, 4))  # two tournaments per child
+    u = rng.random((n_child, 8))  # 4 tournament entrants, 2 cuts, crossover and mutation coins
+    t = (u[:, :4] * n).astype(np.int64)
     kt = key[t]
     pa = np.where(kt[:, 0] >= kt[:, 1], t[:, 0], t[:, 1])
     pb = np.where(kt[:, 2] >= kt[:, 3], t[:, 2], t[:, 3])
-    cuts = np.sort(rng.integers(0, k + 1, size=(n_child, 2)), axis=1)
-    cuts[rng.random(n_child) >= p.crossover] = 0  # no crossover: an empty segment
+    cuts = (u[:, 4:6] * (k + 1)).astype(np.int64)
+    cuts.sort(axis=1)
+    cuts[u[:, 6] >= p.crossover] = 0  # no crossover: an empty segment
     cols = _STEPS[:, :k]
     seg = (cols >= cuts[:, :1]) & (cols < cuts[:, 1:])
-    return _mutate(np.where(seg, pop[pb], pop[pa]), p.mutation, rng)
+    kids = np.where(seg, pop[pb], pop[pa])
+    return _mutate(kids, (u[:, 7] < p.mutation).nonzero()[0].tolist(), rng)
 
 
 def _moves(best: np.ndarray) -> NDArray[np.int64]:
@@ -577,14 +582,19 @@ def run_ga(
             new = _initial(k, p.population, rng, lo, hi)
             pop, (f, v) = new, fn(new)
             fn_new, v_new = f, v
-        else:
-            nb = _apply_moves(pop[elite], search.take(p.population // 2))
-            kids = _breed(pop, key, p.population - 1 - len(nb), p, rng)
-            new = np.vstack([nb, kids])
+        else:  # the elite, a batch of its neighbours, children
+            moves = search.take(p.population // 2)
+            nxt = np.empty_like(pop)
+            nxt[0] = pop[elite]
+            nxt[1 : 1 + len(moves)] = _apply_moves(pop[elite], moves)
+            nxt[1 + len(moves) :] = _breed(pop, key, p.population - 1 - len(moves), p, rng)
+            new = nxt[1:]
             fn_new, v_new = fn(new)
-            pop = np.vstack([pop[elite][None], new])
-            f = np.concatenate([[f[elite]], fn_new])
-            v = np.concatenate([[v[elite]], v_new])
+            pop, f, v = (
+                nxt,
+                np.concatenate((f[elite : elite + 1], fn_new)),
+                np.concatenate((v[elite : elite + 1], v_new)),
+            )
         evals += len(new)
         search.note(new, fn_new, v_new)
         history.append(search.best_f if np.isfinite(search.best_f) else PENALTY)
