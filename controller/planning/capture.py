@@ -12,7 +12,10 @@ Definitions follow the capture issues (they stand over the paper):
   both ways, at most one robot per edge, robot centres ``p + r·n`` at least ``2r + clearance``
   apart. Violations get the paper's penalty −1e20; for selection and elitism infeasible strings
   are ranked by their count of violated constraints (fewer first), feasible ones by f.
-- The fleet: a plan uses at most ``max_robots`` robots (the fleet size); there is no other cap.
+- The fleet: a plan uses at most ``max_robots`` robots (the fleet size); the closure test takes
+  sets of up to ``MAX_CLOSURE_SET`` (200) robots. ``plan_for_fleet`` spaces robot centres by
+  ``2r + max(capture.clearance, approach.safety_margin)``: the approach's safety filter keeps
+  them that far apart, so closer points could never all be reached.
 - ``closure = "exact"`` also demands first-order form closure: the wrenches ``(−n_i, m_i)``
   positively span R³ (checked in the GA by supporting planes through pairs of the chosen
   wrenches, and certified at the end by an LP). On polygons with fewer than four edges the
@@ -24,10 +27,13 @@ the closure test with n the string's robot count, without matrix products (no BL
 The node count is bounded by ``controller.config.CAPTURE_NODE_BUDGET`` (a ``capture.spacing``
 error at config load, an infeasible plan naming ``capture.spacing`` here).
 
-The GA: binary strings (one bit per node), the whole population evaluated at once with numpy,
-tournament selection, two-point crossover, mutation as moves of a robot along the boundary
-(or adding/removing one), elitism, and a local search of the best string's one-move
-neighbours inside the same evaluation budget. Pure: arrays in, results out, a seeded generator.
+The GA: binary strings (one bit per node) starting with 3–6 robots, the whole population
+evaluated at once with numpy, tournament selection, two-point crossover, mutation (probability
+``mutation`` per child) as moves of a robot along the boundary (or adding/removing one),
+elitism, a local search of the best string's one-move neighbours, and a restart once a run has
+stalled (``stall`` = 20 generations, tuned on a seeded suite the bench does not report), all
+inside the budget of population × generations evaluations. Pure: arrays in, results out, a
+seeded generator.
 
 The outcome is a ``CapturePlan`` with ``feasible`` and a ``reason`` naming the constraint that
 could not be met; an infeasible problem is never an exception.
