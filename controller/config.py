@@ -271,6 +271,11 @@ class SimSection:
     realtime: bool = _rule(False)
     tick_timeout: float = _rule(2.0, gt=0, max=600)
     max_time: float = _rule(300.0, gt=0, max=1e6)
+    # the pybullet object as it really is, against what [object] tells the controller (the
+    # robustness sweep of bench/transport.py; 1, 1 and (0, 0): the same object)
+    object_mass_scale: float = _rule(1.0, gt=0, max=100)
+    object_friction_scale: float = _rule(1.0, min=0, max=100)
+    object_com_offset: Point = _rule((0.0, 0.0))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -263,7 +263,7 @@ class PybulletWorld:
         poly = self.cfg.object_polygon()
         self._poly = poly
         self._obstacles = self.cfg.obstacle_polygons()
-        m = o.mass
+        m = o.mass * self.cfg.sim.object_mass_scale  # the true mass (sim.object_mass_scale)
         h = max(o.height, ROBOT_HEIGHT)  # planar world: robots must not pass over a flat object
         pieces = convex_pieces(poly)
         self._pieces = pieces
@@ -298,7 +298,8 @@ class PybulletWorld:
         base_mass = m - light * n_links
         # The base carries the mass; its centre is placed so the composite sits on the centroid.
         link_moment = sum(light * np.asarray(cl[:2]) for cl in com_local[1:])
-        base_com = (m * centroid - link_moment) / base_mass
+        com = centroid + np.asarray(self.cfg.sim.object_com_offset, float)  # the true COM
+        base_com = (m * com - link_moment) / base_mass
         self._base_com = base_com
         izz = geometry.polar_moment_per_mass(poly) * m
         self._izz = izz
@@ -564,7 +565,8 @@ class PybulletWorld:
                 self.t, self.dt, np.asarray(self._drive_target), np.asarray(self._obj_com_vel)
             ):
                 # it fought the hold (or the wall) long enough: drive off, floor friction on
-                self._set_floor_friction(self.cfg.object.floor_friction)
+                mu = self.cfg.object.floor_friction * self.cfg.sim.object_friction_scale
+                self._set_floor_friction(mu)
             if self._steps % self.control_every == 0:
                 self._read_robots(rebase=True)
         if self._steps % self.control_every != 0:

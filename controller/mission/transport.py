@@ -71,7 +71,7 @@ class TransportSettings:
     subgoal_tolerance: float = 0.1
     subgoal_heading: float = math.radians(8.0)
     corridor: float = 0.4
-    progress_step: float = 0.05
+    progress_step: float = 0.02
     contact_tolerance: float = 0.15
     back_off: float = 0.25
     rearrange_timeout: float = 60.0
@@ -82,8 +82,8 @@ class TransportSettings:
     settle_margin: float = 0.6  # the estimate must be this share of the tolerances from the goal
     stuck_plans: int = 3
     park_margin: float = 0.05  # m beyond the lane's band where idle robots wait
-    turn_margin: float = 1.5  # a set chosen to turn the object produces this times the wrench
-    max_rearrangements: int = 4  # re-arrangements in a row without progress, then stalled
+    turn_margin: float = 1.2  # a set chosen to turn the object produces this times the wrench
+    max_rearrangements: int = 8  # re-arrangements in a row without progress, then stalled
 
     @classmethod
     def from_config(cls, cfg: FleetConfig) -> TransportSettings:
@@ -363,35 +363,36 @@ class TransportMission:
 
     def _turning_set(self, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
         """A segment that mostly turns the object: Eq. 5 has no torque, so the set is the
-        fewest candidate nodes whose contact forces (within ``max_force``) produce the wrench
-        the turn needs with a margin (the capacity LP of ``planning.hold``, greedy with swaps);
-        the value reported is that capacity (≥ 1: the set can turn the object)."""
-        from controller.planning.capture import CaptureParams, make_problem
-        from controller.planning.hold import reinforce
+        support of the least-force LP for the wrench the turn needs (with a margin), over every
+        candidate node, reinforced (``planning.hold``) until it can produce that wrench within
+        ``max_force``; the value reported is that capacity (≥ 1: the set can turn the object)."""
+        from controller.planning.capture import candidate_nodes
+        from controller.planning.hold import least_force_set, reinforce
 
         cfg, m = self.cfg, self.model
         r = cfg.max_robot_radius
         poly = geometry.ensure_ccw(cfg.object_polygon())
-        prob = make_problem(poly, r, CaptureParams.from_config(cfg.capture))
+        cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
+        centres = cand.points + r * cand.normals
+        gap = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
+        conflict = gap < 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)
+        np.fill_diagonal(conflict, False)
         need = required_wrench(twist * self.params.speed, m.mass, m.floor_friction, m.mean_radius)
         weakest = min(cfg.robots[i].max_force for i in self.robots)
+        load = self.s.turn_margin * need
+        start = least_force_set(cand.points, cand.normals, m.centroid, load, weakest, conflict)
         res = reinforce(
-            prob.cand.points,
-            prob.cand.normals,
+            cand.points,
+            cand.normals,
             m.centroid,
-            np.zeros(0, int),
-            np.ones(len(prob.cand.points), bool),
-            prob.conflict,
+            start[: len(self.robots)],
+            np.ones(len(cand.points), bool),
+            conflict,
             weakest,
-            -self.s.turn_margin * need[None],
+            -load[None],
             len(self.robots),
         )
-        return (
-            prob.cand.points[res.chosen],
-            prob.cand.normals[res.chosen],
-            float(res.capacity),
-            len(res.chosen),
-        )
+        return cand.points[res.chosen], cand.normals[res.chosen], res.capacity, len(res.chosen)
 
     def _rearrange(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         """Movers follow their path around the object; the others hold still. (The stall clock
@@ -506,10 +507,10 @@ class TransportMission:
         step = step + r * np.abs(geometry.wrap_angle(np.diff(wp[:, 2])))
         tail = np.concatenate([np.cumsum(step[::-1])[::-1][1:], [0.0]])  # after segment j
         dist, closest = geometry.point_segment_distance(pose[None, :2], wp[:-1, :2], wp[1:, :2])
-        j = int(np.argmin(dist[0]))
-        rest = float(np.linalg.norm(wp[j + 1, :2] - closest[0, j]))
-        turn = r * abs(geometry.wrap_angle(pose[2] - wp[j + 1, 2]))
-        return float(dist[0, j]) + rest + turn + float(tail[j])
+        rest = np.linalg.norm(wp[1:, :2] - closest[0], axis=1)
+        turn = r * np.abs(geometry.wrap_angle(pose[2] - wp[1:, 2]))
+        # the best way on from any segment (turns in place share one spot: the heading decides)
+        return float(np.min(dist[0] + rest + turn + tail))
 
     def _stalled(self, view: FleetView, pose: np.ndarray) -> str:
         rem = self._remaining(pose)

@@ -212,3 +212,36 @@ def push_wrenches(points: FloatArray, pushes: FloatArray, centroid: FloatArray) 
     f = np.asarray(pushes, float).reshape(-1, 2)
     rel = np.asarray(points, float).reshape(-1, 2) - np.asarray(centroid, float)
     return np.vstack([f.T, rel[:, 0] * f[:, 1] - rel[:, 1] * f[:, 0]])
+
+
+def least_force_set(
+    points: FloatArray,
+    normals: FloatArray,
+    centroid: FloatArray,
+    wrench: FloatArray,
+    max_force: float,
+    conflict: NDArray[np.bool_],
+) -> np.ndarray:
+    """Candidate nodes (indices) that produce ``wrench`` (Fx, Fy, τ about ``centroid``) with the
+    least total contact force within ``max_force`` each: the L1 LP over every candidate at once,
+    whose basic solution uses at most three contacts. Nodes in conflict with a node carrying more
+    force are dropped (the caller reinforces the rest); empty when no forces produce the wrench."""
+    w = contact_wrenches(points, normals, centroid)
+    n = w.shape[1]
+    res = linprog(
+        np.ones(n),
+        A_eq=w,
+        b_eq=np.asarray(wrench, float),
+        bounds=[(0.0, float(max_force))] * n,
+        method="highs",
+    )
+    if res.status != 0:
+        return np.zeros(0, int)
+    order = np.argsort(-res.x)
+    keep: list[int] = []
+    for j in order:
+        if res.x[j] <= 1e-9:
+            break
+        if not conflict[j, keep].any():
+            keep.append(int(j))
+    return np.asarray(keep, int)

@@ -6,7 +6,10 @@ no robot in the object, no robot on an obstacle or a wall) and the object never 
 obstacle; the unreachable one must fail cleanly with ``no_route``, nothing pushed, nothing hit.
 Most scenarios start with the robots already holding the object (``--mission transport``);
 one captures a moving object first (the whole job). The pybullet ones test the physics of
-pushing (force limits, floor friction, differential drives); the ideal ones the logic.
+pushing (force limits, floor friction, differential drives, turning the object in place by a
+couple); the ideal ones the logic. (The ideal world's push model, one mean push per tick, turns
+an object far slower than real contacts do: its 180° turn takes over 200 s of re-arrangements,
+so the turn is tested in pybullet only.)
 """
 
 from __future__ import annotations
@@ -36,7 +39,6 @@ SCENARIOS = [
         "obstacle-beside-route", L_SHAPE, (1.5, 1.0, 0.0), (5.5, 1.5, 0.0), obstacles=(PILLAR,)
     ),
     Scenario("doorway", L_SHAPE, (1.5, 2.5, 0.0), (5.5, 2.5, 0.0), obstacles=WALL_WITH_DOOR),
-    Scenario("turn-180-ideal", CRATE, (2.0, 2.5, 0.0), (4.0, 3.0, 3.14159)),
     Scenario(
         "moving-when-captured",
         L_SHAPE,

@@ -21,9 +21,14 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def base_config_dict() -> dict[str, Any]:
+def base_config_dict(transport: bool = False) -> dict[str, Any]:
+    """The shipped fleet.toml as data; without ``transport`` the object has no goal (a capture
+    job: the run ends at the arrest, as most tests want)."""
     with open(FLEET_TOML, "rb") as f:
-        return tomllib.load(f)
+        data = tomllib.load(f)
+    if not transport:
+        data["object"].pop("goal", None)
+    return data
 
 
 def deep_update(d: dict[str, Any], patch: dict[str, Any]) -> dict[str, Any]:
@@ -36,9 +41,12 @@ def deep_update(d: dict[str, Any], patch: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def make_config(patch: dict[str, Any] | None = None, port: int | None = None) -> FleetConfig:
-    """The shipped config with a patch applied and zenoh on a free loopback port."""
-    data = deep_update(base_config_dict(), patch or {})
+def make_config(
+    patch: dict[str, Any] | None = None, port: int | None = None, transport: bool = False
+) -> FleetConfig:
+    """The shipped config with a patch applied and zenoh on a free loopback port (a capture job
+    unless ``transport``: see base_config_dict)."""
+    data = deep_update(base_config_dict(transport), patch or {})
     p = port or free_port()
     data["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{p}"], "connect": []}
     return parse_config(data, "test")
