@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from controller.config import RouteSection  # noqa: E402
 from controller.planning.cspace import GridFrame, RobotCSpace, build_object_cspace  # noqa: E402
 from controller.planning.roadmap import RobotRoadmap  # noqa: E402
-from controller.planning.route import object_heuristic, plan_route  # noqa: E402
+from controller.planning.route import plan_route  # noqa: E402
 from controller.planning.route_maps import load_route_map  # noqa: E402
 
 
@@ -107,7 +107,7 @@ def bench_2d(n: int, repeats: int, rng: np.random.Generator) -> dict:
     t_build, roadmap = median_time(
         lambda: RobotRoadmap(RobotCSpace.from_occupancy(occ, frame)), repeats
     )
-    t_ours, res = median_time(lambda: roadmap.plan(sxy, gxy, heuristic="euclid"), repeats)
+    t_ours, res = median_time(lambda: roadmap.plan(sxy, gxy), repeats)
     assert res.ok, res.reason
     matrix = (~occ).astype(int).tolist()
 

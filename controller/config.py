@@ -32,7 +32,11 @@ DRIVERS = ("sim", "mavlink")
 MAVLINK_PROFILES = ("ardurover", "px4")
 MOTION_KINDS = ("line", "sine", "evade", "static")
 CLOSURE_MODES = ("exact", "paper")
-HEURISTICS = ("euclid", "wavefront", "skeleton")
+HEURISTICS = ("euclid", "wavefront", "skeleton", "cost_to_go")
+#: Grid budgets: object route states (cells x heading bins) and robot route cells. Above them a
+#: plan takes minutes and gigabytes (512 x 512 x 36 states take about 5 s and 0.6 GB).
+ROUTE_MAX_STATES = 10_000_000
+ROBOT_ROUTE_MAX_CELLS = 512 * 512
 TRANSPORT_STRATEGIES = ("sa", "serpentine")
 SIM_BACKENDS = ("pybullet", "ideal")
 FILTERS = ("ekf", "ukf")
@@ -160,9 +164,11 @@ class ApproachSection:
 class RouteSection:
     resolution: float = _rule(0.1, gt=0, max=10)
     heading_bins: int = _rule(36, min=1, max=3600)
-    heuristic: str = _rule("skeleton", choices=HEURISTICS)
+    heuristic: str = _rule("cost_to_go", choices=HEURISTICS)
     wg: float = _rule(1.0, choices=(0.0, 1.0))
     wh: float = _rule(1.0, min=0, max=100)
+    reopen: bool = _rule(False)  # re-open closed states when wh > 1 (A* always, greedy never)
+    robot_resolution: float = _rule(0.1, gt=0, max=10)  # m: the robots' own 2-D routes
     speed: float = _rule(0.2, gt=0, max=10)
     yaw_rate: float = _rule(0.3, gt=0, max=100)
     manipulation_cost: float = _rule(2.0, min=0, max=1e4)
@@ -299,7 +305,10 @@ def _type_name(tp: Any) -> str:
     if origin is tuple:
         args = typing.get_args(tp)
         if len(args) == 2 and args[1] is Ellipsis:
-            return f"an array of {_type_name(args[0]).removeprefix('a ').removeprefix('an ')}s"
+            inner = _type_name(args[0])
+            if inner.startswith("an array of "):
+                return "an array of arrays of " + inner.removeprefix("an array of ")
+            return f"an array of {inner.removeprefix('a ').removeprefix('an ')}s"
         return f"an array of {len(args)} items"
     return str(tp)
 
@@ -466,6 +475,24 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
                     f"{path}.kind",
                     'an ardurover robot never moves sideways in GUIDED: set kind = "diff"',
                 )
+    _check_object_poses(obj, obstacles, cfg.world.bounds, src)
+    check_route_grid(cfg.world.bounds, cfg.route, src)
+    return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src)
+
+
+def _polygons_overlap(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two simple polygons share a point (touching counts)."""
+    ea, eb = np.roll(a, -1, axis=0), np.roll(b, -1, axis=0)
+    if geometry.segments_intersect(a[:, None], ea[:, None], b[None], eb[None]).any():
+        return True
+    return bool(geometry.points_in_polygon(a[:1], b)[0] or geometry.points_in_polygon(b[:1], a)[0])
+
+
+def _check_object_poses(
+    obj: ObjectSection, obstacles: tuple[Obstacle, ...], bounds: tuple[Point, Point], src: str
+) -> None:
+    """object.start and object.goal place the object inside the bounds, clear of obstacles."""
+    (x0, y0), (x1, y1) = bounds
     for key in ("start", "goal"):
         pose = getattr(obj, key)
         world_poly = geometry.transform(np.asarray(obj.polygon), pose)
@@ -476,7 +503,73 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
             or world_poly[:, 1].max() > y1
         ):
             raise ConfigError(src, f"object.{key}", "the object placed there leaves world.bounds")
-    return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src)
+        for j, o in enumerate(obstacles):
+            if _polygons_overlap(world_poly, np.asarray(o.polygon, dtype=float)):
+                raise ConfigError(
+                    src,
+                    f"object.{key}",
+                    f"the object placed at {list(pose)} overlaps obstacles[{j}]",
+                )
+
+
+def _cells(extent: float, resolution: float) -> int:
+    return int(math.ceil(extent / resolution - 1e-9))
+
+
+def check_route_grid(bounds: Any, route: RouteSection, src: str = "") -> None:
+    """The route grids over ``bounds`` fit their budgets (:data:`ROUTE_MAX_STATES` object states,
+    :data:`ROBOT_ROUTE_MAX_CELLS` robot cells); raises ConfigError naming the key."""
+    (x0, y0), (x1, y1) = bounds
+    nx, ny = _cells(x1 - x0, route.resolution), _cells(y1 - y0, route.resolution)
+    states = nx * ny * route.heading_bins
+    if states > ROUTE_MAX_STATES:
+        raise ConfigError(
+            src,
+            "route.resolution",
+            f"{route.resolution} m with route.heading_bins = {route.heading_bins} gives "
+            f"{nx} x {ny} x {route.heading_bins} = {states / 1e6:.1f} M route states over "
+            f"world.bounds, above the budget of {ROUTE_MAX_STATES / 1e6:.0f} M (minutes and "
+            "gigabytes per plan); use a coarser route.resolution or fewer route.heading_bins",
+        )
+    rx = _cells(x1 - x0, route.robot_resolution)
+    ry = _cells(y1 - y0, route.robot_resolution)
+    if rx * ry > ROBOT_ROUTE_MAX_CELLS:
+        raise ConfigError(
+            src,
+            "route.robot_resolution",
+            f"{route.robot_resolution} m gives {rx} x {ry} robot route cells over world.bounds, "
+            f"above the budget of {ROBOT_ROUTE_MAX_CELLS} (the robots' routes are planned "
+            "during the run); use a coarser route.robot_resolution",
+        )
+
+
+def parse_table(cls: type, table: Any, path: str, source: str = "") -> Any:
+    """Validate a TOML table against a config dataclass (unknown keys, types, ranges), as the
+    loader does for fleet.toml; raises ConfigError naming ``source`` and the key path."""
+    return _convert(cls, table, path, source)
+
+
+def override(section: Any, values: dict[str, Any], source: str, prefix: str = "") -> Any:
+    """A copy of a config section with some fields replaced, each checked by the field's rules
+    (e.g. command-line overrides); raises ConfigError naming ``prefix + key``."""
+    hints = typing.get_type_hints(type(section))
+    fields = {f.name: f for f in dataclasses.fields(section)}
+    checked = {}
+    for key, value in values.items():
+        where = f"{prefix}{key}"
+        value = _convert(hints[key], value, where, source)
+        _check_rules(fields[key].metadata, value, where, source)
+        checked[key] = value
+    return dataclasses.replace(section, **checked)
+
+
+def validated_polygon(poly: Any, path: str, source: str = "") -> Polygon:
+    """A simple polygon of >= 3 vertices and non-zero area, counter-clockwise (ConfigError if
+    not, naming ``path``)."""
+    if isinstance(poly, tuple | list):
+        poly = [list(v) if isinstance(v, tuple) else v for v in poly]
+    p = _convert(Polygon, poly, path, source)
+    return _polygon(p, path, source)
 
 
 def parse_config(data: dict[str, Any], source: str = "") -> FleetConfig:

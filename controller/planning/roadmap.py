@@ -1,12 +1,14 @@
 """A single robot's global route on its disc C-space (the approach planner's detours).
 
-Weighted A* with pathmax (Yamashita et al. Eq. 1-2) over an 8-connected 2-D grid. Pure: arrays
-in, a :class:`controller.planning.route.RouteResult` out. Moves cost distance / ``speed`` (s).
+Weighted A* with pathmax (Yamashita et al. Eq. 1-2; the search loop is
+:func:`controller.planning.route.weighted_astar`, shared with the object's route) over an
+8-connected 2-D grid. Pure: arrays in, a :class:`controller.planning.route.RouteResult` out.
+Moves cost distance / ``speed`` (s). The default heuristic is the octile distance: the exact cost
+of 8-connected moves on an empty grid, admissible and consistent, and tighter than Euclid's.
 """
 
 from __future__ import annotations
 
-import heapq
 import math
 
 import numpy as np
@@ -22,69 +24,20 @@ from controller.planning.route import (
     _lengths,
     _no_path,
     _subgoal_indices,
+    reopens,
+    weighted_astar,
 )
 
-
-def _search_grid(
-    moves: list[tuple[int, float]],
-    h: list[float],
-    start: int,
-    goal: int,
-    wg: float,
-    wh: float,
-    pathmax: bool,
-    max_expanded: int,
-    trace: bool,
-) -> tuple[list[int] | None, float, int, int, list[float], bool]:
-    """Weighted A* with pathmax over padded flat cells of a 2-D grid (the robot's search).
-
-    ``h`` (s) is inf on occupied cells, so one lookup both tests a cell and scores it.
-    """
-    n = len(h)
-    gbest = [INF] * n
-    parent = [-1] * n
-    gbest[start] = 0.0
-    h0 = h[start]
-    heap: list[tuple[float, float, float, int]] = [(wh * h0, h0, 0.0, start)]
-    push, pop = heapq.heappush, heapq.heappop
-    ftrace: list[float] = []
-    expanded = 0
-    generated = 1
-    while heap:
-        f, _, g, s = pop(heap)
-        if g > gbest[s]:
-            continue
-        expanded += 1
-        if trace:
-            ftrace.append(f)
-        if s == goal:
-            path = [s]
-            while parent[path[-1]] >= 0:
-                path.append(parent[path[-1]])
-            return path[::-1], g, expanded, generated, ftrace, False
-        if expanded >= max_expanded:
-            return None, INF, expanded, generated, ftrace, True
-        for off, cost in moves:
-            t = s + off
-            h2 = h[t]
-            if h2 < INF:
-                g2 = g + cost
-                if g2 < gbest[t]:
-                    gbest[t] = g2
-                    parent[t] = s
-                    f2 = wg * g2 + wh * h2
-                    if pathmax and f2 < f:
-                        f2 = f
-                    push(heap, (f2, h2, g2, t))
-                    generated += 1
-    return None, INF, expanded, generated, ftrace, False
+#: The robot search's heuristics: the paper's potentials and the octile distance (the default).
+ROBOT_HEURISTICS = ("octile", *heuristics.POTENTIALS)
 
 
 class RobotRoadmap:
     """A robot disc's 2-D C-space prepared once for many searches (the approach planner's use).
 
     Holds the padded free mask and the move table; :meth:`plan` runs one search.
-    Heuristics: "euclid" (admissible), "wavefront" (exact, admissible), "skeleton" (not).
+    Heuristics: "octile" (the default, admissible and consistent), "euclid" (admissible),
+    "wavefront" (exact, admissible), "skeleton" (not).
     Moves cost distance / ``speed`` (s); there is no manipulation cost for a lone robot.
     """
 
@@ -116,25 +69,33 @@ class RobotRoadmap:
 
     def heuristic_table(self, kind: str, goal_cell: tuple[int, int]) -> FloatArray:
         """Distance table (m) for a goal cell (iy, ix)."""
-        return heuristics.heuristic_table(
-            kind, ~self.cspace.occupied, goal_cell, self.cspace.frame.resolution
-        )
+        fr = self.cspace.frame
+        if kind == "octile":
+            return heuristics.octile((fr.ny, fr.nx), goal_cell, fr.resolution)
+        if kind not in ROBOT_HEURISTICS:
+            raise ValueError(f"heuristic: expected one of {ROBOT_HEURISTICS}, got {kind!r}")
+        return heuristics.heuristic_table(kind, ~self.cspace.occupied, goal_cell, fr.resolution)
 
     def plan(
         self,
         start_xy: ArrayLike,
         goal_xy: ArrayLike,
         *,
-        heuristic: str = "euclid",
+        heuristic: str = "octile",
         wg: float = 1.0,
         wh: float = 1.0,
         h_table: FloatArray | None = None,
         pathmax: bool = True,
+        reopen: bool = False,
         max_expanded: int = 10_000_000,
         trace: bool = False,
         subgoal_spacing: float = 1.0,
     ) -> RouteResult:
-        """Route from ``start_xy`` to ``goal_xy`` (m); waypoint headings follow the travel."""
+        """Route from ``start_xy`` to ``goal_xy`` (m); waypoint headings follow the travel.
+
+        ``h_table``: a distance table (m) for this goal (from :meth:`heuristic_table`);
+        ``reopen``: re-open closed cells when ``wh > 1`` (see :func:`route.reopens`).
+        """
         _check_weights(float(wg), float(wh))
         cs, fr = self.cspace, self.cspace.frame
         s_xy = np.asarray(start_xy, dtype=float)[:2]
@@ -166,27 +127,24 @@ class RobotRoadmap:
         start = (sc[0] + 1) * w + sc[1] + 1
         goal = (gc[0] + 1) * w + gc[1] + 1
         hpad[~self._free] = INF
-        path, cost, expanded, generated, ftrace, limited = _search_grid(
-            self._moves,
-            hpad.ravel().tolist(),
+        moves = self._moves
+        out = weighted_astar(
             start,
             goal,
-            float(wg),
-            float(wh),
-            pathmax,
-            max_expanded,
-            trace,
+            hpad.ravel().tolist(),
+            lambda s, g: moves,
+            wg=float(wg),
+            wh=float(wh),
+            n_states=hpad.size,
+            pathmax=pathmax,
+            reopen=reopens(float(wg), float(wh), reopen),
+            max_expanded=max_expanded,
+            trace=trace,
         )
-        ft = np.asarray(ftrace, dtype=float)
-        if path is None:
-            reason = (
-                f"expansion limit of {max_expanded} nodes reached"
-                if limited
-                else "search exhausted: goal unreachable"
-            )
-            return _no_path(
-                reason, heuristic, wg, wh, expanded=expanded, generated=generated, f_trace=ft
-            )
+        counts = out.counts()
+        if out.path is None:
+            return _no_path(out.reason(max_expanded), heuristic, wg, wh, **counts)
+        path, cost = out.path, out.cost
         iy, ix = np.divmod(np.asarray(path, dtype=np.int64), w)
         xy = np.stack(
             [fr.x0 + (ix - 0.5) * fr.resolution, fr.y0 + (iy - 0.5) * fr.resolution], axis=1
@@ -213,12 +171,10 @@ class RobotRoadmap:
             length_m=length,
             rotation_rad=0.0,
             manipulations=0,
-            expanded=expanded,
-            generated=generated,
             heuristic=heuristic,
             wg=float(wg),
             wh=float(wh),
-            f_trace=ft,
+            **counts,
         )
 
 
@@ -230,7 +186,7 @@ def plan_robot_route(
     goal_xy: ArrayLike,
     resolution: float,
     *,
-    heuristic: str = "euclid",
+    heuristic: str = "octile",
     wg: float = 1.0,
     wh: float = 1.0,
     speed: float = 1.0,
