@@ -575,30 +575,58 @@ class ObjectCSpace:
         """Exact, cached test of lattice moves from free state (k, iy, ix) to free neighbours.
 
         moves: 0-7 the translations of :data:`MOVES_8`, :data:`TURN_UP`, :data:`TURN_DOWN`.
+        On a miss, every untested move between free states that are not both margin-free, from
+        the states around this one (5 x 5 cells, 3 headings), is tested in one vectorised batch
+        (a search that needs one of them soon needs its neighbours), and each result is cached
+        for both ends of the move (the sweep is the same both ways).
         """
         k_bins, ny, nx = self.free.shape
         base = (k * ny + iy) * nx + ix
-        out: list[bool | None] = [self._moves.get(base * 10 + mv) for mv in moves]
-        todo = [i for i, v in enumerate(out) if v is None]
-        if not todo:
-            return out  # type: ignore[return-value]
-        x, y = self.frame.center(iy, ix)
-        pose = np.array([x, y, k * self.step])
-        tr = [i for i in todo if moves[i] < 8]
-        if tr:
-            steps = MOVES_8[[moves[i] for i in tr]] * self.frame.resolution
-            ok = self.checker.translations_free(np.repeat(pose[None], len(tr), 0), steps)
-            for i, v in zip(tr, ok.tolist(), strict=True):
-                out[i] = v
-        rt = [i for i in todo if moves[i] >= 8]
-        if rt:
-            turns = np.array([self.step if moves[i] == TURN_UP else -self.step for i in rt])
-            ok = self.checker.rotations_free(np.repeat(pose[None], len(rt), 0), turns)
-            for i, v in zip(rt, ok.tolist(), strict=True):
-                out[i] = v
-        for i in todo:
-            self._moves[base * 10 + moves[i]] = bool(out[i])
-        return out  # type: ignore[return-value]
+        got = [self._moves.get(base * 10 + mv) for mv in moves]
+        if any(v is None for v in got):
+            self._check_block(k, iy, ix)
+            got = [self._moves.get(base * 10 + mv, False) for mv in moves]
+        return got  # type: ignore[return-value]
+
+    def _check_block(self, k: int, iy: int, ix: int) -> None:
+        k_bins, ny, nx = self.free.shape
+        ks = sorted({(k + dk) % k_bins for dk in (-1, 0, 1)})
+        y0, y1, x0, x1 = max(iy - 2, 0), min(iy + 3, ny), max(ix - 2, 0), min(ix + 3, nx)
+        a = np.argwhere(self.free[ks, y0:y1, x0:x1])
+        a[:, 0] = np.asarray(ks)[a[:, 0]]
+        a[:, 1] += y0
+        a[:, 2] += x0
+        moves = np.array([*((int(dx), int(dy), 0) for dx, dy in MOVES_8), (0, 0, 1), (0, 0, -1)])
+        n_mv = 10 if k_bins > 1 else 8
+        src = np.repeat(a, n_mv, axis=0)
+        mv = np.tile(np.arange(n_mv), len(a))
+        dst = src + moves[mv][:, [2, 1, 0]]
+        dst[:, 0] %= k_bins
+        inside = (dst[:, 1] >= 0) & (dst[:, 1] < ny) & (dst[:, 2] >= 0) & (dst[:, 2] < nx)
+        src, mv, dst = src[inside], mv[inside], dst[inside]
+        need = self.free[tuple(dst.T)] & ~(
+            self.margin_free[tuple(src.T)] & self.margin_free[tuple(dst.T)]
+        )
+        fs = (src[:, 0] * ny + src[:, 1]) * nx + src[:, 2]
+        fd = (dst[:, 0] * ny + dst[:, 1]) * nx + dst[:, 2]
+        keys = fs * 10 + mv
+        need &= np.array([key not in self._moves for key in keys.tolist()], dtype=bool)
+        src, mv, fs, fd = src[need], mv[need], fs[need], fd[need]
+        if len(src) == 0:
+            return
+        xs, ys = self.frame.centers()
+        pose = np.stack([xs[src[:, 2]], ys[src[:, 1]], src[:, 0] * self.step], 1)
+        ok = np.zeros(len(src), dtype=bool)
+        tr = mv < 8
+        if tr.any():
+            steps = MOVES_8[mv[tr]] * self.frame.resolution
+            ok[tr] = self.checker.translations_free(pose[tr], steps)
+        if (~tr).any():
+            turns = np.where(mv[~tr] == TURN_UP, self.step, -self.step)
+            ok[~tr] = self.checker.rotations_free(pose[~tr], turns)
+        back = np.where(mv < 8, (mv + 4) % 8, np.where(mv == TURN_UP, TURN_DOWN, TURN_UP))
+        self._moves.update(zip((fs * 10 + mv).tolist(), ok.tolist(), strict=True))
+        self._moves.update(zip((fd * 10 + back).tolist(), ok.tolist(), strict=True))
 
 
 def build_object_cspace(

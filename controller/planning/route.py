@@ -89,10 +89,11 @@ class RouteResult:
     straight move or one turn in place (never both); the first and last are the exact start and
     goal. subgoals: (m, 3) poses where the travel direction or the kind of move changes (the
     robots re-arrange there), long straight runs cut every ``subgoal_spacing`` m, ending with the
-    goal. cost: seconds (inf when no path); length_m: (x, y) length of the waypoint polyline;
-    rotation_rad: total turning; manipulations: number of re-arrangements paid for;
-    expanded: nodes expanded (N_open); generated: nodes pushed on the open list; reexpanded:
-    expansions of an already expanded node; f_trace: f of each expansion (only when asked for).
+    goal. cost: seconds (inf when no path); length_m: distance (m) travelled by straight moves
+    (turns in place add none); rotation_rad: total turning; manipulations: number of
+    re-arrangements paid for; expanded: nodes expanded (N_open); generated: nodes pushed on the
+    open list; reexpanded: expansions of an already expanded node; f_trace: f of each expansion
+    (only when asked for).
     """
 
     status: str
@@ -859,7 +860,8 @@ class RoutePlanner:
         idx = _subgoal_indices(wp[:, :2], kinds, p.subgoal_spacing)
         seq = [MODE_START, *first.modes, *modes[1:], *last.modes]
         manip = sum(1 for a, b in zip(seq[:-1], seq[1:], strict=True) if a != b and a != MODE_START)
-        length, turn = _lengths(wp)
+        _, turn = _lengths(wp)
+        length = float(np.sum(np.linalg.norm(np.diff(ref_arr[:, :2], axis=0), axis=1)))
         return RouteResult(
             status="ok",
             waypoints=wp,
