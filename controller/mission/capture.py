@@ -130,10 +130,10 @@ class CaptureMission:
             return
         rr = float(self.radii.max()) + self.cfg.approach.safety_margin + 0.05
         rm = RobotRoadmap.build(
-            self.cfg.bounds_array(), self.obstacles, rr, self.cfg.route.resolution
+            self.cfg.bounds_array(), self.obstacles, rr, self.cfg.route.robot_resolution
         )
         for m, i in blocked:
-            res = rm.plan(centers[i], img[m], heuristic="euclid", subgoal_spacing=0.6)
+            res = rm.plan(centers[i], img[m], subgoal_spacing=0.6)
             if res.status == "ok":
                 self.waypoints[i] = [w[:2] for w in res.subgoals[:-1]]
 

@@ -226,6 +226,47 @@ def octile(shape: tuple[int, int], goal: tuple[int, int], resolution: float) -> 
     return (hi + (math.sqrt(2.0) - 1.0) * lo) * resolution
 
 
+def landmark_distances(free: BoolArray, count: int, resolution: float) -> FloatArray:
+    """Grid distances (m) from ``count`` landmarks to every cell of an (ny, nx) free mask,
+    (count, ny, nx), inf where a landmark cannot reach. Landmarks by farthest-point selection:
+    the first free cell, then each time the free cell farthest from those chosen (preferring
+    cells no landmark reaches yet), so they sit at the far ends of the free space.
+    """
+    ny, nx = free.shape
+    if count <= 0 or not free.any():
+        return np.zeros((0, ny, nx))
+    g = grid_graph(free)
+    chosen: list[int] = [int(np.flatnonzero(free.ravel())[0])]
+    rows = []
+    nearest = np.full(ny * nx, np.inf)
+    for _ in range(count):
+        d = csgraph.dijkstra(g, directed=False, indices=chosen[-1]) * resolution
+        rows.append(d)
+        nearest = np.minimum(nearest, d)
+        score = np.where(np.isfinite(nearest), nearest, 1e300)
+        score[~free.ravel()] = -1.0
+        nxt = int(np.argmax(score))
+        if score[nxt] <= 0 or len(rows) == count:
+            break
+        chosen.append(nxt)
+    return np.array(rows).reshape(len(rows), ny, nx)
+
+
+def landmark_bound(
+    landmarks: FloatArray, goal: tuple[int, int], base: FloatArray | None = None
+) -> FloatArray:
+    """ALT lower bound (m) of the grid distance to ``goal`` from every cell: the largest
+    ``|d(L, goal) - d(L, n)|`` over the landmarks that reach both (the triangle inequality),
+    and at least ``base`` (e.g. the octile distance). Admissible and consistent."""
+    out = np.zeros(landmarks.shape[1:]) if base is None else np.array(base, dtype=float)
+    for d in landmarks:
+        dg = d[goal]
+        if np.isfinite(dg):
+            gap = np.abs(dg - d)
+            np.maximum(out, np.where(np.isfinite(gap), gap, 0.0), out=out)
+    return out
+
+
 def _seed_table(shape: tuple[int, int, int], seeds: tuple[NDArray[np.int_], FloatArray]):
     """The seeds as a (K, ny, nx) table of costs (inf elsewhere; the cheapest per state)."""
     cells, cost = seeds

@@ -223,7 +223,7 @@ def weighted_astar(
     start: int,
     goal: int,
     h: Sequence[float],
-    moves_of: Callable[[int, float], Iterable[tuple[int, float]]],
+    moves_of: Callable[[int, float], Iterable[tuple[int, float]]] | Sequence[tuple[int, float]],
     *,
     wg: float,
     wh: float,
@@ -236,11 +236,11 @@ def weighted_astar(
     """Weighted A* with pathmax (Eq. 1-2): the one search loop of the object and robot routes.
 
     States are ints. ``moves_of(s, g)`` yields the moves out of ``s`` (reached at cost ``g``) as
-    (offset, cost): the successor is ``s + offset``. ``h[t]`` (s) is the heuristic; inf marks a
-    state that cannot reach the goal (it is not entered). ``n_states``: when > 0 the states are
-    ``0 .. n_states - 1`` and the tables are flat lists (fast), else dicts. Ties in f go to the
-    smaller h. ``reopen``: whether a closed state reached at a lower g is expanded again (see
-    :func:`reopens`).
+    (offset, cost): the successor is ``s + offset``; a plain sequence of moves is the same for
+    every state (a grid). ``h[t]`` (s) is the heuristic; inf marks a state that may not be
+    entered. ``n_states``: when > 0 the states are ``0 .. n_states - 1`` and the tables are flat
+    lists (fast), else dicts. Ties in f go to the smaller h. ``reopen``: whether a closed state
+    reached at a lower g is expanded again (see :func:`reopens`).
     """
     if n_states > 0:
         gbest: Any = [INF] * n_states
@@ -248,11 +248,12 @@ def weighted_astar(
         closed: Any = bytearray(n_states)
     else:
         gbest, parent, closed = InfDict(), {}, FalseDict()
+    fixed = not callable(moves_of)
     parent[start] = -1
     gbest[start] = 0.0
     h0 = h[start]
     heap: list[tuple[float, float, float, int]] = [(wh * h0, h0, 0.0, start)]
-    push, pop = heapq.heappush, heapq.heappop
+    push, pop, inf = heapq.heappush, heapq.heappop, INF
     ftrace: list[float] = []
     expanded = reexpanded = 0
     generated = 1
@@ -271,13 +272,13 @@ def weighted_astar(
                 _unwind(parent, s), g, expanded, generated, reexpanded, ftrace, False
             )
         if expanded >= max_expanded:
-            return SearchOutcome(None, INF, expanded, generated, reexpanded, ftrace, True)
-        for off, cost in moves_of(s, g):
+            return SearchOutcome(None, inf, expanded, generated, reexpanded, ftrace, True)
+        for off, cost in moves_of if fixed else moves_of(s, g):  # type: ignore[operator]
             t = s + off
-            g2 = g + cost
-            if g2 < gbest[t]:
-                h2 = h[t]
-                if h2 < INF and (reopen or not closed[t]):
+            h2 = h[t]
+            if h2 < inf:
+                g2 = g + cost
+                if g2 < gbest[t] and (reopen or not closed[t]):
                     gbest[t] = g2
                     parent[t] = s
                     f2 = wg * g2 + wh * h2

@@ -31,7 +31,7 @@ from controller.planning.cspace import (
     build_robot_cspace,
     segment_distance,
 )
-from controller.planning.roadmap import RobotRoadmap, plan_robot_route
+from controller.planning.roadmap import ROBOT_HEURISTICS, RobotRoadmap, plan_robot_route
 from controller.planning.route import RoutePlanner, plan_route
 
 L_SHAPE = np.array(
@@ -582,7 +582,7 @@ def test_robot_route_is_optimal_on_its_grid_and_reusable():
     obstacles = [rect(1.9, 0.0, 2.1, 3.0)]
     roadmap = RobotRoadmap.build(BOUNDS, obstacles, 0.1, 0.05, speed=0.5)
     res = roadmap.plan((0.5, 0.5), (3.5, 0.5))
-    assert res.heuristic == "octile"
+    assert res.heuristic == "landmarks"
     again = plan_robot_route(BOUNDS, obstacles, 0.1, (0.5, 0.5), (3.5, 0.5), 0.05, roadmap=roadmap)
     assert res.ok and np.array_equal(res.waypoints, again.waypoints)
     assert res.waypoints[:, 1].max() > 3.0
@@ -593,10 +593,17 @@ def test_robot_route_is_optimal_on_its_grid_and_reusable():
     for q in res.waypoints:
         assert roadmap.cspace.is_free(q[:2])
         assert geometry.polygon_signed_distance([q[:2]], obstacles[0])[0] >= 0.1
-    euclid = roadmap.plan((0.5, 0.5), (3.5, 0.5), heuristic="euclid")
-    wave = roadmap.plan((0.5, 0.5), (3.5, 0.5), heuristic="wavefront")
-    assert euclid.cost == pytest.approx(res.cost) and wave.cost == pytest.approx(res.cost)
-    assert wave.expanded <= res.expanded <= euclid.expanded
+    runs = {k: roadmap.plan((0.5, 0.5), (3.5, 0.5), heuristic=k) for k in ROBOT_HEURISTICS}
+    for k in ("octile", "euclid", "wavefront"):  # admissible: the same optimal cost
+        assert runs[k].cost == pytest.approx(res.cost, rel=1e-12)
+    assert runs["wavefront"].expanded <= res.expanded < runs["octile"].expanded
+    assert runs["octile"].expanded <= runs["euclid"].expanded
+    # the landmark bound lies between the octile distance and the true distance
+    exact = roadmap.heuristic_table("wavefront", gc)
+    alt = roadmap.heuristic_table("landmarks", gc)
+    free = ~roadmap.cspace.occupied
+    octile = roadmap.heuristic_table("octile", gc)
+    assert np.all(alt[free] <= exact[free] + 1e-9) and np.all(alt[free] >= octile[free] - 1e-12)
 
 
 def test_shipped_map_parses_with_four_reachable_goals():
