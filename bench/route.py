@@ -37,11 +37,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-import shapely
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from controller import geometry  # noqa: E402
 from controller.config import RouteSection, load_config  # noqa: E402
 from controller.planning.cspace import (  # noqa: E402
     GridFrame,
@@ -52,6 +50,7 @@ from controller.planning.cspace import (  # noqa: E402
 from controller.planning.roadmap import RobotRoadmap  # noqa: E402
 from controller.planning.route import RoutePlanner, plan_route  # noqa: E402
 from controller.planning.route_maps import load_route_map  # noqa: E402
+from tests.support.route_check import route_clearance  # noqa: E402
 
 CRATE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.4], [0.4, 0.4], [0.4, 1.0], [0.0, 1.0]])
 
@@ -62,49 +61,6 @@ def log(msg: str) -> None:
 
 def rect(x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
     return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=float)
-
-
-# --------------------------------------------------------------------------- independent check
-
-
-def _clearance(shapes, obstacles, bounds) -> np.ndarray:
-    (x0, y0), (x1, y1) = bounds
-    room = shapely.box(x0, y0, x1, y1)
-    g = np.atleast_1d(np.asarray(shapes, dtype=object))
-    d = shapely.distance(room.exterior, g)
-    for o in obstacles:
-        d = np.minimum(d, shapely.distance(shapely.Polygon(o), g))
-    return np.where(shapely.contains(room, g), d, -1.0)
-
-
-def step_clearance(poly, a, b, obstacles, bounds) -> float:
-    """Clearance (m) of one straight move (exact swept area) or one turn in place (sampled so
-    that no point is farther than 1e-4 m from a sample; that bound is subtracted)."""
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    dth = float(geometry.wrap_angle(b[2] - a[2]))
-    pa = geometry.transform(poly, a)
-    if abs(dth) < 1e-12:
-        pb = geometry.transform(poly, b)
-        parts = [shapely.Polygon(pa), shapely.Polygon(pb)]
-        for i in range(len(pa)):
-            j = (i + 1) % len(pa)
-            parts.append(shapely.MultiPoint([pa[i], pa[j], pb[i], pb[j]]).convex_hull)
-        return float(_clearance(shapely.union_all(parts), obstacles, bounds)[0])
-    ra, rb = geometry.rot(a[2]), geometry.rot(b[2])
-    c = np.linalg.solve(np.eye(2) - rb @ ra.T, b[:2] - rb @ ra.T @ a[:2])  # the fixed point
-    rho = float(np.max(np.linalg.norm(pa - c, axis=1)))
-    n = max(2, int(math.ceil(abs(dth) * rho / 2e-4)))
-    shapes = []
-    for t in np.linspace(0.0, 1.0, n + 1):
-        r = geometry.rot(t * dth)
-        shapes.append(shapely.Polygon(c + (pa - c) @ r.T))
-    return float(np.min(_clearance(np.array(shapes, dtype=object), obstacles, bounds))) - 1e-4
-
-
-def route_clearance(res, poly, obstacles, bounds) -> float:
-    wp = res.waypoints
-    pairs = zip(wp[:-1], wp[1:], strict=True)
-    return min(step_clearance(poly, a, b, obstacles, bounds) for a, b in pairs)
 
 
 # --------------------------------------------------------------------------- the doorway

@@ -320,56 +320,60 @@ class FootprintChecker:
     def translations_free(self, poses: ArrayLike, steps: ArrayLike) -> BoolArray:
         """Whether each translation from reference pose (N, 3) by step (N, 2) m, heading fixed,
         keeps the ring clear. Both end poses must be free (then this test is exact)."""
-        p = np.atleast_2d(np.asarray(poses, dtype=float))
         v = np.atleast_2d(np.asarray(steps, dtype=float))
-        if len(p) == 0:
-            return np.zeros(0, dtype=bool)
-        reach = self.rho + self.req + float(np.max(np.linalg.norm(v, axis=1))) + 1e-9
-        seg, vert = self._near(p[:, :2], reach)
-        if not seg.any():
-            return np.ones(len(p), dtype=bool)
-        w = self.world(p)  # (N, n, 2)
-        sa, sb = self.seg_a[seg], self.seg_b[seg]  # (E, 2)
-        # footprint vertices along their trails against obstacle and wall edges
-        d1 = segment_distance(w[:, :, None], (w + v[:, None])[:, :, None], sa[None, None], sb)
-        ok = d1.reshape(len(p), -1).min(axis=1) >= self.req - _TOL
-        ov = self.verts[vert]
-        if len(ov):
-            fa, fb = w, np.roll(w, -1, axis=1)  # footprint edges at the start pose
-            o0 = np.broadcast_to(ov[None, :, None], (len(p), len(ov), 1, 2))
-            o1 = o0 - v[:, None, None]
-            d2 = segment_distance(o0, o1, fa[:, None], fb[:, None])
-            ok &= d2.reshape(len(p), -1).min(axis=1) >= self.req - _TOL
-        return ok
+        longest = float(np.max(np.linalg.norm(v, axis=1))) if v.size else 0.0
+        return self._sweeps_free(poses, v, longest, self._trail_distance)
 
     def rotations_free(self, poses: ArrayLike, turns: ArrayLike) -> BoolArray:
         """Whether each turn in place of reference pose (N, 3) by the signed angle (N,) rad
         keeps the ring clear. Both end poses must be free (then this test is exact)."""
-        p = np.atleast_2d(np.asarray(poses, dtype=float))
         dt = np.atleast_1d(np.asarray(turns, dtype=float))
+        return self._sweeps_free(poses, dt, 0.0, self._arc_distance)
+
+    def _sweeps_free(self, poses: ArrayLike, amount, longest: float, distance) -> BoolArray:
+        """Common part of the sweep tests: only the obstacle edges and vertices within reach of
+        the batch take part; ``distance(p, amount, edges, vertices)`` gives per move the least
+        distance between a moving vertex and a fixed edge, either way round."""
+        p = np.atleast_2d(np.asarray(poses, dtype=float))
         if len(p) == 0:
             return np.zeros(0, dtype=bool)
-        seg, vert = self._near(p[:, :2], self.rho + self.req + 1e-9)
+        seg, vert = self._near(p[:, :2], self.rho + self.req + longest + 1e-9)
         if not seg.any():
             return np.ones(len(p), dtype=bool)
+        d = distance(p, amount, (self.seg_a[seg], self.seg_b[seg]), self.verts[vert])
+        return d >= self.req - _TOL
+
+    def _trail_distance(self, p, v, edges, verts) -> FloatArray:
+        w = self.world(p)  # (N, n, 2)
+        sa, sb = edges
+        # footprint vertices along their straight trails against obstacle and wall edges
+        d = segment_distance(w[:, :, None], (w + v[:, None])[:, :, None], sa[None, None], sb)
+        d = d.reshape(len(p), -1).min(axis=1)
+        if len(verts):  # obstacle vertices moving the other way against the footprint edges
+            fa, fb = w[:, None], np.roll(w, -1, axis=1)[:, None]
+            o0 = np.broadcast_to(verts[None, :, None], (len(p), len(verts), 1, 2))
+            d2 = segment_distance(o0, o0 - v[:, None, None], fa, fb)
+            d = np.minimum(d, d2.reshape(len(p), -1).min(axis=1))
+        return d
+
+    def _arc_distance(self, p, dt, edges, verts) -> FloatArray:
         c = p[:, None, None, :2]
-        sa, sb = self.seg_a[seg], self.seg_b[seg]
-        # footprint vertices along arcs about the reference point
+        sa, sb = edges
+        # footprint vertices along arcs about the reference point against the edges
         start = (p[:, 2:3] + self._polar[None])[:, :, None]
-        d1 = arc_segment_distance(
+        d = arc_segment_distance(
             c, self._radius[None, :, None], start, dt[:, None, None], sa[None, None], sb
         )
-        ok = d1.reshape(len(p), -1).min(axis=1) >= self.req - _TOL
-        ov = self.verts[vert]
-        if len(ov):
+        d = d.reshape(len(p), -1).min(axis=1)
+        if len(verts):  # obstacle vertices turning the other way against the footprint edges
             w = self.world(p)
             fa, fb = w[:, None], np.roll(w, -1, axis=1)[:, None]  # (N, 1, n, 2)
-            rel = ov[None] - p[:, None, :2]  # (N, V, 2)
+            rel = verts[None] - p[:, None, :2]  # (N, V, 2)
             rad = np.linalg.norm(rel, axis=-1)[..., None]
             ang = np.arctan2(rel[..., 1], rel[..., 0])[..., None]
             d2 = arc_segment_distance(c, rad, ang, -dt[:, None, None], fa, fb)
-            ok &= d2.reshape(len(p), -1).min(axis=1) >= self.req - _TOL
-        return ok
+            d = np.minimum(d, d2.reshape(len(p), -1).min(axis=1))
+        return d
 
 
 # --------------------------------------------------------------------------- rasters

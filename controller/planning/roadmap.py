@@ -29,7 +29,7 @@ from controller.planning.route import (
     _check_weights,
     _lengths,
     _no_path,
-    _subgoal_indices,
+    ok_result,
     reopens,
     weighted_astar,
 )
@@ -171,21 +171,8 @@ class RobotRoadmap:
         dirs = np.diff(np.asarray(path, dtype=np.int64)).tolist()
         modes = [-1] + dirs + ([dirs[-1]] if dirs else [])
         modes = modes[: len(wp)]
-        idx = _subgoal_indices(xy, modes, subgoal_spacing)
         length, _ = _lengths(wp)
-        return RouteResult(
-            status="ok",
-            waypoints=wp,
-            subgoals=wp[idx],
-            cost=float(cost),
-            length_m=length,
-            rotation_rad=0.0,
-            manipulations=0,
-            heuristic=heuristic,
-            wg=float(wg),
-            wh=float(wh),
-            **counts,
-        )
+        return ok_result(wp, modes, subgoal_spacing, cost, length, 0, (heuristic, wg, wh), counts)
 
 
 def plan_robot_route(

@@ -314,6 +314,36 @@ def _subgoal_indices(xy: FloatArray, modes: Sequence[Any], spacing: float) -> li
     return sorted(set(out))
 
 
+def ok_result(
+    wp: FloatArray,
+    kinds: Sequence[Any],
+    spacing: float,
+    cost: float,
+    length: float,
+    manipulations: int,
+    search: tuple[str, float, float],
+    counts: dict[str, Any],
+) -> RouteResult:
+    """A found route: waypoints (k, 3), the kind of each move (for the subgoals), the subgoal
+    spacing (m), cost (s), length (m), re-arrangements, (heuristic, wg, wh), search counts."""
+    idx = _subgoal_indices(wp[:, :2], kinds, spacing)
+    _, turn = _lengths(wp)
+    kind, wg, wh = search
+    return RouteResult(
+        status="ok",
+        waypoints=wp,
+        subgoals=wp[idx],
+        cost=float(cost),
+        length_m=length,
+        rotation_rad=turn,
+        manipulations=manipulations,
+        heuristic=kind,
+        wg=float(wg),
+        wh=float(wh),
+        **counts,
+    )
+
+
 def _lengths(wp: FloatArray) -> tuple[float, float]:
     if len(wp) < 2:
         return 0.0, 0.0
@@ -711,70 +741,6 @@ class RoutePlanner:
         return out
 
     # -- the search ---------------------------------------------------------------------------
-    def _moves_of(
-        self, start_joins: list[_Join], gmin: dict[int, float]
-    ) -> Callable[[int, float], list[tuple[int, float]]]:
-        """moves_of(s, g) for :func:`weighted_astar` over states ``cell * N_MODES + mode``."""
-        n_states = self._n * N_MODES
-        s_virtual, g_virtual = n_states, n_states + 1
-        manip = self.params.manipulation_cost
-        k_bins = self.cspace.heading_bins
-        layer = self._layer
-        free_p, margin_p = self._free_p, self._margin_p
-        goal_joins = self._goal_joins
-        tcost, toff, rcost = self._tcost, self._toff, self._rot_cost
-
-        def candidates(c: int) -> list[tuple[int, int]]:
-            k = c // layer
-            out = [(d, c + toff[d]) for d in range(8)]
-            if k_bins > 1:
-                up = c - (k_bins - 1) * layer if k == k_bins - 1 else c + layer
-                out.append((TURN_UP, up))
-                if k_bins > 2:
-                    dn = c + (k_bins - 1) * layer if k == 0 else c - layer
-                    out.append((TURN_DOWN, dn))
-            return [(mv, c2) for mv, c2 in out if free_p[c2]]
-
-        def checked(c: int, cands: list[tuple[int, int]]) -> list[tuple[int, int]]:
-            if margin_p[c]:
-                todo = [i for i, (_, c2) in enumerate(cands) if not margin_p[c2]]
-            else:
-                todo = list(range(len(cands)))
-            if not todo:
-                return cands
-            k, iy, ix = self._unflat(c)
-            res = self.cspace.moves_free(k, iy, ix, [cands[i][0] for i in todo])
-            bad = {i for i, ok in zip(todo, res, strict=True) if not ok}
-            return [mc for i, mc in enumerate(cands) if i not in bad]
-
-        def moves_of(s: int, g: float) -> list[tuple[int, float]]:
-            if s == s_virtual:
-                return [
-                    (j.state * N_MODES + (j.modes[-1] if j.modes else MODE_START) - s,
-                     j.cost + manip * j.changes)
-                    for j in start_joins
-                ]  # fmt: skip
-            c, m = divmod(s, N_MODES)
-            out = []
-            for mv, c2 in checked(c, candidates(c)):
-                mode = mv if mv < 8 else MODE_ROTATE
-                cost = tcost[mv] if mv < 8 else rcost
-                if m != mode and m != MODE_START:
-                    cost += manip
-                g2 = g + cost
-                gm = gmin.get(c2, INF)
-                if g2 >= gm + manip:
-                    continue  # dominated: another mode of that cell is cheaper by a re-arrangement
-                if g2 < gm:
-                    gmin[c2] = g2
-                out.append((c2 * N_MODES + mode - s, cost))
-            j = goal_joins.get(c)
-            if j is not None:
-                turn_in = bool(j.modes) and _arrival_charge(m, j.modes[0])
-                out.append((g_virtual - s, j.cost + manip * (j.changes + turn_in)))
-            return out
-
-        return moves_of
 
     def plan(
         self,
@@ -817,7 +783,7 @@ class RoutePlanner:
             s_virtual,
             s_virtual + 1,
             h,
-            self._moves_of(reach, {}),
+            _ObjectMoves(self, reach),
             wg=wg,
             wh=wh,
             pathmax=pathmax,
@@ -858,23 +824,11 @@ class RoutePlanner:
             wp = np.vstack([start_p, self.goal])
             ref_arr = np.vstack([ref_arr, ref_arr])
         kinds = _move_kinds(ref_arr)
-        idx = _subgoal_indices(wp[:, :2], kinds, p.subgoal_spacing)
         seq = [MODE_START, *first.modes, *modes[1:], *last.modes]
         manip = sum(1 for a, b in zip(seq[:-1], seq[1:], strict=True) if a != b and a != MODE_START)
-        _, turn = _lengths(wp)
         length = float(np.sum(np.linalg.norm(np.diff(ref_arr[:, :2], axis=0), axis=1)))
-        return RouteResult(
-            status="ok",
-            waypoints=wp,
-            subgoals=wp[idx],
-            cost=float(cost),
-            length_m=length,
-            rotation_rad=turn,
-            manipulations=manip,
-            heuristic=self.kind,
-            wg=self.wg,
-            wh=self.wh,
-            **counts,
+        return ok_result(
+            wp, kinds, p.subgoal_spacing, cost, length, manip, (self.kind, self.wg, self.wh), counts
         )
 
 
@@ -884,6 +838,80 @@ def _padded(a: NDArray[Any], fill: Any = False) -> NDArray[Any]:
     out = np.full((k_bins, ny + 2, nx + 2), fill, dtype=a.dtype)
     out[:, 1:-1, 1:-1] = a
     return out.ravel()
+
+
+class _ObjectMoves:
+    """moves_of(s, g) of the object search (see :func:`weighted_astar`) over the states
+    ``cell * N_MODES + mode`` and the virtual start and goal: the lattice moves to free states
+    that pass the exact sweep test (unless both ends are margin-free), the start's and the
+    goal's ways, each with its manipulation charge. A successor whose g exceeds the best g of
+    its cell (any mode) by a re-arrangement or more is dropped: that mode can do nothing the
+    other cannot do for at most one re-arrangement more."""
+
+    def __init__(self, planner: RoutePlanner, start_joins: list[_Join]):
+        self.pl = planner
+        self.start_joins = start_joins
+        self.s_virtual = planner._n * N_MODES
+        self.manip = planner.params.manipulation_cost
+        self.gmin: dict[int, float] = {}
+
+    def candidates(self, c: int) -> list[tuple[int, int]]:
+        """(move, cell) of the moves from lattice cell c to free cells (not yet checked)."""
+        pl = self.pl
+        k_bins, layer = pl.cspace.heading_bins, pl._layer
+        out = [(d, c + pl._toff[d]) for d in range(8)]
+        if k_bins > 1:
+            k = c // layer
+            out.append((TURN_UP, c - (k_bins - 1) * layer if k == k_bins - 1 else c + layer))
+            if k_bins > 2:
+                out.append((TURN_DOWN, c + (k_bins - 1) * layer if k == 0 else c - layer))
+        free = pl._free_p
+        return [(mv, c2) for mv, c2 in out if free[c2]]
+
+    def checked(self, c: int, cands: list[tuple[int, int]]) -> list[tuple[int, int]]:
+        """The candidates whose swept footprint is clear (margin-free pairs need no test)."""
+        margin = self.pl._margin_p
+        if margin[c]:
+            todo = [i for i, (_, c2) in enumerate(cands) if not margin[c2]]
+        else:
+            todo = list(range(len(cands)))
+        if not todo:
+            return cands
+        k, iy, ix = self.pl._unflat(c)
+        res = self.pl.cspace.moves_free(k, iy, ix, [cands[i][0] for i in todo])
+        bad = {i for i, ok in zip(todo, res, strict=True) if not ok}
+        return [mc for i, mc in enumerate(cands) if i not in bad]
+
+    def __call__(self, s: int, g: float) -> list[tuple[int, float]]:
+        manip = self.manip
+        if s == self.s_virtual:
+            return [
+                (j.state * N_MODES + (j.modes[-1] if j.modes else MODE_START) - s,
+                 j.cost + manip * j.changes)
+                for j in self.start_joins
+            ]  # fmt: skip
+        c, m = divmod(s, N_MODES)
+        out = []
+        for mv, c2 in self.checked(c, self.candidates(c)):
+            mode = mv if mv < 8 else MODE_ROTATE
+            cost = self.pl._tcost[mv] if mv < 8 else self.pl._rot_cost
+            if m != mode and m != MODE_START:
+                cost += manip
+            if self._keep(c2, g + cost):
+                out.append((c2 * N_MODES + mode - s, cost))
+        j = self.pl._goal_joins.get(c)
+        if j is not None:
+            turn_in = bool(j.modes) and _arrival_charge(m, j.modes[0])
+            out.append((self.s_virtual + 1 - s, j.cost + manip * (j.changes + turn_in)))
+        return out
+
+    def _keep(self, c2: int, g2: float) -> bool:
+        gm = self.gmin.get(c2, INF)
+        if g2 >= gm + self.manip:
+            return False
+        if g2 < gm:
+            self.gmin[c2] = g2
+        return True
 
 
 def _pose3(pose: ArrayLike, name: str) -> FloatArray:
