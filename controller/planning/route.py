@@ -19,29 +19,34 @@ at cell centres, K headings) with
 
 ``w_g`` is 0 or 1, ``w_h >= 0``; ``w_h = 0`` is Dijkstra, ``w_g = 0`` greedy best-first. Costs
 are seconds: distance / ``speed``, rotation / ``yaw_rate``, plus ``manipulation_cost`` whenever
-the travel direction relative to the object changes (a new translation direction, or switching
-between translating and turning: the robots around the object re-arrange; Yamashita puts the
-manipulation constraints into the cost function). The search state is (cell, heading, last move),
-10 "modes" per cell, so that cost is exact.
+the kind of move changes (a new translation direction, or switching between translating and
+turning: the robots around the object re-arrange; Yamashita puts the manipulation constraints
+into the cost function). The search state is (cell, heading, kind of the last move), 11 modes
+per lattice state, so that cost is exact.
 
-**Exact start and goal.** The start pose joins the lattice by a turn in place to a neighbouring
-heading bin and a straight move to a neighbouring cell centre; the goal is reached from the
-lattice by a straight move to the goal position and the final turn to the goal heading. Every
-one of these moves, and every lattice move, is checked exactly against the grown footprint
-(:class:`controller.planning.cspace.FootprintChecker`); the first and last waypoints are the
-exact start and goal. These sub-cell joins are not charged a manipulation.
+**Exact start and goal.** The start pose joins the lattice by one turn in place to one of the
+two nearest heading bins and one straight move to the centre of its cell or a neighbour (or the
+move first, then the turn, where that is free); the goal is reached the same way backwards,
+ending with the final turn to the goal heading. Every one of these moves, and every lattice
+move, is checked exactly against the grown footprint
+(:class:`controller.planning.cspace.FootprintChecker`) and costed like any other move, its
+changes of kind charged too; the first and last waypoints are the exact start and goal.
+Waypoints are one straight move or one turn of at most ``min(2 pi / K, pi / 4)`` apart.
 
-**Heuristics** (s): (D) ``cost_to_go``, the default: the lattice's cost-to-go from the goal
-(:func:`controller.planning.heuristics.lattice_cost_to_go`), computed once per planner: admissible,
-consistent and exact but for the manipulation cost. The paper's potentials (A) ``euclid``, (B)
-``wavefront``, (C) ``skeleton``: a distance table over the (x, y) cells free at some heading,
-divided by ``speed``, plus the smallest heading change to the goal divided by ``yaw_rate``. All
-add ``manipulation_cost`` times the fewest changes of travel direction still needed
-(:func:`controller.planning.heuristics.turn_bounds`; ``turn_bound=False`` leaves it out).
-Translation + rotation, and manipulation, are separate cost terms, so the sum of a lower bound
-of each is a lower bound: (A), (B), (D) are admissible and ``w_g = w_h = 1`` returns the
-optimal cost on the lattice; (C) is not. Re-opening of closed states: always for A*
-(``w_g = 1``, ``w_h <= 1``), never for greedy, for ``w_h > 1`` when ``route.reopen`` is set.
+**Heuristics** (s): (D) ``cost_to_go``, the default: the lattice's cost-to-go to the goal's ways
+with the manipulation cost (:func:`controller.planning.heuristics.lattice_cost_to_go`), computed
+once per planner, refined per mode along the ray of the last move (:class:`_CostToGoH`):
+admissible, and with the default parameters exact or nearly so, so that the search expands
+little more than the route itself. The paper's potentials (A) ``euclid``, (B) ``wavefront``,
+(C) ``skeleton``: a distance table over the (x, y) cells free at some heading, divided by
+``speed``, plus the smallest heading change to the goal divided by ``yaw_rate``, plus
+``manipulation_cost`` times the fewest changes of travel direction still needed
+(:func:`controller.planning.heuristics.turn_bounds`). ``turn_bound=False`` leaves the
+manipulation out of every heuristic (the paper's bare potentials). Translation + rotation, and
+manipulation, are separate cost terms, so the sum of a lower bound of each is a lower bound:
+(A), (B), (D) are admissible and ``w_g = w_h = 1`` returns the optimal cost on the lattice; (C)
+is not. Re-opening of closed states: always for A* (``w_g = 1``, ``w_h <= 1``), never for
+greedy, for ``w_h > 1`` when ``route.reopen`` is set.
 
 Unreachable goals are answers, not errors: ``status = "no_path"`` with a reason.
 """
@@ -58,7 +63,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from controller import geometry
-from controller.config import HEURISTICS, RouteSection
+from controller.config import HEURISTICS, FleetConfig, RouteSection
 from controller.planning import heuristics
 from controller.planning.cspace import (
     MOVES_8,
@@ -512,13 +517,24 @@ class RoutePlanner:
     cspace: from :func:`build_object_cspace` (its resolution and heading bins must match
     ``params``); goal: the object-frame goal pose (x m, y m, theta rad); params: the ``[route]``
     section. Building checks the goal, finds the ways to reach it exactly from the lattice and
-    computes the heuristic tables (for ``cost_to_go`` the lattice cost-to-go, the costly part,
-    ~0.1 s at 128 x 128 x 36); then :meth:`plan` only searches, and with the default heuristic
-    the search expands little more than the route itself. Moves checked exactly are cached on the
-    C-space, so re-plans from nearby starts (transport) are cheaper still.
-    ``turn_bound=False`` drops the manipulation bound from h (the paper's bare potentials).
-    Raises ValueError for parameters that do not fit (weights, heuristic name, grid).
+    computes the heuristic tables (for ``cost_to_go`` the lattice cost-to-go, the costly part:
+    about 0.3 s at 128 x 128 x 36, 1 s at 256^2, 5 s at 512^2); then :meth:`plan` only searches,
+    and with the default heuristic the search expands little more than the route itself. Moves
+    checked exactly are cached on the C-space, so re-plans from nearby starts (transport) are
+    cheaper still. ``turn_bound=False`` drops the manipulation bound from h (the paper's bare
+    potentials). Raises ValueError for parameters that do not fit (weights, heuristic name,
+    grid). :meth:`from_config` builds one for a fleet config's object and goal.
     """
+
+    @classmethod
+    def from_config(
+        cls, cfg: FleetConfig, goal: ArrayLike | None = None, cspace: ObjectCSpace | None = None
+    ) -> RoutePlanner:
+        """A planner toward ``goal`` (default ``object.goal``) for the config's world, obstacles,
+        object and largest robot, with its ``[route]`` parameters; pass ``cspace`` (from
+        :func:`object_cspace`) to share one C-space between goals."""
+        cs = cspace if cspace is not None else object_cspace(cfg)
+        return cls(cs, cfg.object.goal if goal is None else goal, cfg.route)
 
     def __init__(
         self,
@@ -922,6 +938,19 @@ def _pose3(pose: ArrayLike, name: str) -> FloatArray:
     if p.shape != (3,) or not np.all(np.isfinite(p)):
         raise ValueError(f"{name}: expected a pose [x, y, theta] of finite numbers, got {pose!r}")
     return p
+
+
+def object_cspace(cfg: FleetConfig) -> ObjectCSpace:
+    """The object's C-space for a fleet config: its world bounds and obstacles, the object
+    polygon, the largest robot radius, ``route.resolution`` and ``route.heading_bins``."""
+    return build_object_cspace(
+        cfg.bounds_array(),
+        cfg.obstacle_polygons(),
+        cfg.object_polygon(),
+        cfg.max_robot_radius,
+        cfg.route.resolution,
+        cfg.route.heading_bins,
+    )
 
 
 def plan_route(

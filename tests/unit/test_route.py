@@ -302,6 +302,23 @@ def test_a_crate_passes_a_doorway_its_robots_fit():
     assert res.status == "no_path" and "unreachable" in res.reason
 
 
+@pytest.mark.parametrize("phi_deg", [23.0, 61.0])
+def test_an_off_axis_doorway_one_cell_wider_than_the_ring_is_found(phi_deg):
+    # resolution-complete in the sense: clearance one cell (0.1 m) beyond the ring on
+    # each side, the doorway turned off the lattice's directions and heading bins
+    phi = math.radians(phi_deg)
+    room, c = np.array([[0.0, 0.0], [10.0, 10.0]]), np.array([5.0, 5.0])
+    half = (1.0 + 2 * 0.2 + 2 * 0.1) / 2
+    walls = [rect(-0.1, half, 0.1, 6.0), rect(-0.1, -6.0, 0.1, -half)]
+    obstacles = [geometry.transform(w, (c[0], c[1], phi)) for w in walls]
+    d = np.array([math.cos(phi), math.sin(phi)])
+    centre = geometry.rot(phi) @ np.array([0.5, 0.5])
+    start, goal = np.r_[c - 2.5 * d - centre, phi], np.r_[c + 2.5 * d - centre, phi]
+    res = plan_route(room, obstacles, CRATE, 0.1, start, goal, RouteSection())
+    assert res.ok, res.reason
+    assert_route_clear(res, CRATE, 0.1, obstacles, room, start, goal)
+
+
 def test_a_goal_near_a_wall_the_robots_fit_is_reached():
     # the object 0.3 m from the wall; the robots need 0.2 m
     start, goal = (1.0, 2.0, 0.0), (5.0, 0.3, 0.0)

@@ -224,3 +224,20 @@ def test_planner_rejects_a_cspace_of_other_parameters():
     cs = build_object_cspace([[0, 0], [4, 4]], [], SQUARE, 0.05, 0.1, 12)
     with pytest.raises(ValueError, match="heading"):
         RoutePlanner(cs, (3, 3, 0), RouteSection(heading_bins=8))
+
+
+def test_a_planner_from_the_fleet_config_plans_the_shipped_scenario():
+    from controller.config import load_config
+    from controller.planning.route import object_cspace
+
+    cfg = load_config("fleet.toml")
+    cs = object_cspace(cfg)
+    planner = RoutePlanner.from_config(cfg, cspace=cs)
+    res = planner.plan(cfg.object.start)
+    assert res.ok and np.allclose(res.waypoints[-1], cfg.object.goal)
+    assert np.allclose(res.subgoals[-1], cfg.object.goal) and res.manipulations >= 1
+    # a second goal on the same C-space
+    other = RoutePlanner.from_config(cfg, goal=(2.0, 9.0, 1.5707963), cspace=cs).plan(
+        cfg.object.start
+    )
+    assert other.ok and other.cost > 0
