@@ -589,6 +589,10 @@ class RoutePlanner:
         iy, ix = divmod(p, self._w)
         return k, iy - 1, ix - 1
 
+    def _unpadded(self, c: int) -> int:
+        k, iy, ix = self._unflat(c)
+        return (k * self.cspace.frame.ny + iy) * self.cspace.frame.nx + ix
+
     def _flat(self, k: int, iy: int, ix: int) -> int:
         return k * self._layer + (iy + 1) * self._w + ix + 1
 
@@ -787,6 +791,10 @@ class RoutePlanner:
         assert self._h_obj is not None
         h = self._h_obj
         reach = [j for j in joins if h[j.state * N_MODES + MODE_START] < INF]  # E < inf
+        if self.kind != "cost_to_go":  # the potentials do not know the lattice's components
+            labels = self.cspace.labels.ravel()
+            goal_labels = {int(labels[self._unpadded(c)]) for c in self._goal_joins}
+            reach = [j for j in reach if int(labels[self._unpadded(j.state)]) in goal_labels]
         if not reach:
             why = (
                 "start and goal lie in different free regions of the C-space"
