@@ -32,7 +32,11 @@ DRIVERS = ("sim", "mavlink")
 MAVLINK_PROFILES = ("ardurover", "px4")
 MOTION_KINDS = ("line", "sine", "evade", "static")
 CLOSURE_MODES = ("exact", "paper")
-HEURISTICS = ("euclid", "wavefront", "skeleton")
+HEURISTICS = ("euclid", "wavefront", "skeleton", "cost_to_go")
+#: Grid budgets: object route states (cells x heading bins) and robot route cells. Above them a
+#: plan takes minutes and gigabytes (512 x 512 x 36 states take about 5 s and 0.6 GB).
+ROUTE_MAX_STATES = 10_000_000
+ROBOT_ROUTE_MAX_CELLS = 512 * 512
 TRANSPORT_STRATEGIES = ("sa", "serpentine", "downhill")
 TRANSPORT_SCHEDULES = ("geometric", "logarithmic")
 TRANSPORT_INITIAL = ("lp", "hold", "random")
@@ -190,9 +194,11 @@ class ApproachSection:
 class RouteSection:
     resolution: float = _rule(0.1, gt=0, max=10)
     heading_bins: int = _rule(36, min=1, max=3600)
-    heuristic: str = _rule("skeleton", choices=HEURISTICS)
+    heuristic: str = _rule("cost_to_go", choices=HEURISTICS)
     wg: float = _rule(1.0, choices=(0.0, 1.0))
     wh: float = _rule(1.0, min=0, max=100)
+    reopen: bool = _rule(False)  # re-open closed states when wh > 1 (A* always, greedy never)
+    robot_resolution: float = _rule(0.1, gt=0, max=10)  # m: the robots' own 2-D routes
     speed: float = _rule(0.2, gt=0, max=10)
     yaw_rate: float = _rule(0.3, gt=0, max=100)
     manipulation_cost: float = _rule(2.0, min=0, max=1e4)
@@ -360,7 +366,10 @@ def _type_name(tp: Any) -> str:
     if origin is tuple:
         args = typing.get_args(tp)
         if len(args) == 2 and args[1] is Ellipsis:
-            return f"an array of {_type_name(args[0]).removeprefix('a ').removeprefix('an ')}s"
+            inner = _type_name(args[0])
+            if inner.startswith("an array of "):
+                return "an array of arrays of " + inner.removeprefix("an array of ")
+            return f"an array of {inner.removeprefix('a ').removeprefix('an ')}s"
         return f"an array of {len(args)} items"
     return str(tp)
 
@@ -543,18 +552,6 @@ def _validate_robots(cfg: FleetConfig, obstacles: tuple[Obstacle, ...], src: str
         _validate_robot(cfg, i, obstacles, src)
 
 
-def _validate_object_placement(cfg: FleetConfig, obj: ObjectSection, src: str) -> None:
-    """The object placed at its start and at its goal stays inside the room."""
-    (x0, y0), (x1, y1) = cfg.world.bounds
-    for key in ("start", "goal"):
-        if getattr(obj, key) is None:
-            continue
-        world_poly = geometry.transform(np.asarray(obj.polygon), getattr(obj, key))
-        lo, hi = world_poly.min(axis=0), world_poly.max(axis=0)
-        if lo[0] < x0 or hi[0] > x1 or lo[1] < y0 or hi[1] > y1:
-            raise ConfigError(src, f"object.{key}", "the object placed there leaves world.bounds")
-
-
 def edge_node_counts(polygon: Any, spacing: float) -> np.ndarray:
     """Capture candidate nodes per edge at ``spacing``: max(1, floor(length / spacing)), as
     floats (a tiny spacing gives huge counts, never an overflow)."""
@@ -638,8 +635,103 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
     )
     obj, notes = _object(cfg, src)
     _validate_robots(cfg, obstacles, src)
-    _validate_object_placement(cfg, obj, src)
+    _check_object_poses(obj, obstacles, cfg.world.bounds, src)
+    check_route_grid(cfg.world.bounds, cfg.route, src)
     return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src, notes=notes)
+
+
+def _polygons_overlap(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two simple polygons share a point (touching counts)."""
+    ea, eb = np.roll(a, -1, axis=0), np.roll(b, -1, axis=0)
+    if geometry.segments_intersect(a[:, None], ea[:, None], b[None], eb[None]).any():
+        return True
+    return bool(geometry.points_in_polygon(a[:1], b)[0] or geometry.points_in_polygon(b[:1], a)[0])
+
+
+def _check_object_poses(
+    obj: ObjectSection, obstacles: tuple[Obstacle, ...], bounds: tuple[Point, Point], src: str
+) -> None:
+    """object.start and object.goal place the object inside the bounds, clear of obstacles."""
+    (x0, y0), (x1, y1) = bounds
+    for key in ("start", "goal"):
+        pose = getattr(obj, key)
+        if pose is None:  # no goal: a capture job
+            continue
+        world_poly = geometry.transform(np.asarray(obj.polygon), pose)
+        if (
+            world_poly[:, 0].min() < x0
+            or world_poly[:, 0].max() > x1
+            or world_poly[:, 1].min() < y0
+            or world_poly[:, 1].max() > y1
+        ):
+            raise ConfigError(src, f"object.{key}", "the object placed there leaves world.bounds")
+        for j, o in enumerate(obstacles):
+            if _polygons_overlap(world_poly, np.asarray(o.polygon, dtype=float)):
+                raise ConfigError(
+                    src,
+                    f"object.{key}",
+                    f"the object placed at {list(pose)} overlaps obstacles[{j}]",
+                )
+
+
+def _cells(extent: float, resolution: float) -> int:
+    return int(math.ceil(extent / resolution - 1e-9))
+
+
+def check_route_grid(bounds: Any, route: RouteSection, src: str = "") -> None:
+    """The route grids over ``bounds`` fit their budgets (:data:`ROUTE_MAX_STATES` object states,
+    :data:`ROBOT_ROUTE_MAX_CELLS` robot cells); raises ConfigError naming the key."""
+    (x0, y0), (x1, y1) = bounds
+    nx, ny = _cells(x1 - x0, route.resolution), _cells(y1 - y0, route.resolution)
+    states = nx * ny * route.heading_bins
+    if states > ROUTE_MAX_STATES:
+        raise ConfigError(
+            src,
+            "route.resolution",
+            f"{route.resolution} m with route.heading_bins = {route.heading_bins} gives "
+            f"{nx} x {ny} x {route.heading_bins} = {states / 1e6:.1f} M route states over "
+            f"world.bounds, above the budget of {ROUTE_MAX_STATES / 1e6:.0f} M (minutes and "
+            "gigabytes per plan); use a coarser route.resolution or fewer route.heading_bins",
+        )
+    rx = _cells(x1 - x0, route.robot_resolution)
+    ry = _cells(y1 - y0, route.robot_resolution)
+    if rx * ry > ROBOT_ROUTE_MAX_CELLS:
+        raise ConfigError(
+            src,
+            "route.robot_resolution",
+            f"{route.robot_resolution} m gives {rx} x {ry} robot route cells over world.bounds, "
+            f"above the budget of {ROBOT_ROUTE_MAX_CELLS} (the robots' routes are planned "
+            "during the run); use a coarser route.robot_resolution",
+        )
+
+
+def parse_table(cls: type, table: Any, path: str, source: str = "") -> Any:
+    """Validate a TOML table against a config dataclass (unknown keys, types, ranges), as the
+    loader does for fleet.toml; raises ConfigError naming ``source`` and the key path."""
+    return _convert(cls, table, path, source)
+
+
+def override(section: Any, values: dict[str, Any], source: str, prefix: str = "") -> Any:
+    """A copy of a config section with some fields replaced, each checked by the field's rules
+    (e.g. command-line overrides); raises ConfigError naming ``prefix + key``."""
+    hints = typing.get_type_hints(type(section))
+    fields = {f.name: f for f in dataclasses.fields(section)}
+    checked = {}
+    for key, value in values.items():
+        where = f"{prefix}{key}"
+        value = _convert(hints[key], value, where, source)
+        _check_rules(fields[key].metadata, value, where, source)
+        checked[key] = value
+    return dataclasses.replace(section, **checked)
+
+
+def validated_polygon(poly: Any, path: str, source: str = "") -> Polygon:
+    """A simple polygon of >= 3 vertices and non-zero area, counter-clockwise (ConfigError if
+    not, naming ``path``)."""
+    if isinstance(poly, tuple | list):
+        poly = [list(v) if isinstance(v, tuple) else v for v in poly]
+    p = _convert(Polygon, poly, path, source)
+    return _polygon(p, path, source)
 
 
 def parse_config(data: dict[str, Any], source: str = "") -> FleetConfig:
@@ -664,12 +756,15 @@ def load_config(path: str | Path) -> FleetConfig:
 
 def config_to_dict(cfg: FleetConfig) -> dict[str, Any]:
     """The config as plain data (for logs and --json); tuples become lists. The loader's notes
-    are left out (they are no config key: the data must load again)."""
+    and unset optional keys (``object.goal`` None: TOML has no null) are left out: the data
+    must load again."""
 
     def conv(v: Any) -> Any:
         if dataclasses.is_dataclass(v):
             return {
-                f.name: conv(getattr(v, f.name)) for f in dataclasses.fields(v) if f.name != "notes"
+                f.name: conv(getattr(v, f.name))
+                for f in dataclasses.fields(v)
+                if f.name != "notes" and getattr(v, f.name) is not None
             }
         if isinstance(v, tuple | list):
             return [conv(x) for x in v]

@@ -342,7 +342,7 @@ class CaptureMission:
             return
         rr = float(self.radii.max()) + self.cfg.approach.safety_margin + self.s.detour_clearance
         rm = RobotRoadmap.build(
-            self.cfg.bounds_array(), self.obstacles, rr, self.cfg.route.resolution
+            self.cfg.bounds_array(), self.obstacles, rr, self.cfg.route.robot_resolution
         )
         for m, i in blocked:
             res = rm.plan(centers[i], stations[m], subgoal_spacing=self.s.detour_spacing)

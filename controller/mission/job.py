@@ -174,6 +174,11 @@ class CaptureJob:
         self.failed = False
         self.transport: Any = None
         self.arrest_t: float | None = None
+        self.route_planner: Any = None
+        if cfg.object.goal is not None:  # built before the loop: it takes a second
+            from controller.mission.transport import route_planner_for
+
+            self.route_planner = route_planner_for(cfg)
 
     def _assign(self, view: FleetView) -> np.ndarray:
         radius = self.cfg.max_robot_radius
@@ -233,6 +238,7 @@ class CaptureJob:
             self.assignment,
             self.capture.points,
             self.capture.normals,
+            route_planner=self.route_planner,
         )
 
     def _start(self, view: FleetView, pinned: bool) -> Intent:

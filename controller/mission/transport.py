@@ -115,8 +115,12 @@ class TransportMission:
         robots: np.ndarray,
         points: np.ndarray,
         normals: np.ndarray,
+        route_planner: Any = None,
     ) -> None:
         self.cfg = cfg
+        # the route planner toward object.goal (its C-space and cost-to-go table take a second:
+        # the job builds it before the loop starts; built here on the first route otherwise)
+        self.route_planner = route_planner
         self.rng = rng
         self.guard = guard
         self.s = TransportSettings.from_config(cfg)
@@ -193,18 +197,9 @@ class TransportMission:
 
     # --- route --------------------------------------------------------------------------------
     def _route(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
-        from controller.planning.route import plan_route
-
-        cfg = self.cfg
-        res = plan_route(
-            cfg.bounds_array(),
-            cfg.obstacle_polygons(),
-            cfg.object_polygon(),
-            cfg.max_robot_radius,
-            pose,
-            np.asarray(cfg.object.goal, float),
-            cfg.route,
-        )
+        if self.route_planner is None:
+            self.route_planner = route_planner_for(self.cfg)
+        res = self.route_planner.plan(pose)
         if not res.ok:
             return self._fail(Reason.NO_ROUTE, res.reason, view, events)
         self.route = res
@@ -743,10 +738,19 @@ class _Ready:
         return {} if self.inner is None else self.inner.summary()
 
 
+def route_planner_for(cfg: FleetConfig) -> Any:
+    """The object's route planner toward ``object.goal`` (C-space and cost-to-go table built)."""
+    from controller.planning.route import RoutePlanner
+
+    return RoutePlanner.from_config(cfg)
+
+
 def transport_from_start(cfg: FleetConfig, rng: np.random.Generator, reach: float = 0.03):
     """``fleet run/daemon --mission transport``: carry an object the robots already hold. The
     robots whose discs are within ``reach`` m of the object's surface at the first estimates
     hold their nearest boundary point; the others are free."""
+
+    planner = route_planner_for(cfg)
 
     def make(view: FleetView) -> TransportMission:
         pose = np.asarray(view.object_pose, float)
@@ -760,6 +764,8 @@ def transport_from_start(cfg: FleetConfig, rng: np.random.Generator, reach: floa
         gap = d[np.arange(len(local)), j] - radii
         held = np.flatnonzero(gap < reach)
         normals = geometry.outward_normals(poly)[j]
-        return TransportMission(cfg, rng, SafetyStage(cfg), held, near[held], normals[held])
+        return TransportMission(
+            cfg, rng, SafetyStage(cfg), held, near[held], normals[held], route_planner=planner
+        )
 
     return _Ready(cfg, make)

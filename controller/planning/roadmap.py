@@ -1,12 +1,20 @@
 """A single robot's global route on its disc C-space (the approach planner's detours).
 
-Weighted A* with pathmax (Yamashita et al. Eq. 1-2) over an 8-connected 2-D grid. Pure: arrays
-in, a :class:`controller.planning.route.RouteResult` out. Moves cost distance / ``speed`` (s).
+Weighted A* with pathmax (Yamashita et al. Eq. 1-2; the search loop is
+:func:`controller.planning.route.weighted_astar`, shared with the object's route) over an
+8-connected 2-D grid. Pure: arrays in, a :class:`controller.planning.route.RouteResult` out.
+Moves cost distance / ``speed`` (s).
+
+The default heuristic ``"landmarks"`` is the octile distance (the exact cost of 8-connected
+moves on an empty grid) tightened by landmark lower bounds (ALT, Goldberg & Harrelson 2005): the
+grid distances from a few landmarks, computed once per roadmap (scipy csgraph), bound the
+distance between any two cells by the triangle inequality, ``d(n, g) >= |d(L, g) - d(L, n)|``.
+The larger of the two is admissible and consistent, and around obstacles much tighter than the
+octile distance alone (``"octile"``), so the search expands far fewer cells.
 """
 
 from __future__ import annotations
 
-import heapq
 import math
 
 import numpy as np
@@ -21,74 +29,26 @@ from controller.planning.route import (
     _check_weights,
     _lengths,
     _no_path,
-    _subgoal_indices,
+    ok_result,
+    reopens,
+    weighted_astar,
 )
 
-
-def _search_grid(
-    moves: list[tuple[int, float]],
-    h: list[float],
-    start: int,
-    goal: int,
-    wg: float,
-    wh: float,
-    pathmax: bool,
-    max_expanded: int,
-    trace: bool,
-) -> tuple[list[int] | None, float, int, int, list[float], bool]:
-    """Weighted A* with pathmax over padded flat cells of a 2-D grid (the robot's search).
-
-    ``h`` (s) is inf on occupied cells, so one lookup both tests a cell and scores it.
-    """
-    n = len(h)
-    gbest = [INF] * n
-    parent = [-1] * n
-    gbest[start] = 0.0
-    h0 = h[start]
-    heap: list[tuple[float, float, float, int]] = [(wh * h0, h0, 0.0, start)]
-    push, pop = heapq.heappush, heapq.heappop
-    ftrace: list[float] = []
-    expanded = 0
-    generated = 1
-    while heap:
-        f, _, g, s = pop(heap)
-        if g > gbest[s]:
-            continue
-        expanded += 1
-        if trace:
-            ftrace.append(f)
-        if s == goal:
-            path = [s]
-            while parent[path[-1]] >= 0:
-                path.append(parent[path[-1]])
-            return path[::-1], g, expanded, generated, ftrace, False
-        if expanded >= max_expanded:
-            return None, INF, expanded, generated, ftrace, True
-        for off, cost in moves:
-            t = s + off
-            h2 = h[t]
-            if h2 < INF:
-                g2 = g + cost
-                if g2 < gbest[t]:
-                    gbest[t] = g2
-                    parent[t] = s
-                    f2 = wg * g2 + wh * h2
-                    if pathmax and f2 < f:
-                        f2 = f
-                    push(heap, (f2, h2, g2, t))
-                    generated += 1
-    return None, INF, expanded, generated, ftrace, False
+#: The robot search's heuristics: octile + landmarks (the default), octile, the paper's potentials.
+ROBOT_HEURISTICS = ("landmarks", "octile", *heuristics.POTENTIALS)
 
 
 class RobotRoadmap:
     """A robot disc's 2-D C-space prepared once for many searches (the approach planner's use).
 
-    Holds the padded free mask and the move table; :meth:`plan` runs one search.
-    Heuristics: "euclid" (admissible), "wavefront" (exact, admissible), "skeleton" (not).
+    Holds the padded free mask, the move table and the landmark distances (``landmarks`` of
+    them, spread by farthest-point selection); :meth:`plan` runs one search.
+    Heuristics: "landmarks" (the default) and "octile" (admissible and consistent), "euclid"
+    (admissible), "wavefront" (exact, admissible), "skeleton" (not).
     Moves cost distance / ``speed`` (s); there is no manipulation cost for a lone robot.
     """
 
-    def __init__(self, cspace: RobotCSpace, speed: float = 1.0):
+    def __init__(self, cspace: RobotCSpace, speed: float = 1.0, landmarks: int = 4):
         if not speed > 0:
             raise ValueError(f"speed: expected > 0 m/s, got {speed!r}")
         self.cspace = cspace
@@ -102,6 +62,7 @@ class RobotRoadmap:
             (int(dy * self._w + dx), fr.resolution * math.hypot(dx, dy) / self.speed)
             for dx, dy in MOVES_8
         ]
+        self._landmarks = heuristics.landmark_distances(~cspace.occupied, landmarks, fr.resolution)
 
     @staticmethod
     def build(
@@ -116,25 +77,36 @@ class RobotRoadmap:
 
     def heuristic_table(self, kind: str, goal_cell: tuple[int, int]) -> FloatArray:
         """Distance table (m) for a goal cell (iy, ix)."""
-        return heuristics.heuristic_table(
-            kind, ~self.cspace.occupied, goal_cell, self.cspace.frame.resolution
-        )
+        fr = self.cspace.frame
+        if kind == "octile":
+            return heuristics.octile((fr.ny, fr.nx), goal_cell, fr.resolution)
+        if kind == "landmarks":
+            table = heuristics.octile((fr.ny, fr.nx), goal_cell, fr.resolution)
+            return heuristics.landmark_bound(self._landmarks, goal_cell, table)
+        if kind not in ROBOT_HEURISTICS:
+            raise ValueError(f"heuristic: expected one of {ROBOT_HEURISTICS}, got {kind!r}")
+        return heuristics.heuristic_table(kind, ~self.cspace.occupied, goal_cell, fr.resolution)
 
     def plan(
         self,
         start_xy: ArrayLike,
         goal_xy: ArrayLike,
         *,
-        heuristic: str = "euclid",
+        heuristic: str = "landmarks",
         wg: float = 1.0,
         wh: float = 1.0,
         h_table: FloatArray | None = None,
         pathmax: bool = True,
+        reopen: bool = False,
         max_expanded: int = 10_000_000,
         trace: bool = False,
         subgoal_spacing: float = 1.0,
     ) -> RouteResult:
-        """Route from ``start_xy`` to ``goal_xy`` (m); waypoint headings follow the travel."""
+        """Route from ``start_xy`` to ``goal_xy`` (m); waypoint headings follow the travel.
+
+        ``h_table``: a distance table (m) for this goal (from :meth:`heuristic_table`);
+        ``reopen``: re-open closed cells when ``wh > 1`` (see :func:`route.reopens`).
+        """
         _check_weights(float(wg), float(wh))
         cs, fr = self.cspace, self.cspace.frame
         s_xy = np.asarray(start_xy, dtype=float)[:2]
@@ -166,27 +138,23 @@ class RobotRoadmap:
         start = (sc[0] + 1) * w + sc[1] + 1
         goal = (gc[0] + 1) * w + gc[1] + 1
         hpad[~self._free] = INF
-        path, cost, expanded, generated, ftrace, limited = _search_grid(
-            self._moves,
-            hpad.ravel().tolist(),
+        out = weighted_astar(
             start,
             goal,
-            float(wg),
-            float(wh),
-            pathmax,
-            max_expanded,
-            trace,
+            hpad.ravel().tolist(),
+            self._moves,
+            wg=float(wg),
+            wh=float(wh),
+            n_states=hpad.size,
+            pathmax=pathmax,
+            reopen=reopens(float(wg), float(wh), reopen),
+            max_expanded=max_expanded,
+            trace=trace,
         )
-        ft = np.asarray(ftrace, dtype=float)
-        if path is None:
-            reason = (
-                f"expansion limit of {max_expanded} nodes reached"
-                if limited
-                else "search exhausted: goal unreachable"
-            )
-            return _no_path(
-                reason, heuristic, wg, wh, expanded=expanded, generated=generated, f_trace=ft
-            )
+        counts = out.counts()
+        if out.path is None:
+            return _no_path(out.reason(max_expanded), heuristic, wg, wh, **counts)
+        path, cost = out.path, out.cost
         iy, ix = np.divmod(np.asarray(path, dtype=np.int64), w)
         xy = np.stack(
             [fr.x0 + (ix - 0.5) * fr.resolution, fr.y0 + (iy - 0.5) * fr.resolution], axis=1
@@ -203,23 +171,8 @@ class RobotRoadmap:
         dirs = np.diff(np.asarray(path, dtype=np.int64)).tolist()
         modes = [-1] + dirs + ([dirs[-1]] if dirs else [])
         modes = modes[: len(wp)]
-        idx = _subgoal_indices(xy, modes, subgoal_spacing)
         length, _ = _lengths(wp)
-        return RouteResult(
-            status="ok",
-            waypoints=wp,
-            subgoals=wp[idx],
-            cost=float(cost),
-            length_m=length,
-            rotation_rad=0.0,
-            manipulations=0,
-            expanded=expanded,
-            generated=generated,
-            heuristic=heuristic,
-            wg=float(wg),
-            wh=float(wh),
-            f_trace=ft,
-        )
+        return ok_result(wp, modes, subgoal_spacing, cost, length, 0, (heuristic, wg, wh), counts)
 
 
 def plan_robot_route(
@@ -230,7 +183,7 @@ def plan_robot_route(
     goal_xy: ArrayLike,
     resolution: float,
     *,
-    heuristic: str = "euclid",
+    heuristic: str = "landmarks",
     wg: float = 1.0,
     wh: float = 1.0,
     speed: float = 1.0,

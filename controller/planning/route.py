@@ -1,37 +1,61 @@
-"""Global route planning for the carried object and for single robots (Yamashita et al. §3).
+"""Global route planning for the carried object (Yamashita et al. §3), and the shared A* core.
 
 Pure: arrays and frozen dataclasses in, a :class:`RouteResult` out; no I/O, no clock.
 
-The object's search runs over its (x, y, theta) C-space (:mod:`controller.cspace`) with
+**Use.** Build the C-space once per config (:func:`controller.planning.cspace.build_object_cspace`),
+a :class:`RoutePlanner` once per goal, then ``planner.plan(start_pose)`` for every (re-)plan::
+
+    cs = build_object_cspace(bounds, obstacles, polygon, robot_radius, res, heading_bins)
+    planner = RoutePlanner(cs, goal_pose, cfg.route)        # checks the goal, builds tables
+    route = planner.plan(object_pose)                       # cheap; call again to re-plan
+
+:func:`plan_route` does all three in one call. Poses are object-frame poses (x m, y m, theta
+rad) as ``object.start``/``object.goal``.
+
+**The search** runs over the lattice of :mod:`controller.planning.cspace` (the reference point
+at cell centres, K headings) with
 
     f(n') = max(f(n), w_g g(n') + w_h h(n'))        (Eq. 1 with the pathmax of Eq. 2)
 
-so f never decreases along a path, and the expansion order is non-decreasing in f even with an
-inconsistent heuristic. ``w_g`` is 0 or 1, ``w_h >= 0``; ``w_h = 0`` is Dijkstra, ``w_g = 0`` is
-greedy best-first. Moves are 8-connected (x, y) steps at a fixed heading and one heading bin in
-place. Costs are seconds: distance / ``speed``, rotation / ``yaw_rate``, plus
-``manipulation_cost`` whenever the travel direction relative to the object changes (a new
-translation direction, or switching between translating and turning): the robots around the
-object must re-arrange (Yamashita puts the manipulation constraints into the cost function). To
-keep that cost exact the search state is (cell, heading, last move), 10 "modes" per cell.
+``w_g`` is 0 or 1, ``w_h >= 0``; ``w_h = 0`` is Dijkstra, ``w_g = 0`` greedy best-first. Costs
+are seconds: distance / ``speed``, rotation / ``yaw_rate``, plus ``manipulation_cost`` whenever
+the kind of move changes (a new translation direction, or switching between translating and
+turning: the robots around the object re-arrange; Yamashita puts the manipulation constraints
+into the cost function). The search state is (cell, heading, kind of the last move), 11 modes
+per lattice state, so that cost is exact.
 
-The heuristic h (s) is a distance table from :mod:`controller.heuristics` divided by ``speed``
-(the paper's potential normalized by the velocity), plus the smallest heading change to the goal
-divided by ``yaw_rate``, plus ``manipulation_cost`` times the fewest changes of travel direction
-still needed from this cell and mode (a link distance, :func:`controller.heuristics.turn_bounds`;
-``turn_bound=False`` leaves it out). Translation, rotation and manipulation are separate cost
-terms, so the sum of three lower bounds is a lower bound: with Euclid or wavefront the heuristic
-is admissible and ``w_g = w_h = 1`` returns the optimal cost (the mode term can make it
-inconsistent; pathmax and re-opening handle that). The skeleton wavefront is not admissible.
+**Exact start and goal.** The start pose joins the lattice by one turn in place to one of the
+two nearest heading bins and one straight move to the centre of its cell or a neighbour (or the
+move first, then the turn, where that is free); the goal is reached the same way backwards,
+ending with the final turn to the goal heading. Every one of these moves, and every lattice
+move, is checked exactly against the grown footprint
+(:class:`controller.planning.cspace.FootprintChecker`) and costed like any other move, its
+changes of kind charged too; the first and last waypoints are the exact start and goal.
+Waypoints are one straight move or one turn of at most ``min(2 pi / K, pi / 4)`` apart.
 
-Unreachable goals are answers, not errors: the C-space's connected components are checked first
-(exactly the planner's move graph), so an enclosed goal returns ``no_path`` at once.
+**Heuristics** (s): (D) ``cost_to_go``, the default: the lattice's cost-to-go to the goal's ways
+with the manipulation cost (:func:`controller.planning.heuristics.lattice_cost_to_go`), computed
+once per planner, refined per mode along the ray of the last move (:class:`_CostToGoH`):
+admissible, and with the default parameters exact or nearly so, so that the search expands
+little more than the route itself. The paper's potentials (A) ``euclid``, (B) ``wavefront``,
+(C) ``skeleton``: a distance table over the (x, y) cells free at some heading, divided by
+``speed``, plus the smallest heading change to the goal divided by ``yaw_rate``, plus
+``manipulation_cost`` times the fewest changes of travel direction still needed
+(:func:`controller.planning.heuristics.turn_bounds`). ``turn_bound=False`` leaves the
+manipulation out of every heuristic (the paper's bare potentials). Translation + rotation, and
+manipulation, are separate cost terms, so the sum of a lower bound of each is a lower bound:
+(A), (B), (D) are admissible and ``w_g = w_h = 1`` returns the optimal cost on the lattice; (C)
+is not. Re-opening of closed states: always for A* (``w_g = 1``, ``w_h <= 1``), never for
+greedy, for ``w_h > 1`` when ``route.reopen`` is set.
+
+Unreachable goals are answers, not errors: ``status = "no_path"`` with a reason.
 """
 
 from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,17 +63,26 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from controller import geometry
-from controller.config import RouteSection
+from controller.config import HEURISTICS, FleetConfig, RouteSection
 from controller.planning import heuristics
-from controller.planning.cspace import MOVES_8, ObjectCSpace, build_object_cspace
+from controller.planning.cspace import (
+    MOVES_8,
+    TURN_DOWN,
+    TURN_UP,
+    ObjectCSpace,
+    build_object_cspace,
+)
 
 FloatArray = NDArray[np.float64]
 INF = math.inf
 
-#: Modes of the object search: 0-7 the translation directions of ``MOVES_8``, then these two.
+#: Modes of the object search (the kind of the last move): 0-7 the translation directions of
+#: ``MOVES_8``, turning, the start (any first move is free), and a move joining an exact start or
+#: goal in a direction off the lattice's eight.
 MODE_ROTATE = 8
 MODE_START = 9
-N_MODES = 10
+MODE_JOIN = 10
+N_MODES = 11
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,13 +90,15 @@ class RouteResult:
     """A planned route, or why there is none.
 
     status: "ok" or "no_path"; reason: empty when ok, else why (human readable).
-    waypoints: (k, 3) poses (m, m, rad), one grid move apart; the first and last are the exact
-    start and goal. subgoals: (m, 3) poses where the travel direction changes (the robots
-    re-arrange there), long straight runs cut every ``subgoal_spacing`` m, ending with the goal.
-    cost: seconds (inf when no path); length_m: (x, y) length of the waypoint polyline;
-    rotation_rad: total turning; manipulations: number of re-arrangements paid for;
-    expanded: nodes expanded (N_open); generated: nodes pushed on the open list;
-    f_trace: f of each expanded node in order (only when asked for).
+    waypoints: (k, 3) object-frame poses (m, m, rad); consecutive waypoints differ by one
+    straight move or one turn in place (never both); the first and last are the exact start and
+    goal. subgoals: (m, 3) poses where the travel direction or the kind of move changes (the
+    robots re-arrange there), long straight runs cut every ``subgoal_spacing`` m, ending with the
+    goal. cost: seconds (inf when no path); length_m: distance (m) travelled by straight moves
+    (turns in place add none); rotation_rad: total turning; manipulations: number of
+    re-arrangements paid for; expanded: nodes expanded (N_open); generated: nodes pushed on the
+    open list; reexpanded: expansions of an already expanded node; f_trace: f of each expansion
+    (only when asked for).
     """
 
     status: str
@@ -76,6 +111,7 @@ class RouteResult:
     manipulations: int = 0
     expanded: int = 0
     generated: int = 0
+    reexpanded: int = 0
     heuristic: str = ""
     wg: float = 1.0
     wh: float = 1.0
@@ -84,6 +120,17 @@ class RouteResult:
     @property
     def ok(self) -> bool:
         return self.status == "ok"
+
+    def lateral_deviation(self, xy: ArrayLike) -> float:
+        """Distance (m) from a point to the route's (x, y) polyline (inf when there is none)."""
+        wp = self.waypoints
+        if len(wp) == 0:
+            return INF
+        p = np.asarray(xy, dtype=float)[:2]
+        if len(wp) == 1:
+            return float(np.linalg.norm(p - wp[0, :2]))
+        d, _ = geometry.point_segment_distance(p[None], wp[:-1, :2], wp[1:, :2])
+        return float(d.min())
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data for JSON (inf cost becomes None)."""
@@ -98,6 +145,7 @@ class RouteResult:
             "manipulations": self.manipulations,
             "expanded": self.expanded,
             "generated": self.generated,
+            "reexpanded": self.reexpanded,
             "heuristic": self.heuristic,
             "wg": self.wg,
             "wh": self.wh,
@@ -115,141 +163,145 @@ def _check_weights(wg: float, wh: float) -> None:
         raise ValueError(f"wh: expected a finite number >= 0, got {wh!r}")
 
 
-# --------------------------------------------------------------------------- the searches
+def reopens(wg: float, wh: float, reopen: bool) -> bool:
+    """Whether the search re-opens closed states: always for A* (w_g = 1, w_h <= 1, so the cost
+    stays optimal with an inconsistent heuristic), never for greedy (w_g = 0: g does not order
+    the search), and for w_h > 1 when asked (``route.reopen``)."""
+    if wg == 0.0:
+        return False
+    return wh <= 1.0 or reopen
 
 
-def _search_object(
-    h: list[float],
-    hmode: list[list[float]],
-    layer: int,
-    n_layers: int,
-    toff: list[int],
-    tcost: list[float],
-    rcost: float,
-    manip: float,
-    start_c: int,
-    goal_c: int,
+# --------------------------------------------------------------------------- the A* core
+
+
+@dataclass(frozen=True, eq=False)
+class SearchOutcome:
+    """What :func:`weighted_astar` found: the states of the path (or None), its cost and counts."""
+
+    path: list[int] | None
+    cost: float
+    expanded: int
+    generated: int
+    reexpanded: int
+    f_trace: list[float]
+    limited: bool
+
+    def counts(self) -> dict[str, Any]:
+        """The search counts as :class:`RouteResult` fields."""
+        return {
+            "expanded": self.expanded,
+            "generated": self.generated,
+            "reexpanded": self.reexpanded,
+            "f_trace": np.asarray(self.f_trace, dtype=float),
+        }
+
+    def reason(self, max_expanded: int) -> str:
+        """Why the search found no path."""
+        if self.limited:
+            return f"expansion limit of {max_expanded} nodes reached"
+        return "search exhausted: goal unreachable"
+
+
+class InfDict(dict):
+    """A dict of g values that reads inf for a state never reached."""
+
+    def __missing__(self, key: int) -> float:
+        return INF
+
+
+class FalseDict(dict):
+    """A dict of flags that reads False for a state never marked."""
+
+    def __missing__(self, key: int) -> bool:
+        return False
+
+
+def _unwind(parent: Any, s: int) -> list[int]:
+    path = [s]
+    while parent[path[-1]] >= 0:
+        path.append(parent[path[-1]])
+    return path[::-1]
+
+
+def weighted_astar(
+    start: int,
+    goal: int,
+    h: Sequence[float],
+    moves_of: Callable[[int, float], Iterable[tuple[int, float]]] | Sequence[tuple[int, float]],
+    *,
     wg: float,
     wh: float,
-    pathmax: bool,
-    max_expanded: int,
-    trace: bool,
-) -> tuple[list[int] | None, float, int, int, list[float], bool]:
-    """Weighted A* with pathmax over states ``cell * N_MODES + mode`` (cell = k * layer + p).
+    n_states: int = 0,
+    pathmax: bool = True,
+    reopen: bool = True,
+    max_expanded: int = 20_000_000,
+    trace: bool = False,
+) -> SearchOutcome:
+    """Weighted A* with pathmax (Eq. 1-2): the one search loop of the object and robot routes.
 
-    ``h`` (s) per cell is inf on occupied cells and on cells that cannot reach the goal, so one
-    lookup both tests a cell and scores it; ``hmode[m]`` (s) per (x, y) cell of a layer adds the
-    mode-dependent part (the manipulation bound) for a state entered in mode m.
-    Returns (states of the path or None, cost, expanded, generated, f trace, hit the limit).
+    States are ints. ``moves_of(s, g)`` yields the moves out of ``s`` (reached at cost ``g``) as
+    (offset, cost): the successor is ``s + offset``; a plain sequence of moves is the same for
+    every state (a grid). ``h[t]`` (s) is the heuristic; inf marks a state that may not be
+    entered. ``n_states``: when > 0 the states are ``0 .. n_states - 1`` and the tables are flat
+    lists (fast), else dicts. Ties in f go to the smaller h. ``reopen``: whether a closed state
+    reached at a lower g is expanded again (see :func:`reopens`).
     """
-    big_m = N_MODES
-    # per mode: (cell offset, state offset, cost, new mode) of the 8 translations
-    tmoves = []
-    for m in range(big_m):
-        tmoves.append(
-            tuple(
-                (
-                    toff[d],
-                    toff[d] * big_m + d,
-                    tcost[d] + (0.0 if m in (d, MODE_START) else manip),
-                    hmode[d],
-                )
-                for d in range(8)
-            )
-        )
-    rmove = [rcost + (0.0 if m in (MODE_ROTATE, MODE_START) else manip) for m in range(big_m)]
-    rot: list[tuple[int, ...]] = []
-    for k in range(n_layers):
-        if n_layers == 1:
-            rot.append(())
-        elif n_layers == 2:
-            rot.append((layer if k == 0 else -layer,))
-        else:
-            up = layer if k < n_layers - 1 else -(n_layers - 1) * layer
-            dn = -layer if k > 0 else (n_layers - 1) * layer
-            rot.append((up, dn))
-
-    s0 = start_c * big_m + MODE_START
-    # g per state, and per cell the best g over its modes: a state whose g exceeds its cell's
-    # best by the manipulation cost or more is dominated (switching modes costs exactly that).
-    gbest: dict[int, float] = {}
-    gmin: dict[int, float] = {}
-    parent: dict[int, int] = {s0: -1}
-    gbest[s0] = 0.0
-    gmin[start_c] = 0.0
-    h0 = h[start_c] + hmode[MODE_START][start_c % layer]
-    hrot = hmode[MODE_ROTATE]
-    heap: list[tuple[float, float, float, int]] = [(wh * h0, h0, 0.0, s0)]
-    push, pop = heapq.heappush, heapq.heappop
+    if n_states > 0:
+        gbest: Any = [INF] * n_states
+        parent: Any = [-1] * n_states
+        closed: Any = bytearray(n_states)
+    else:
+        gbest, parent, closed = InfDict(), {}, FalseDict()
+    fixed = not callable(moves_of)
+    parent[start] = -1
+    gbest[start] = 0.0
+    h0 = h[start]
+    heap: list[tuple[float, float, float, int]] = [(wh * h0, h0, 0.0, start)]
+    push, pop, inf = heapq.heappush, heapq.heappop, INF
     ftrace: list[float] = []
-    expanded = 0
+    expanded = reexpanded = 0
     generated = 1
     while heap:
         f, _, g, s = pop(heap)
         if g > gbest[s]:
             continue
-        c, m = divmod(s, big_m)
-        if g > gmin[c] + manip:
-            continue
+        if closed[s]:
+            reexpanded += 1
+        closed[s] = 1
         expanded += 1
         if trace:
             ftrace.append(f)
-        if c == goal_c:
-            path = [s]
-            while parent[path[-1]] >= 0:
-                path.append(parent[path[-1]])
-            return path[::-1], g, expanded, generated, ftrace, False
+        if s == goal:
+            return SearchOutcome(
+                _unwind(parent, s), g, expanded, generated, reexpanded, ftrace, False
+            )
         if expanded >= max_expanded:
-            return None, INF, expanded, generated, ftrace, True
-        base = s - m
-        k, p = divmod(c, layer)
-        for off, soff, cost, hm in tmoves[m]:
-            c2 = c + off
-            h2 = h[c2]
-            if h2 < INF:
-                h2 += hm[p + off]
+            return SearchOutcome(None, inf, expanded, generated, reexpanded, ftrace, True)
+        for off, cost in moves_of if fixed else moves_of(s, g):  # type: ignore[operator]
+            t = s + off
+            h2 = h[t]
+            if h2 < inf:
                 g2 = g + cost
-                s2 = base + soff
-                if g2 < gbest.get(s2, INF):
-                    gm = gmin.get(c2, INF)
-                    if g2 < gm + manip:
-                        gbest[s2] = g2
-                        if g2 < gm:
-                            gmin[c2] = g2
-                        parent[s2] = s
-                        f2 = wg * g2 + wh * h2
-                        if pathmax and f2 < f:
-                            f2 = f
-                        push(heap, (f2, h2, g2, s2))
-                        generated += 1
-        g2 = g + rmove[m]
-        hr = hrot[p]
-        for off in rot[k]:
-            c2 = c + off
-            h2 = h[c2]
-            if h2 < INF:
-                h2 += hr
-                s2 = c2 * big_m + MODE_ROTATE
-                if g2 < gbest.get(s2, INF):
-                    gm = gmin.get(c2, INF)
-                    if g2 < gm + manip:
-                        gbest[s2] = g2
-                        if g2 < gm:
-                            gmin[c2] = g2
-                        parent[s2] = s
-                        f2 = wg * g2 + wh * h2
-                        if pathmax and f2 < f:
-                            f2 = f
-                        push(heap, (f2, h2, g2, s2))
-                        generated += 1
-    return None, INF, expanded, generated, ftrace, False
+                if g2 < gbest[t] and (reopen or not closed[t]):
+                    gbest[t] = g2
+                    parent[t] = s
+                    f2 = wg * g2 + wh * h2
+                    if pathmax and f2 < f:
+                        f2 = f
+                    push(heap, (f2, h2, g2, t))
+                    generated += 1
+    return SearchOutcome(None, INF, expanded, generated, reexpanded, ftrace, False)
 
 
 # --------------------------------------------------------------------------- post-processing
 
 
-def _subgoal_indices(xy: FloatArray, modes: list[int], spacing: float) -> list[int]:
-    """Indices of the waypoints that become subgoals: direction changes, spacing cuts, the goal."""
+def _subgoal_indices(xy: FloatArray, modes: Sequence[Any], spacing: float) -> list[int]:
+    """Indices of the waypoints that become subgoals: mode changes, spacing cuts, the goal.
+
+    ``modes[i]`` is the kind of the move that ends at waypoint i (``modes[0]`` is unused).
+    """
     n = len(xy)
     if n == 0:
         return []
@@ -267,6 +319,36 @@ def _subgoal_indices(xy: FloatArray, modes: list[int], spacing: float) -> list[i
     return sorted(set(out))
 
 
+def ok_result(
+    wp: FloatArray,
+    kinds: Sequence[Any],
+    spacing: float,
+    cost: float,
+    length: float,
+    manipulations: int,
+    search: tuple[str, float, float],
+    counts: dict[str, Any],
+) -> RouteResult:
+    """A found route: waypoints (k, 3), the kind of each move (for the subgoals), the subgoal
+    spacing (m), cost (s), length (m), re-arrangements, (heuristic, wg, wh), search counts."""
+    idx = _subgoal_indices(wp[:, :2], kinds, spacing)
+    _, turn = _lengths(wp)
+    kind, wg, wh = search
+    return RouteResult(
+        status="ok",
+        waypoints=wp,
+        subgoals=wp[idx],
+        cost=float(cost),
+        length_m=length,
+        rotation_rad=turn,
+        manipulations=manipulations,
+        heuristic=kind,
+        wg=float(wg),
+        wh=float(wh),
+        **counts,
+    )
+
+
 def _lengths(wp: FloatArray) -> tuple[float, float]:
     if len(wp) < 2:
         return 0.0, 0.0
@@ -275,45 +357,608 @@ def _lengths(wp: FloatArray) -> tuple[float, float]:
     return length, turn
 
 
-# --------------------------------------------------------------------------- object route
+def _move_kinds(ref: FloatArray) -> list[Any]:
+    """Kind of each move between reference poses: "turn" or the rounded travel direction."""
+    kinds: list[Any] = [None]
+    for a, b in zip(ref[:-1], ref[1:], strict=True):
+        d = b[:2] - a[:2]
+        n = float(np.hypot(*d))
+        if n < 1e-9:
+            kinds.append("turn")
+        else:
+            kinds.append((round(float(d[0]) / n, 6), round(float(d[1]) / n, 6)))
+    return kinds
 
 
-def _manipulation_bound(
-    cspace: ObjectCSpace, goal_cell: tuple[int, int], manip: float
-) -> list[list[float]]:
-    """Per mode, per padded (x, y) cell: a lower bound (s) on the manipulation cost still to pay.
+def _split_turn(a: FloatArray, dtheta: float, max_step: float) -> list[FloatArray]:
+    """Poses after a turn in place from ``a`` by ``dtheta``, in pieces no larger than max_step
+    (so the direction of every piece is unambiguous)."""
+    n = max(1, int(math.ceil(abs(dtheta) / max_step - 1e-9)))
+    return [np.array([a[0], a[1], a[2] + dtheta * (i + 1) / n]) for i in range(n)]
 
-    Translation mode d: ``manip`` times the fewest direction changes when the last move was d
-    (:func:`controller.heuristics.turn_bounds` over the projected free space). Rotating: one
-    change to start translating again, plus the fewest changes after it, unless already at the
-    goal cell. Start: the fewest changes with the first direction free. Each mode change is
-    charged ``manip`` and every change of translation direction needs at least one, so the
-    bound is admissible.
+
+# --------------------------------------------------------------------------- the planner
+
+
+@dataclass(frozen=True)
+class _Join:
+    """A way between an exact pose and a lattice state (a start or goal connector)."""
+
+    state: int  # padded flat lattice index
+    cost: float  # s, without manipulation charges
+    seq: list[FloatArray]  # reference poses strictly between the exact pose and the state
+    modes: tuple[int, ...]  # modes of its pieces in the order travelled (empty: no move at all)
+
+    @property
+    def changes(self) -> int:
+        """Changes of the kind of move between its own pieces."""
+        return sum(1 for a, b in zip(self.modes[:-1], self.modes[1:], strict=True) if a != b)
+
+
+def _step_mode(v: FloatArray) -> int:
+    """The mode of a straight move by v: a lattice direction if v is along one, else a join."""
+    for d, (dx, dy) in enumerate(MOVES_8):
+        if abs(v[0] * dy - v[1] * dx) < 1e-12 and v[0] * dx + v[1] * dy > 0:
+            return d
+    return MODE_JOIN
+
+
+class _PotentialH:
+    """h (s) of object search states for the paper's potentials: a (x, y, theta) table plus the
+    per-mode manipulation bound; 0 for the virtual start and goal."""
+
+    def __init__(self, h3: FloatArray, hmode: list[FloatArray], layer: int, n_lattice: int):
+        self.h3 = h3
+        self.hmode = hmode
+        self.layer = layer
+        self.n = n_lattice * N_MODES
+
+    def __getitem__(self, s: int) -> float:
+        if s >= self.n:
+            return 0.0
+        c, m = divmod(s, N_MODES)
+        v = float(self.h3[c])
+        if v == INF:
+            return INF
+        return v + float(self.hmode[m][c % self.layer])
+
+
+def _arrival_charge(mode: int, first: int) -> bool:
+    """Whether arriving in ``mode`` at a way that begins with ``first`` is a change of kind."""
+    if mode == MODE_START or first < 0:
+        return False
+    return mode != first or first == MODE_JOIN
+
+
+class _CostToGoH:
+    """h (s) of object search states from the lattice cost-to-go E (the first move's kind free;
+    padded flat) and the goal's ways (per lattice state: cost with their own changes, first kind).
+
+    For a state that last moved in mode m the cost-to-go is ``D_m(c) = min(join_m(c),
+    manip + E(c), cost of one more move in mode m + D_m(next))``: walked along the ray of mode m
+    (a translation direction, or turning either way) on first use and memoised; a lower bound
+    because E is. The start mode takes the smaller of E and its join; a join move (off the
+    lattice's directions) has no free continuation.
     """
-    fr = cspace.frame
-    w, hh = fr.nx + 2, fr.ny + 2
-    out: list[list[float]] = []
-    if manip <= 0:
-        zero = [0.0] * (w * hh)
-        return [zero] * N_MODES
-    t, v = heuristics.turn_bounds(cspace.free.any(axis=0), goal_cell, MOVES_8)
-    rot = 1.0 + v
-    rot[goal_cell] = 0.0
-    for layer_val in [*t, rot, v]:
-        pad = np.full((hh, w), INF)
-        pad[1:-1, 1:-1] = manip * layer_val
-        out.append(pad.ravel().tolist())
-    return out
+
+    def __init__(
+        self,
+        planner: RoutePlanner,
+        e: FloatArray,
+        joins: dict[int, list[tuple[float, int]]],
+        manip: float,
+    ):
+        self.e, self.joins, self.manip = e, joins, manip
+        self.n = planner._n * N_MODES
+        self.toff, self.tcost, self.rc = planner._toff, planner._tcost, planner._rot_cost
+        self.layer, self.k_bins = planner._layer, planner.cspace.heading_bins
+        self.memo: dict[int, float] = {}
+
+    def join(self, c: int, mode: int) -> float:
+        """Cost of joining the goal from lattice state c arrived at in ``mode`` (inf if none)."""
+        ways = self.joins.get(c)
+        if ways is None:
+            return INF
+        return min(b + self.manip * _arrival_charge(mode, f) for b, f in ways)
+
+    def _step(self, c: int, ray: int) -> int:
+        if ray < 8:
+            return c + self.toff[ray]
+        k = c // self.layer
+        if ray == TURN_UP:
+            return c - (self.k_bins - 1) * self.layer if k == self.k_bins - 1 else c + self.layer
+        return c + (self.k_bins - 1) * self.layer if k == 0 else c - self.layer
+
+    def _ray(self, c: int, ray: int) -> float:
+        """D along a ray (translation direction 0-7, TURN_UP, TURN_DOWN) from state c."""
+        memo, e = self.memo, self.e
+        cost = self.tcost[ray] if ray < 8 else self.rc
+        mode = ray if ray < 8 else MODE_ROTATE
+        path = []
+        x, val = c, INF
+        for _ in range(self.n):
+            v = memo.get(x * 10 + ray)
+            if v is not None:
+                val = v
+                break
+            if float(e[x]) == INF:
+                break
+            path.append(x)
+            x = self._step(x, ray)
+            if x == c:  # turned full circle
+                break
+        for x in reversed(path):
+            val = min(self.join(x, mode), self.manip + float(e[x]), cost + val)
+            memo[x * 10 + ray] = val
+        return val
+
+    def __getitem__(self, s: int) -> float:
+        if s >= self.n:
+            return 0.0
+        c, m = divmod(s, N_MODES)
+        e = float(self.e[c])
+        if e == INF or self.manip <= 0:
+            return e
+        if m == MODE_START:
+            return min(e, self.join(c, m))
+        if m < 8:
+            return max(e, self._ray(c, m))
+        v = min(self.join(c, m), self.manip + e)
+        if m == MODE_ROTATE and self.k_bins > 1:
+            up = self._ray(self._step(c, TURN_UP), TURN_UP)
+            dn = self._ray(self._step(c, TURN_DOWN), TURN_DOWN)
+            v = min(v, self.rc + min(up, dn))
+        return max(e, v)
 
 
-def object_heuristic(cspace: ObjectCSpace, kind: str, goal_cell: tuple[int, int]) -> FloatArray:
-    """The named heuristic's (x, y) distance table (m) over the projected free space.
+class RoutePlanner:
+    """The object's route planner for one C-space and one goal: build once, plan from any start.
 
-    The projected free space holds the cells free at one heading at least; see
-    :mod:`controller.heuristics` for which tables are admissible.
+    cspace: from :func:`build_object_cspace` (its resolution and heading bins must match
+    ``params``); goal: the object-frame goal pose (x m, y m, theta rad); params: the ``[route]``
+    section. Building checks the goal, finds the ways to reach it exactly from the lattice and
+    computes the heuristic tables (for ``cost_to_go`` the lattice cost-to-go, the costly part:
+    about 0.3 s at 128 x 128 x 36, 1 s at 256^2, 5 s at 512^2); then :meth:`plan` only searches,
+    and with the default heuristic the search expands little more than the route itself. Moves
+    checked exactly are cached on the C-space, so re-plans from nearby starts (transport) are
+    cheaper still. ``turn_bound=False`` drops the manipulation bound from h (the paper's bare
+    potentials). Raises ValueError for parameters that do not fit (weights, heuristic name,
+    grid). :meth:`from_config` builds one for a fleet config's object and goal.
     """
-    free2d = cspace.free.any(axis=0)
-    return heuristics.heuristic_table(kind, free2d, goal_cell, cspace.frame.resolution)
+
+    @classmethod
+    def from_config(
+        cls, cfg: FleetConfig, goal: ArrayLike | None = None, cspace: ObjectCSpace | None = None
+    ) -> RoutePlanner:
+        """A planner toward ``goal`` (default ``object.goal``) for the config's world, obstacles,
+        object and largest robot, with its ``[route]`` parameters; pass ``cspace`` (from
+        :func:`object_cspace`) to share one C-space between goals."""
+        cs = cspace if cspace is not None else object_cspace(cfg)
+        return cls(cs, cfg.object.goal if goal is None else goal, cfg.route)
+
+    def __init__(
+        self,
+        cspace: ObjectCSpace,
+        goal: ArrayLike,
+        params: RouteSection,
+        *,
+        turn_bound: bool = True,
+    ):
+        kind, wg, wh = params.heuristic, float(params.wg), float(params.wh)
+        _check_weights(wg, wh)
+        if kind not in HEURISTICS:
+            raise ValueError(f"heuristic: expected one of {HEURISTICS}, got {kind!r}")
+        if (
+            abs(cspace.frame.resolution - params.resolution) > 1e-12
+            or cspace.heading_bins != params.heading_bins
+        ):
+            raise ValueError(
+                "cspace: built at resolution "
+                f"{cspace.frame.resolution} m / {cspace.heading_bins} headings, params ask for "
+                f"{params.resolution} m / {params.heading_bins}"
+            )
+        self.cspace = cspace
+        self.params = params
+        self.kind, self.wg, self.wh = kind, wg, wh
+        self.goal = _pose3(goal, "goal")
+        fr = cspace.frame
+        self._w, self._h = fr.nx + 2, fr.ny + 2
+        self._layer = self._w * self._h
+        self._n = cspace.heading_bins * self._layer
+        self.goal_reason = self._check_end(self.goal, "goal")
+        self._goal_joins: dict[int, _Join] = {}
+        if not self.goal_reason:
+            self._goal_joins = {j.state: j for j in self._joins(self.goal, True)}
+            if not self._goal_joins:
+                self.goal_reason = (
+                    "goal unreachable: no lattice state next to the goal joins it without a "
+                    "collision (the goal is too tight for the resolution)"
+                )
+        self._free_p = _padded(cspace.free)
+        self._margin_p = _padded(cspace.margin_free)
+        self._rot_cost = cspace.step / params.yaw_rate
+        self._toff = [int(dy * self._w + dx) for dx, dy in MOVES_8]
+        self._tcost = [fr.resolution * math.hypot(dx, dy) / params.speed for dx, dy in MOVES_8]
+        self._h_obj: _PotentialH | _CostToGoH | None = None
+        if not self.goal_reason:
+            self._h_obj = self._heuristic(turn_bound)
+
+    # -- poses and joins ----------------------------------------------------------------------
+    def _unflat(self, c: int) -> tuple[int, int, int]:
+        k, p = divmod(c, self._layer)
+        iy, ix = divmod(p, self._w)
+        return k, iy - 1, ix - 1
+
+    def _unpadded(self, c: int) -> int:
+        k, iy, ix = self._unflat(c)
+        return (k * self.cspace.frame.ny + iy) * self.cspace.frame.nx + ix
+
+    def _flat(self, k: int, iy: int, ix: int) -> int:
+        return k * self._layer + (iy + 1) * self._w + ix + 1
+
+    def _lattice_ref(self, c: int) -> FloatArray:
+        k, iy, ix = self._unflat(c)
+        x, y = self.cspace.frame.center(iy, ix)
+        return np.array([x, y, k * self.cspace.step])
+
+    def _check_end(self, pose: FloatArray, name: str) -> str:
+        cs = self.cspace
+        if cs.cell_of(pose) is None:
+            return f"{name} lies outside the world bounds"
+        if not cs.is_free(pose):
+            d, what = cs.clearance(pose)
+            ring = 2.0 * cs.robot_radius
+            return (
+                f"{name} pose collides: the object there comes within {max(d, 0.0):.3f} m of "
+                f"{what}; the robots around it need {ring:.3f} m"
+            )
+        return ""
+
+    def _joins(self, pose: FloatArray, to_goal: bool) -> list[_Join]:
+        """Collision-free ways between an exact pose and the lattice states around it.
+
+        Candidates: the two nearest heading bins at the pose's cell and its 8 neighbours. Each
+        way is one turn in place and one straight move: the turn first (at the pose's position,
+        then the move at the bin's heading) or, if that collides, the move first (at the pose's
+        heading, then the turn at the cell centre). Both pieces are checked exactly. ``seq`` runs
+        from the exact pose to the lattice state; a goal's way is travelled backwards (``modes``
+        are in the order travelled).
+        """
+        cs, p = self.cspace, self.params
+        ref = cs.ref_pose(pose)
+        cell = cs.frame.cell_of(ref[:2])
+        if cell is None:
+            return []
+        kf = math.floor(ref[2] / cs.step)
+        bins = sorted({kf % cs.heading_bins, (kf + 1) % cs.heading_bins})
+        cand = [
+            (k, cell[0] + dy, cell[1] + dx)
+            for k in bins
+            for dy in (-1, 0, 1)
+            for dx in (-1, 0, 1)
+            if 0 <= cell[0] + dy < cs.frame.ny
+            and 0 <= cell[1] + dx < cs.frame.nx
+            and cs.free[k, cell[0] + dy, cell[1] + dx]
+        ]
+        if not cand:
+            return []
+        cells = np.array(cand)
+        n = len(cells)
+        xs, ys = cs.frame.centers()
+        turns = np.atleast_1d(geometry.wrap_angle(cells[:, 0] * cs.step - ref[2]))
+        target = np.stack([xs[cells[:, 2]], ys[cells[:, 1]], ref[2] + turns], 1)
+        steps = target[:, :2] - ref[:2]
+        here = np.repeat(ref[None], n, 0)
+        chk = cs.checker
+        # the turn first: exact pose -> (its position, the bin's heading) -> the lattice state
+        via1 = np.column_stack([here[:, :2], target[:, 2]])
+        ok1 = chk.poses_free(via1)
+        ok1[ok1] = chk.rotations_free(here[ok1], turns[ok1])
+        ok1[ok1] = chk.translations_free(via1[ok1], steps[ok1])
+        # the move first: exact pose -> (the cell centre, its heading) -> the lattice state
+        via2 = np.column_stack([target[:, :2], here[:, 2]])
+        ok2 = ~ok1 & chk.poses_free(via2)
+        ok2[ok2] = chk.translations_free(here[ok2], steps[ok2])
+        ok2[ok2] = chk.rotations_free(via2[ok2], turns[ok2])
+        max_turn = min(cs.step, math.pi / 4)
+        out = []
+        for i in np.flatnonzero(ok1 | ok2):
+            k, iy, ix = (int(v) for v in cells[i])
+            cost = abs(float(turns[i])) / p.yaw_rate + float(np.hypot(*steps[i])) / p.speed
+            if ok1[i]:
+                seq = _split_turn(ref, float(turns[i]), max_turn)
+            else:
+                seq = [via2[i], *_split_turn(via2[i], float(turns[i]), max_turn)[:-1]]
+            pieces = [MODE_ROTATE, "move"] if ok1[i] else ["move", MODE_ROTATE]
+            sizes = {MODE_ROTATE: abs(float(turns[i])), "move": float(np.hypot(*steps[i]))}
+            move = _step_mode(-steps[i] if to_goal else steps[i])
+            modes = [move if q == "move" else q for q in pieces if sizes[q] > 1e-12]
+            out.append(
+                _Join(self._flat(k, iy, ix), cost, seq, tuple(modes[::-1] if to_goal else modes))
+            )
+        return out
+
+    # -- heuristics ---------------------------------------------------------------------------
+    def _heuristic(self, turn_bound: bool) -> _PotentialH | _CostToGoH:
+        cs, p = self.cspace, self.params
+        joins = list(self._goal_joins.values())
+        cells = np.array([self._unflat(j.state) for j in joins])
+        if self.kind != "cost_to_go":
+            return self._potential(cells, turn_bound)
+        manip = p.manipulation_cost if turn_bound else 0.0
+        entries: dict[int, list[tuple[float, int]]] = {}
+        seed_cost, seed_kind = [], []
+        for j in joins:
+            first = j.modes[0] if j.modes else -1
+            base = j.cost + manip * j.changes
+            entries.setdefault(j.state, []).append((base, first))
+            # a way that begins off the lattice's directions is always entered by a change
+            seed_cost.append(base + manip * (first == MODE_JOIN))
+            seed_kind.append(first if 0 <= first <= MODE_ROTATE else -1)
+        e = heuristics.lattice_cost_to_go(
+            cs.free,
+            (cells, np.array(seed_cost)),
+            cs.frame.resolution / p.speed,
+            self._rot_cost,
+            manip,
+            seed_kinds=np.array(seed_kind),
+        )
+        return _CostToGoH(self, _padded(e, INF), entries, manip)
+
+    def _potential(self, cells: NDArray[np.int_], turn_bound: bool) -> _PotentialH:
+        """The paper's potential (x, y) / speed + heading change / yaw_rate + manipulation
+        bound."""
+        cs, p = self.cspace, self.params
+        fr = cs.frame
+        free2d = cs.free.any(axis=0)
+        gref = cs.ref_pose(self.goal)
+        gcell = fr.cell_of(gref[:2])
+        assert gcell is not None
+        if self.kind == "euclid":
+            gy = (gref[1] - fr.y0) / fr.resolution - 0.5
+            gx = (gref[0] - fr.x0) / fr.resolution - 0.5
+            table = heuristics.euclid(free2d, (gy, gx), fr.resolution)
+        elif self.kind == "wavefront":
+            xs, ys = fr.centers()
+            cen = np.stack([xs[cells[:, 2]], ys[cells[:, 1]]], 1)
+            lengths = np.linalg.norm(cen - gref[:2], axis=1)
+            table = heuristics.wavefront(
+                free2d, gcell, fr.resolution, seeds=(cells[:, 1:], lengths)
+            )
+        else:
+            table = heuristics.skeleton_wavefront(free2d, gcell, fr.resolution)
+        dk = np.abs(geometry.wrap_angle(gref[2] - np.arange(cs.heading_bins) * cs.step))
+        h3 = dk[:, None, None] / p.yaw_rate + table[None] / p.speed
+        h3 = np.where(cs.free, h3, INF)
+        goal_mask = np.zeros_like(free2d)
+        goal_mask[cells[:, 1], cells[:, 2]] = True
+        hmode = self._manipulation_bound(free2d, goal_mask, p.manipulation_cost * turn_bound)
+        return _PotentialH(_padded(h3, INF), hmode, self._layer, self._n)
+
+    def _manipulation_bound(
+        self, free2d: NDArray[np.bool_], goal_mask: NDArray[np.bool_], manip: float
+    ) -> list[FloatArray]:
+        """Per mode, per padded (x, y) cell: a lower bound (s) on the manipulation cost to pay.
+
+        Translation mode d: ``manip`` times the fewest direction changes when the last move was
+        d (:func:`controller.planning.heuristics.turn_bounds` over the cells free at some
+        heading, 0 where the goal is joined). Rotating: one change to start translating again,
+        plus the fewest after it, unless the goal is joined there. Start: the fewest changes
+        with the first direction free. Every change of mode is charged ``manip`` and every
+        change of translation direction needs one, so the bound is admissible (and consistent).
+        """
+        size = self._h * self._w
+        if manip <= 0:
+            zero = np.zeros(size)
+            return [zero] * N_MODES
+        t, v = heuristics.turn_bounds(free2d, goal_mask, MOVES_8)
+        rot = np.where(goal_mask, 0.0, 1.0 + v)
+        out = []
+        for layer_val in [*t, rot, v, rot]:
+            pad = np.full((self._h, self._w), INF)
+            pad[1:-1, 1:-1] = manip * layer_val
+            out.append(pad.ravel())
+        return out
+
+    # -- the search ---------------------------------------------------------------------------
+
+    def plan(
+        self,
+        start: ArrayLike,
+        *,
+        pathmax: bool = True,
+        max_expanded: int = 20_000_000,
+        trace: bool = False,
+    ) -> RouteResult:
+        """The route from the object-frame ``start`` pose to the goal (see :class:`RouteResult`).
+
+        Never raises for an unreachable goal or a colliding start: the result's status is
+        "no_path" with a reason. ``pathmax=False`` turns Eq. 2 off (for tests); ``trace``
+        records f of each expansion.
+        """
+        kind, wg, wh = self.kind, self.wg, self.wh
+        start_p = _pose3(start, "start")
+        if self.goal_reason:
+            return _no_path(self.goal_reason, kind, wg, wh)
+        reason = self._check_end(start_p, "start")
+        if reason:
+            return _no_path(reason, kind, wg, wh)
+        if np.allclose(start_p, self.goal, atol=1e-12):
+            wp = np.vstack([start_p, self.goal])
+            return RouteResult("ok", waypoints=wp, subgoals=wp[1:], cost=0.0, heuristic=kind,
+                               wg=wg, wh=wh)  # fmt: skip
+        joins = self._joins(start_p, False)
+        assert self._h_obj is not None
+        h = self._h_obj
+        reach = [j for j in joins if h[j.state * N_MODES + MODE_START] < INF]  # E < inf
+        if self.kind != "cost_to_go":  # the potentials do not know the lattice's components
+            labels = self.cspace.labels.ravel()
+            goal_labels = {int(labels[self._unpadded(c)]) for c in self._goal_joins}
+            reach = [j for j in reach if int(labels[self._unpadded(j.state)]) in goal_labels]
+        if not reach:
+            why = (
+                "start and goal lie in different free regions of the C-space"
+                if joins
+                else "no lattice state next to the start joins it without a collision"
+            )
+            return _no_path(f"goal unreachable: {why}", kind, wg, wh)
+        s_virtual = self._n * N_MODES
+        out = weighted_astar(
+            s_virtual,
+            s_virtual + 1,
+            h,
+            _ObjectMoves(self, reach),
+            wg=wg,
+            wh=wh,
+            pathmax=pathmax,
+            reopen=reopens(wg, wh, self.params.reopen),
+            max_expanded=max_expanded,
+            trace=trace,
+        )
+        counts = out.counts()
+        if out.path is None:
+            return _no_path(out.reason(max_expanded), kind, wg, wh, **counts)
+        return self._result(start_p, out.path, out.cost, {j.state: j for j in reach}, counts)
+
+    def _result(
+        self,
+        start_p: FloatArray,
+        path: list[int],
+        cost: float,
+        start_joins: dict[int, _Join],
+        counts: dict[str, Any],
+    ) -> RouteResult:
+        cs, p = self.cspace, self.params
+        states = path[1:-1]
+        cells = [s // N_MODES for s in states]
+        modes = [s % N_MODES for s in states]
+        first, last = start_joins[cells[0]], self._goal_joins[cells[-1]]
+        ref = [cs.ref_pose(start_p), *first.seq]
+        ref += [self._lattice_ref(c) for c in cells]
+        ref += [*last.seq[::-1], cs.ref_pose(self.goal)]
+        ref_arr = np.array(ref)
+        step = np.diff(ref_arr, axis=0)
+        step[:, 2] = geometry.wrap_angle(step[:, 2])
+        keep = np.r_[True, np.any(np.abs(step) > 1e-12, axis=1)]
+        ref_arr = ref_arr[keep]
+        wp = cs.frame_pose(ref_arr)
+        wp[:, 2] = geometry.wrap_angle(wp[:, 2])
+        wp[0], wp[-1] = start_p, self.goal
+        if len(wp) == 1:
+            wp = np.vstack([start_p, self.goal])
+            ref_arr = np.vstack([ref_arr, ref_arr])
+        kinds = _move_kinds(ref_arr)
+        seq = [MODE_START, *first.modes, *modes[1:], *last.modes]
+        manip = sum(1 for a, b in zip(seq[:-1], seq[1:], strict=True) if a != b and a != MODE_START)
+        length = float(np.sum(np.linalg.norm(np.diff(ref_arr[:, :2], axis=0), axis=1)))
+        return ok_result(
+            wp, kinds, p.subgoal_spacing, cost, length, manip, (self.kind, self.wg, self.wh), counts
+        )
+
+
+def _padded(a: NDArray[Any], fill: Any = False) -> NDArray[Any]:
+    """A (K, ny, nx) table with one ``fill`` cell around each layer, flattened."""
+    k_bins, ny, nx = a.shape
+    out = np.full((k_bins, ny + 2, nx + 2), fill, dtype=a.dtype)
+    out[:, 1:-1, 1:-1] = a
+    return out.ravel()
+
+
+class _ObjectMoves:
+    """moves_of(s, g) of the object search (see :func:`weighted_astar`) over the states
+    ``cell * N_MODES + mode`` and the virtual start and goal: the lattice moves to free states
+    that pass the exact sweep test (unless both ends are margin-free), the start's and the
+    goal's ways, each with its manipulation charge. A successor whose g exceeds the best g of
+    its cell (any mode) by a re-arrangement or more is dropped: that mode can do nothing the
+    other cannot do for at most one re-arrangement more."""
+
+    def __init__(self, planner: RoutePlanner, start_joins: list[_Join]):
+        self.pl = planner
+        self.start_joins = start_joins
+        self.s_virtual = planner._n * N_MODES
+        self.manip = planner.params.manipulation_cost
+        self.gmin: dict[int, float] = {}
+
+    def candidates(self, c: int) -> list[tuple[int, int]]:
+        """(move, cell) of the moves from lattice cell c to free cells (not yet checked)."""
+        pl = self.pl
+        k_bins, layer = pl.cspace.heading_bins, pl._layer
+        out = [(d, c + pl._toff[d]) for d in range(8)]
+        if k_bins > 1:
+            k = c // layer
+            out.append((TURN_UP, c - (k_bins - 1) * layer if k == k_bins - 1 else c + layer))
+            if k_bins > 2:
+                out.append((TURN_DOWN, c + (k_bins - 1) * layer if k == 0 else c - layer))
+        free = pl._free_p
+        return [(mv, c2) for mv, c2 in out if free[c2]]
+
+    def checked(self, c: int, cands: list[tuple[int, int]]) -> list[tuple[int, int]]:
+        """The candidates whose swept footprint is clear (margin-free pairs need no test)."""
+        margin = self.pl._margin_p
+        if margin[c]:
+            todo = [i for i, (_, c2) in enumerate(cands) if not margin[c2]]
+        else:
+            todo = list(range(len(cands)))
+        if not todo:
+            return cands
+        k, iy, ix = self.pl._unflat(c)
+        res = self.pl.cspace.moves_free(k, iy, ix, [cands[i][0] for i in todo])
+        bad = {i for i, ok in zip(todo, res, strict=True) if not ok}
+        return [mc for i, mc in enumerate(cands) if i not in bad]
+
+    def __call__(self, s: int, g: float) -> list[tuple[int, float]]:
+        manip = self.manip
+        if s == self.s_virtual:
+            return [
+                (j.state * N_MODES + (j.modes[-1] if j.modes else MODE_START) - s,
+                 j.cost + manip * j.changes)
+                for j in self.start_joins
+            ]  # fmt: skip
+        c, m = divmod(s, N_MODES)
+        out = []
+        for mv, c2 in self.checked(c, self.candidates(c)):
+            mode = mv if mv < 8 else MODE_ROTATE
+            cost = self.pl._tcost[mv] if mv < 8 else self.pl._rot_cost
+            if m != mode and m != MODE_START:
+                cost += manip
+            if self._keep(c2, g + cost):
+                out.append((c2 * N_MODES + mode - s, cost))
+        j = self.pl._goal_joins.get(c)
+        if j is not None:
+            turn_in = bool(j.modes) and _arrival_charge(m, j.modes[0])
+            out.append((self.s_virtual + 1 - s, j.cost + manip * (j.changes + turn_in)))
+        return out
+
+    def _keep(self, c2: int, g2: float) -> bool:
+        gm = self.gmin.get(c2, INF)
+        if g2 >= gm + self.manip:
+            return False
+        if g2 < gm:
+            self.gmin[c2] = g2
+        return True
+
+
+def _pose3(pose: ArrayLike, name: str) -> FloatArray:
+    try:
+        p = np.asarray(pose, dtype=float).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: expected a pose [x, y, theta], got {pose!r}") from exc
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"{name}: expected a pose [x, y, theta] of finite numbers, got {pose!r}")
+    return p
+
+
+def object_cspace(cfg: FleetConfig) -> ObjectCSpace:
+    """The object's C-space for a fleet config: its world bounds and obstacles, the object
+    polygon, the largest robot radius, ``route.resolution`` and ``route.heading_bins``."""
+    return build_object_cspace(
+        cfg.bounds_array(),
+        cfg.obstacle_polygons(),
+        cfg.object_polygon(),
+        cfg.max_robot_radius,
+        cfg.route.resolution,
+        cfg.route.heading_bins,
+    )
 
 
 def plan_route(
@@ -326,28 +971,19 @@ def plan_route(
     params: RouteSection,
     *,
     cspace: ObjectCSpace | None = None,
-    h_table: FloatArray | None = None,
     pathmax: bool = True,
     turn_bound: bool = True,
     max_expanded: int = 20_000_000,
     trace: bool = False,
 ) -> RouteResult:
-    """Plan the carried object's route from ``start`` to ``goal`` poses (x m, y m, theta rad).
+    """Plan the carried object's route from ``start`` to ``goal`` poses in one call.
 
     bounds [[xmin, ymin], [xmax, ymax]] (m); obstacles: world polygons (n, 2); footprint_polygon:
-    the object polygon in its frame (CCW, m); robot_radius: the fleet's largest robot radius (m);
-    params: the [route] section (resolution, heading_bins, heuristic, wg, wh, speed, yaw_rate,
-    manipulation_cost, subgoal_spacing). ``cspace`` reuses a C-space from
-    :func:`build_object_cspace` (then bounds, obstacles, footprint and radius are not used);
-    ``h_table`` reuses an (x, y) heuristic table (m) from :func:`object_heuristic` for this goal.
-    ``pathmax=False`` turns Eq. 2 off (for tests); ``turn_bound=False`` drops the manipulation
-    bound from h (the bare paper potentials); ``trace`` records f of each expansion.
-    Never raises for an unreachable goal: the result's status is "no_path" with a reason.
+    the object polygon in its frame (m); robot_radius: the fleet's largest robot radius (m);
+    params: the [route] section. ``cspace`` reuses a C-space from :func:`build_object_cspace`
+    (then bounds, obstacles, footprint and radius are not used). See :class:`RoutePlanner` for
+    the rest; to plan many times toward one goal, build a RoutePlanner once instead.
     """
-    kind, wg, wh = params.heuristic, float(params.wg), float(params.wh)
-    _check_weights(wg, wh)
-    if kind not in heuristics.HEURISTICS:
-        raise ValueError(f"heuristic: expected one of {heuristics.HEURISTICS}, got {kind!r}")
     if cspace is None:
         cspace = build_object_cspace(
             bounds,
@@ -357,126 +993,5 @@ def plan_route(
             params.resolution,
             params.heading_bins,
         )
-    elif (
-        abs(cspace.frame.resolution - params.resolution) > 1e-12
-        or cspace.heading_bins != params.heading_bins
-    ):
-        raise ValueError(
-            "cspace: built at resolution "
-            f"{cspace.frame.resolution} m / {cspace.heading_bins} headings, params ask for "
-            f"{params.resolution} m / {params.heading_bins}"
-        )
-    start_p = np.asarray(start, dtype=float)[:3]
-    goal_p = np.asarray(goal, dtype=float)[:3]
-    sc, gc = cspace.cell_of(start_p), cspace.cell_of(goal_p)
-    for name, cell in (("start", sc), ("goal", gc)):
-        if cell is None:
-            return _no_path(f"{name} lies outside the world bounds", kind, wg, wh)
-        if cspace.occupied[cell]:
-            return _no_path(
-                f"{name} pose collides: the footprint grown by the robots hits an obstacle or a "
-                "wall there",
-                kind,
-                wg,
-                wh,
-            )
-    assert sc is not None and gc is not None
-    if cspace.labels[sc] != cspace.labels[gc]:
-        return _no_path(
-            "goal unreachable: start and goal lie in different free regions of the C-space",
-            kind,
-            wg,
-            wh,
-        )
-    fr = cspace.frame
-    k_bins = cspace.heading_bins
-    if h_table is None:
-        h_table = object_heuristic(cspace, kind, (gc[1], gc[2]))
-    w, hh = fr.nx + 2, fr.ny + 2
-    layer = w * hh
-    free3 = np.zeros((k_bins, hh, w), dtype=np.uint8)
-    free3[:, 1:-1, 1:-1] = cspace.free
-    hxy = np.full((hh, w), INF)
-    hxy[1:-1, 1:-1] = np.asarray(h_table, dtype=float) / params.speed
-    step = 2.0 * math.pi / k_bins
-    dk = np.abs(np.arange(k_bins) - gc[0])
-    dk = np.minimum(dk, k_bins - dk)
-    hth = dk * step / params.yaw_rate
-    h3 = hth[:, None, None] + hxy[None]
-    h3[free3 == 0] = INF
-    h = h3.ravel().tolist()
-    toff = [int(dy * w + dx) for dx, dy in MOVES_8]
-    tcost = [fr.resolution * math.hypot(dx, dy) / params.speed for dx, dy in MOVES_8]
-    start_c = sc[0] * layer + (sc[1] + 1) * w + sc[2] + 1
-    goal_c = gc[0] * layer + (gc[1] + 1) * w + gc[2] + 1
-    hmode = _manipulation_bound(
-        cspace, (gc[1], gc[2]), params.manipulation_cost if turn_bound else 0.0
-    )
-    path, cost, expanded, generated, ftrace, limited = _search_object(
-        h,
-        hmode,
-        layer,
-        k_bins,
-        toff,
-        tcost,
-        step / params.yaw_rate,
-        params.manipulation_cost,
-        start_c,
-        goal_c,
-        wg,
-        wh,
-        pathmax,
-        max_expanded,
-        trace,
-    )
-    ft = np.asarray(ftrace, dtype=float)
-    if path is None:
-        reason = (
-            f"expansion limit of {max_expanded} nodes reached"
-            if limited
-            else "search exhausted: goal unreachable"
-        )
-        return _no_path(reason, kind, wg, wh, expanded=expanded, generated=generated, f_trace=ft)
-    st = np.asarray(path, dtype=np.int64)
-    c, modes = np.divmod(st, N_MODES)
-    k, p = np.divmod(c, layer)
-    iy, ix = np.divmod(p, w)
-    xs = fr.x0 + (ix - 1 + 0.5) * fr.resolution
-    ys = fr.y0 + (iy - 1 + 0.5) * fr.resolution
-    th = geometry.wrap_angle(k * step)
-    wp = np.stack([xs, ys, np.atleast_1d(th)], axis=1)
-    wp[0] = start_p
-    if len(wp) > 1:
-        wp[-1] = goal_p
-    else:
-        wp = np.vstack([start_p, goal_p])
-        modes = np.array([MODE_START, MODE_START])
-    mode_list = modes.tolist()
-    idx = _subgoal_indices(wp[:, :2], mode_list, params.subgoal_spacing)
-    manip = sum(
-        1
-        for a, b in zip(mode_list[1:-1], mode_list[2:], strict=True)
-        if a != b and not (a == MODE_ROTATE and b == MODE_ROTATE)
-    )
-    length, turn = _lengths(wp)
-    return RouteResult(
-        status="ok",
-        waypoints=wp,
-        subgoals=wp[idx],
-        cost=float(cost),
-        length_m=length,
-        rotation_rad=turn,
-        manipulations=manip,
-        expanded=expanded,
-        generated=generated,
-        heuristic=kind,
-        wg=wg,
-        wh=wh,
-        f_trace=ft,
-    )
-
-
-# --------------------------------------------------------------------------- robot routes
-
-
-# --------------------------------------------------------------------------- shipped maps
+    planner = RoutePlanner(cspace, goal, params, turn_bound=turn_bound)
+    return planner.plan(start, pathmax=pathmax, max_expanded=max_expanded, trace=trace)

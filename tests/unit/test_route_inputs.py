@@ -1,0 +1,243 @@
+"""Route inputs: maps, configs and the command line; every mistake exits 2 naming file and key."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from controller.cli import main
+from controller.config import ConfigError, RouteSection, parse_config
+from controller.planning.cspace import CSpaceError
+from controller.planning.route import RoutePlanner, plan_route
+from tests.support.config import base_config_dict, deep_update, write_toml
+
+SQUARE = np.array([[-0.2, -0.1], [0.2, -0.1], [0.2, 0.1], [-0.2, 0.1]])
+
+MAP_TOML = """
+[map]
+name = "tiny"
+robot_radius = {radius}
+[world]
+bounds = {bounds}
+[object]
+polygon = [[-0.2, -0.1], [0.2, -0.1], [0.2, 0.1], [-0.2, 0.1]]
+start = [0.8, 0.8, 0.0]
+[[goals]]
+name = "open"
+pose = {goal}
+[[goals]]
+name = "boxed"
+pose = [3.0, 3.0, 0.0]
+{boxes}
+"""
+
+BOXES = [(2.3, 2.3, 3.7, 2.4), (2.3, 3.6, 3.7, 3.7), (2.3, 2.3, 2.4, 3.7), (3.6, 2.3, 3.7, 3.7)]
+
+
+def _rect(x0, y0, x1, y1) -> list[list[float]]:
+    return [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+
+
+def map_file(tmp_path, **over) -> str:
+    fields = {
+        "radius": "0.05",
+        "bounds": "[[0.0, 0.0], [4.0, 4.0]]",
+        "goal": "[3.2, 0.8, 0.0]",
+        "boxes": "".join(f"[[obstacles]]\npolygon = {_rect(*r)}\n" for r in BOXES),
+    }
+    fields.update(over)
+    text = MAP_TOML
+    for k, v in fields.items():
+        text = text.replace("{" + k + "}", v)
+    path = tmp_path / "tiny.toml"
+    path.write_text(text)
+    return str(path)
+
+
+# --------------------------------------------------------------------------- route maps
+
+
+BAD_MAPS = {
+    "reversed_bounds": ({"bounds": "[[4.0, 4.0], [0.0, 0.0]]"}, "world.bounds", "max > min"),
+    "negative_radius": ({"radius": "-0.1"}, "map.robot_radius", ">= 0"),
+    "two_vertex_obstacle": (
+        {"boxes": "[[obstacles]]\npolygon = [[1.0, 1.0], [2.0, 1.0]]\n"},
+        "obstacles[0].polygon",
+        "at least 3 vertices",
+    ),
+    "two_number_goal": ({"goal": "[3.2, 0.8]"}, "goals[0].pose", "3 items"),
+    "unknown_key": ({"radius": "0.05\nrobot_radios = 1"}, "map.robot_radios", "did you mean"),
+    "not_a_number": ({"radius": '"wide"'}, "map.robot_radius", "a number"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_MAPS))
+def test_a_bad_route_map_exits_2_naming_file_and_key(case, tmp_path, capsys):
+    over, key, words = BAD_MAPS[case]
+    f = map_file(tmp_path, **over)
+    assert main(["plan", "route", "--map", f, "--goal", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert f in err and key in err and words in err, err
+
+
+def test_missing_files_and_goals_exit_2(tmp_path, capsys):
+    assert main(["plan", "route", "--map", str(tmp_path / "nope.toml")]) == 2
+    assert "cannot read" in capsys.readouterr().err
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[map\n")
+    assert main(["plan", "route", "--map", str(bad)]) == 2
+    assert "not valid TOML" in capsys.readouterr().err
+    f = map_file(tmp_path)
+    assert main(["plan", "route", "--map", f, "--goal", "7"]) == 2
+    err = capsys.readouterr().err
+    assert "goals" in err and "open, boxed" in err
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--wh", "inf"], "--wh: expected a finite number"),
+        (["--wh", "-1"], "--wh: expected a value >= 0"),
+        (["--wh", "1000"], "--wh: expected a value <= 100"),
+    ],
+)
+def test_bad_command_line_values_exit_2_naming_the_flag(args, words, tmp_path, capsys):
+    f = map_file(tmp_path)
+    assert main(["plan", "route", "--map", f, "--goal", "1", *args]) == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err
+    with pytest.raises(SystemExit) as exc:
+        main(["plan", "route", "--map", f, "--wg", "0.5"])
+    assert exc.value.code == 2
+
+
+def test_bad_planner_inputs_raise_config_errors_naming_the_parameter():
+    bounds = np.array([[0.0, 0.0], [4.0, 4.0]])
+    p = RouteSection()
+    cases = [
+        (dict(bounds=[[4.0, 4.0], [0.0, 0.0]]), "bounds"),
+        (dict(robot_radius=-0.1), "robot_radius"),
+        (dict(obstacles=[[[1.0, 1.0], [2.0, 1.0]]]), "obstacles[0]"),
+        (dict(footprint_polygon=[[0, 0], [1, 1]]), "footprint"),
+    ]
+    for over, key in cases:
+        kw = dict(
+            bounds=bounds,
+            obstacles=[],
+            footprint_polygon=SQUARE,
+            robot_radius=0.05,
+            start=(1, 1, 0),
+            goal=(3, 3, 0),
+            params=p,
+        )
+        kw.update(over)
+        with pytest.raises(CSpaceError) as exc:
+            plan_route(**kw)
+        assert isinstance(exc.value, ConfigError) and exc.value.path == key
+    with pytest.raises(ValueError, match="goal"):
+        plan_route(bounds, [], SQUARE, 0.05, (1, 1, 0), (3, 3), p)
+
+
+# --------------------------------------------------------------------------- fleet.toml
+
+
+def _config(patch: dict, drop=None):
+    data = deep_update(base_config_dict(), patch)
+    if drop:
+        drop(data)
+    return data
+
+
+@pytest.mark.parametrize("key", ["start", "goal"])
+def test_object_start_or_goal_inside_an_obstacle_is_a_config_error(key, tmp_path, capsys):
+    data = base_config_dict()
+    bench = data["obstacles"][0]["polygon"]  # the bench in the middle of the room
+    x, y = bench[0]
+    data["object"][key] = [x + 0.2, y + 0.2, 0.0]
+    with pytest.raises(ConfigError) as exc:
+        parse_config(data, "t.toml")
+    assert exc.value.path == f"object.{key}" and "obstacles[0]" in exc.value.message
+    path = write_toml(tmp_path / "bad.toml", data)
+    assert main(["check", "--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"object.{key}" in err and "obstacles[0]" in err
+
+
+def test_the_route_grids_have_a_budget_named_by_their_keys():
+    with pytest.raises(ConfigError) as exc:
+        parse_config(_config({"route": {"resolution": 0.0125}}), "t.toml")
+    assert exc.value.path == "route.resolution"
+    assert "route.heading_bins" in exc.value.message and "budget" in exc.value.message
+    with pytest.raises(ConfigError) as exc:
+        parse_config(_config({"route": {"resolution": 0.05, "heading_bins": 360}}), "t.toml")
+    assert exc.value.path == "route.resolution" and "360" in exc.value.message
+    with pytest.raises(ConfigError) as exc:
+        parse_config(_config({"route": {"robot_resolution": 0.01}}), "t.toml")
+    assert exc.value.path == "route.robot_resolution"
+    # 512 x 512 x 36 over the shipped room is within the budget
+    cfg = parse_config(_config({"route": {"resolution": 0.025}}), "t.toml")
+    assert cfg.route.resolution == 0.025 and cfg.route.heuristic == "cost_to_go"
+
+
+def test_a_map_beyond_the_grid_budget_exits_2(tmp_path, capsys):
+    f = map_file(tmp_path, bounds="[[0.0, 0.0], [400.0, 400.0]]")
+    assert main(["plan", "route", "--map", f, "--goal", "1"]) == 2
+    assert "route.resolution" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- the command
+
+
+KEYS = {"status", "reason", "waypoints", "subgoals", "cost", "length_m", "manipulations"}
+KEYS |= {"expanded", "reexpanded", "seconds", "heuristic", "wg", "wh"}
+
+
+def test_cli_json_fields_and_exit_codes(tmp_path, capsys):
+    f = map_file(tmp_path)
+    rc = main(["plan", "route", "--map", f, "--goal", "1", "--heuristic", "wavefront", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and set(out) == KEYS
+    assert out["status"] == "ok" and out["heuristic"] == "wavefront" and out["wg"] == 1.0
+    assert len(out["waypoints"][0]) == 3 and out["cost"] > 0 and out["expanded"] > 0
+    assert out["waypoints"][0] == [0.8, 0.8, 0.0] and out["waypoints"][-1] == [3.2, 0.8, 0.0]
+    rc = main(["plan", "route", "--map", f, "--goal", "boxed", "--wh", "0.5", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 1 and out["status"] == "no_path" and out["cost"] is None and out["wh"] == 0.5
+    assert "unreachable" in out["reason"]
+
+
+def test_cli_plans_the_fleet_config_and_plots(tmp_path, capsys):
+    png = tmp_path / "route.png"
+    rc = main(["plan", "route", "--config", "fleet.toml", "--json", "--plot", str(png)])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["status"] == "ok" and png.stat().st_size > 1000
+    assert out["heuristic"] == "cost_to_go"
+    assert out["waypoints"][0] == [2.0, 3.0, 0.0] and out["waypoints"][-1] == [9.5, 9.5, 0.0]
+
+
+def test_planner_rejects_a_cspace_of_other_parameters():
+    from controller.planning.cspace import build_object_cspace
+
+    cs = build_object_cspace([[0, 0], [4, 4]], [], SQUARE, 0.05, 0.1, 12)
+    with pytest.raises(ValueError, match="heading"):
+        RoutePlanner(cs, (3, 3, 0), RouteSection(heading_bins=8))
+
+
+def test_a_planner_from_the_fleet_config_plans_the_shipped_scenario():
+    from controller.config import load_config
+    from controller.planning.route import object_cspace
+
+    cfg = load_config("fleet.toml")
+    cs = object_cspace(cfg)
+    planner = RoutePlanner.from_config(cfg, cspace=cs)
+    res = planner.plan(cfg.object.start)
+    assert res.ok and np.allclose(res.waypoints[-1], cfg.object.goal)
+    assert np.allclose(res.subgoals[-1], cfg.object.goal) and res.manipulations >= 1
+    # a second goal on the same C-space
+    other = RoutePlanner.from_config(cfg, goal=(2.0, 9.0, 1.5707963), cspace=cs).plan(
+        cfg.object.start
+    )
+    assert other.ok and other.cost > 0
