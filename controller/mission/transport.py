@@ -105,7 +105,8 @@ class Contact:
 
 class TransportMission:
     """Carries the object from where the capture left it. ``robots`` (K,) indices of the robots
-    that hold it, ``contacts`` their contact points and outward normals (K, 2), object frame."""
+    that hold it, ``points``/``normals`` their contact points and outward normals (K, 2), object
+    frame; the rest of the fleet starts free."""
 
     def __init__(
         self,
@@ -125,7 +126,9 @@ class TransportMission:
         self.guard = guard
         self.s = TransportSettings.from_config(cfg)
         self.n = len(cfg.robots)
-        self.robots = np.asarray(robots, int)
+        # every robot of the fleet takes part: those holding the object keep their contacts,
+        # the others are free (re-arrangement recruits them when the holders cannot push)
+        self.robots = np.arange(self.n)
         o = cfg.object
         self.model = ObjectModel.build(
             cfg.object_polygon(), o.mass, o.floor_friction, o.contact_friction, cfg.max_robot_radius
@@ -133,10 +136,9 @@ class TransportMission:
         self.params = TransportParams.from_config(cfg.transport)
         self.planner = TransportPlanner(self.params)
         self.lp = ContactForceLP(max(len(self.robots), 1), friction=o.contact_friction > 0)
-        self.contacts: dict[int, Contact | None] = {
-            int(i): Contact(np.asarray(p, float), -np.asarray(nv, float))
-            for i, p, nv in zip(self.robots, points, normals, strict=True)
-        }
+        self.contacts: dict[int, Contact | None] = {int(i): None for i in self.robots}
+        for i, p, nv in zip(np.asarray(robots, int), points, normals, strict=True):
+            self.contacts[int(i)] = Contact(np.asarray(p, float), -np.asarray(nv, float))
         self.actions: dict[int, str | None] = {int(i): None for i in self.robots}
         self.phase = Phase.ROUTE
         self.t0: float | None = None
@@ -222,7 +224,11 @@ class TransportMission:
         return self._begin_segment(view, pose, events)
 
     def _begin_segment(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
-        """A new segment: re-arrange if the contacts cannot push along it, else transport."""
+        """A new segment: re-arrange if the contacts cannot push along it, else transport.
+        Subgoals already within tolerance are passed (the route's exact joins can put one a
+        hair's turn from the start)."""
+        while self._subgoal_reached(pose):
+            self.subgoal += 1
         self.planner.reset()
         self.last_plan = None
         if self._can_push(pose):
@@ -251,14 +257,18 @@ class TransportMission:
     def _can_push(self, pose: np.ndarray) -> bool:
         """Whether the robots in contact can push the object along the segment (the LP)."""
         twist = self._direction(pose) * self.params.speed
+        return self._pushes(twist, *self._contact_arrays())
+
+    def _pushes(self, twist: np.ndarray, pts: np.ndarray, nrm: np.ndarray, fmax: np.ndarray):
+        """Whether contacts (object-frame points, inward normals, force limits) can move the
+        object with ``twist`` (the contact-force LP)."""
         if not np.any(twist):
             return True
+        if len(pts) == 0:
+            return False
         w = required_wrench(
             twist, self.model.mass, self.model.floor_friction, self.model.mean_radius
         )
-        pts, nrm, fmax = self._contact_arrays()
-        if len(pts) == 0:
-            return False
         res = self.lp.solve(
             pts - self.model.centroid, nrm, fmax, np.ones(len(pts), bool), w,
             self.model.contact_friction, self.model.mean_radius,
@@ -276,9 +286,8 @@ class TransportMission:
 
     # --- rearrange ----------------------------------------------------------------------------
     def _start_rearrangement(self, view: FleetView, pose: np.ndarray, events: list[Event]):
-        """New contacts for the segment (Eq. 5 along its direction, or a turning set when it
-        mostly turns the object); the robots nearest to them move there, the others keep their
-        contacts (one too close to a new contact lets go)."""
+        """New contacts for the segment (:meth:`_new_set`); the robots nearest to them move
+        there, the others keep their contacts (one too close to a new contact lets go)."""
         self._go(Phase.REARRANGE, view.t, events)
         self.rearrangements += 1
         self.futile += 1
@@ -290,11 +299,7 @@ class TransportMission:
         cfg = self.cfg
         r = cfg.max_robot_radius
         # a segment that turns the object more than a little: Eq. 5 knows no torque
-        turning = abs(twist[2]) * self.model.mean_radius > 0.3  # its share of the unit twist
-        if turning:
-            new_pts, new_nrm, value, n_push = self._turning_set(twist)
-        else:
-            new_pts, new_nrm, value, n_push = self._pushing_set(d)
+        new_pts, new_nrm, value, n_push, basis = self._new_set(twist, d)
         ids = list(self.contacts)
         here = geometry.inverse_transform(view.poses[ids, :2], pose)
         cost = np.linalg.norm(here[:, None] - (new_pts + r * new_nrm)[None], axis=-1)
@@ -326,7 +331,7 @@ class TransportMission:
                     "t": view.t,
                     "direction": np.round(d, 4).tolist(),
                     "pushers": n_push,
-                    "basis": "turn_capacity" if turning else "eq5",
+                    "basis": basis,
                     "eq5_value": float(value),
                     "moving": [view.ids[i] for i in self.moves],
                     "contacts": {
@@ -336,31 +341,47 @@ class TransportMission:
             )
         )
 
-    def _pushing_set(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
-        """Sharma Eq. 5 along D: the fewest pushers that overcome the floor friction (plus one
-        for the torque), at the candidate nodes pushing hardest along D."""
+    def _new_set(self, twist: np.ndarray, d: np.ndarray):
+        """The contact set for a segment: Sharma's Eq. 5 along D with the fewest pushers that
+        overcome the floor friction (plus one for the torque), then one more, each confirmed by
+        the contact-force LP at the weakest robot's force limit; a segment that mostly turns
+        the object, or one no Eq. 5 set can push, gets the least-force set of the LP over all
+        candidate nodes (:meth:`_wrench_set`). Returns (points, outward normals, value,
+        pushers, basis)."""
+        cfg, m = self.cfg, self.model
+        weakest = min(cfg.robots[i].max_force for i in self.robots)
+        twist_v = twist * self.params.speed
+        if abs(twist[2]) * m.mean_radius <= 0.3:  # the turn's share of the unit twist
+            friction = m.floor_friction * m.mass * 9.81
+            first = int(min(len(self.robots), math.ceil(friction / weakest) + 1))
+            for n in range(first, min(first + 1, len(self.robots)) + 1):
+                pts, nrm, value = self._pushing_set(d, n)
+                if self._pushes(twist_v, pts, -nrm, np.full(len(pts), weakest)):
+                    return pts, nrm, value, n, "eq5"
+        pts, nrm, value, n = self._wrench_set(twist)
+        return pts, nrm, value, n, "lp_capacity"
+
+    def _pushing_set(self, d: np.ndarray, n_push: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """Sharma Eq. 5 along D: the ``n_push`` candidate nodes pushing hardest along D."""
         from controller.planning.capture import (
             CaptureParams,
             candidate_nodes,
             plan_push_arrangement,
         )
 
-        cfg, m = self.cfg, self.model
-        weakest = min(cfg.robots[i].max_force for i in self.robots)
-        friction = m.floor_friction * m.mass * 9.81
-        n_push = int(min(len(self.robots), math.ceil(friction / weakest) + 1))
+        cfg = self.cfg
         r = cfg.max_robot_radius
         poly = geometry.ensure_ccw(cfg.object_polygon())
         params = CaptureParams.from_config(cfg.capture)
         idx, value = plan_push_arrangement(poly, r, d, n_push, params, self.rng)
         cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
-        return cand.points[idx], cand.normals[idx], float(value), n_push
+        return cand.points[idx], cand.normals[idx], float(value)
 
-    def _turning_set(self, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
-        """A segment that mostly turns the object: Eq. 5 has no torque, so the set is the
-        support of the least-force LP for the wrench the turn needs (with a margin), over every
-        candidate node, reinforced (``planning.hold``) until it can produce that wrench within
-        ``max_force``; the value reported is that capacity (≥ 1: the set can turn the object)."""
+    def _wrench_set(self, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
+        """The support of the least-force LP for the wrench the segment needs (with a margin:
+        ``turn_margin``) over every candidate node, reinforced (``planning.hold``) until it can
+        produce that wrench within ``max_force``; the value reported is that capacity (≥ 1: the
+        set can move the object as asked)."""
         from controller.planning.capture import candidate_nodes
         from controller.planning.hold import least_force_set, reinforce
 

@@ -20,6 +20,8 @@ from controller.mission.factory import build_mission
 from controller.runtime.dry_run import DryRun, judge
 from tests.support.transport_scenarios import CRATE, L_SHAPE, Scenario, scenario_config
 
+LONG_CRATE = [[0.0, 0.0], [0.6, 0.0], [0.6, 1.2], [0.0, 1.2]]  # pushed along x: a 1.2 m back
+
 ROOM = ((0.0, 0.0), (8.0, 6.0))
 PILLAR = ((3.6, 1.2), (4.0, 1.2), (4.0, 1.6), (3.6, 1.6))
 WALL_WITH_DOOR = (  # a wall across the room at x = 4 with a door 1.8 m wide
@@ -50,8 +52,8 @@ SCENARIOS = [
     Scenario("open-floor-pybullet", CRATE, (1.5, 2.5, 0.0), (5.0, 3.0, 0.0), backend="pybullet"),
     Scenario("turn-180-pybullet", CRATE, (2.0, 2.5, 0.0), (3.5, 3.0, 3.14159), backend="pybullet"),
     Scenario(
-        "heavy-pybullet",  # 29 N of floor friction for robots of 8 N: four pushers at their limit
-        CRATE,
+        "heavy-pybullet",  # 29 N of floor friction for robots of 8 N: four pushers at 92 % of
+        LONG_CRATE,  # their limit, on a back edge where five fit
         (1.5, 2.5, 0.0),
         (4.0, 2.5, 0.0),
         backend="pybullet",
