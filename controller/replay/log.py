@@ -19,7 +19,7 @@ import numpy as np
 
 from controller import geometry, wire
 from controller.config import ConfigError, FleetConfig, InputError, parse_config
-from controller.io.recorder import log_is_complete, read_log, read_metadata
+from controller.io.recorder import drop_none, log_is_complete, read_log, read_metadata
 from controller.replay import metrics
 
 log = logging.getLogger(__name__)
@@ -48,6 +48,9 @@ class RunLog:
     events: list[dict[str, Any]] = field(default_factory=list)
     robot_events: list[dict[str, Any]] = field(default_factory=list)
     estops: list[dict[str, Any]] = field(default_factory=list)
+    scene: Counter = field(default_factory=Counter)  # Foxglove scene channels: messages
+    time_base: str = "wall"  # "sim": log times are sim time on ``epoch_s`` (dry runs)
+    epoch_s: float = 0.0
 
 
 def load_run(path: str | Path) -> RunLog:
@@ -66,16 +69,24 @@ def load_run(path: str | Path) -> RunLog:
 
 def _read_run(path: Path) -> RunLog:
     run = RunLog(path=path, complete=log_is_complete(path))
-    meta = read_metadata(path).get("fleet.config")
+    records = read_metadata(path)
+    clock = records.get("fleet.time", {})
+    if clock.get("base") == "sim":
+        run.time_base, run.epoch_s = "sim", float(clock.get("epoch_s", 0.0))
+    meta = records.get("fleet.config")
     if meta:
         run.mode = meta.get("mode", "")
         try:
-            run.config = parse_config(json.loads(meta["config"]), meta.get("source", ""))
+            data = drop_none(json.loads(meta["config"]))  # logs before the fix wrote nulls
+            run.config = parse_config(data, meta.get("source", ""))
         except (ConfigError, ValueError, KeyError) as exc:
             log.warning("%s: the recorded config does not load: %s", path, exc)
         else:
             run.fleet = run.config.fleet.name
     for rec in read_log(path):
+        if rec.topic.startswith("/"):  # the Foxglove scene (never a bus key)
+            run.scene[rec.topic] += 1
+            continue
         parsed = wire.parse_key(rec.topic, run.fleet)
         if run.fleet is None and parsed is not None:
             run.fleet = parsed.fleet
@@ -177,6 +188,8 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         "start_s": min(all_t) if all_t else None,
         "duration_s": (max(all_t) - min(all_t)) if all_t else 0.0,
         "topics": {k: _topic_figures(run, k, n) for k, n in sorted(run.topics.items())},
+        "scene": dict(sorted(run.scene.items())),
+        "time_base": run.time_base,
         "robots": robots,
         "object": {
             "poses": len(omeas),
