@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,7 +20,14 @@ import numpy as np
 
 from controller import geometry, wire
 from controller.config import ConfigError, FleetConfig, InputError, parse_config
-from controller.io.recorder import drop_none, log_is_complete, read_log, read_metadata
+from controller.io.recorder import (
+    LogRecord,
+    drop_none,
+    log_is_complete,
+    read_log,
+    read_metadata,
+    segments,
+)
 from controller.replay import metrics
 
 log = logging.getLogger(__name__)
@@ -49,6 +57,7 @@ class RunLog:
     robot_events: list[dict[str, Any]] = field(default_factory=list)
     estops: list[dict[str, Any]] = field(default_factory=list)
     scene: Counter = field(default_factory=Counter)  # Foxglove scene channels: messages
+    segments: list[dict[str, Any]] = field(default_factory=list)  # file, complete, messages, s
     time_base: str = "wall"  # "sim": log times are sim time on ``epoch_s`` (dry runs)
     epoch_s: float = 0.0
 
@@ -83,25 +92,38 @@ def _read_run(path: Path) -> RunLog:
             log.warning("%s: the recorded config does not load: %s", path, exc)
         else:
             run.fleet = run.config.fleet.name
-    for rec in read_log(path):
-        if rec.topic.startswith("/"):  # the Foxglove scene (never a bus key)
-            run.scene[rec.topic] += 1
-            continue
-        parsed = wire.parse_key(rec.topic, run.fleet)
-        if run.fleet is None and parsed is not None:
-            run.fleet = parsed.fleet
-        run.topics[rec.topic] += 1
-        try:
-            msg = rec.message()
-        except wire.WireError:
-            run.undecodable += 1
-            continue
-        if msg is None:
-            continue
-        run.stamps[rec.topic].append(msg.t)
-        if parsed is not None:
-            _sort(run, parsed, msg)
+    for seg in segments(path):
+        part = {"file": str(seg), "complete": log_is_complete(seg), "messages": 0}
+        first = last = None
+        for rec in read_log(seg):
+            part["messages"] += 1
+            first = rec.log_time_ns if first is None else min(first, rec.log_time_ns)
+            last = rec.log_time_ns if last is None else max(last, rec.log_time_ns)
+            _take(run, rec)
+        part["seconds"] = 0.0 if first is None else (last - first) / 1e9
+        run.segments.append(part)
     return run
+
+
+def _take(run: RunLog, rec: LogRecord) -> None:
+    """One record of the log into the run."""
+    if rec.topic.startswith("/"):  # the Foxglove scene (never a bus key)
+        run.scene[rec.topic] += 1
+        return
+    parsed = wire.parse_key(rec.topic, run.fleet)
+    if run.fleet is None and parsed is not None:
+        run.fleet = parsed.fleet
+    run.topics[rec.topic] += 1
+    try:
+        msg = rec.message()
+    except wire.WireError:
+        run.undecodable += 1
+        return
+    if msg is None:
+        return
+    run.stamps[rec.topic].append(msg.t)
+    if parsed is not None:
+        _sort(run, parsed, msg)
 
 
 def _sort(run: RunLog, key: wire.KeyParts, msg: Any) -> None:
@@ -189,6 +211,8 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         "duration_s": (max(all_t) - min(all_t)) if all_t else 0.0,
         "topics": {k: _topic_figures(run, k, n) for k, n in sorted(run.topics.items())},
         "scene": dict(sorted(run.scene.items())),
+        "segments": run.segments,
+        "recovered": _recovered(run.segments),
         "time_base": run.time_base,
         "robots": robots,
         "object": {
@@ -209,6 +233,9 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         "min_clearance_t": None,
         "max_object_penetration_m": None,
         "obstacle_contacts": None,
+        "hold_displacement_m": None,
+        "object_min_clearance_m": None,
+        "object_min_clearance_t": None,
         "verdict": None,
     }
     if cfg is not None:
@@ -228,15 +255,57 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
             out["max_object_penetration_m"] = depth
         hits = metrics.obstacle_contacts(tr_h, r_h, cfg.obstacle_polygons(), cfg.bounds_array())
         out["obstacle_contacts"] = sorted(ids[have[i]] for i in hits)
+        out.update(_object_figures(cfg, obj, phases))
         from controller.runtime.dry_run import judge  # the run's own verdict code
 
         out["verdict"] = judge(out)
     return out
 
 
+CARRIED = ("route", "rearrange", "transport")  # the phases after which the object is carried
+
+
+def _object_figures(cfg: FleetConfig, obj: metrics.Track, phases: list[dict]) -> dict:
+    """The object's figures of the verdict, as the run scores them: how far the arrested object
+    moved from the start of the (last) hold until it was carried (``hold_displacement_m``), and
+    its smallest clearance to obstacles and walls (``object_min_clearance_m``)."""
+    poly = geometry.ensure_ccw(cfg.object_polygon())
+    carried = next((p["t"] for p in phases if p["phase"] in CARRIED), math.inf)
+    holds = [p["t"] for p in phases if p["phase"] == "hold" and p["t"] < carried]
+    end = min(carried, float(obj.t[-1])) if len(obj) else carried
+    moved = metrics.hold_displacement(obj, poly, holds[-1], end) if holds else None
+    bounds = cfg.bounds_array() if cfg.world.walls else None
+    clear = metrics.object_clearance(obj, poly, cfg.obstacle_polygons(), bounds)
+    return {
+        "hold_displacement_m": moved,
+        "object_min_clearance_m": None if clear is None else clear[0],
+        "object_min_clearance_t": None if clear is None else clear[1],
+    }
+
+
+def _recovered(parts: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """What was read from files cut short by a crash (None: every file was finished)."""
+    cut = [p for p in parts if not p["complete"]]
+    if not cut:
+        return None
+    return {
+        "files": [p["file"] for p in cut],
+        "messages": sum(p["messages"] for p in cut),
+        "seconds": round(sum(p["seconds"] for p in cut), 3),
+    }
+
+
 def print_summary(r: dict) -> None:
     """The ``fleet replay`` summary as text on stdout."""
     print(f"{r['log']}: {'complete' if r['complete'] else 'cut short (crash?)'}, {r['mode']}")
+    if len(r.get("segments", [])) > 1:
+        print(f"  {len(r['segments'])} segments")
+    if r.get("recovered"):
+        rec = r["recovered"]
+        print(
+            f"  recovered from cut files: {rec['messages']} messages, {rec['seconds']:.2f} s "
+            f"({', '.join(rec['files'])})"
+        )
     print(
         f"  {r['messages']} messages over {r['duration_s']:.1f} s, {r['undecodable']} undecodable"
     )
