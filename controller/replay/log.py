@@ -63,10 +63,12 @@ class RunLog:
 
 
 def load_run(path: str | Path) -> RunLog:
-    """Read a log into a :class:`RunLog`. Messages that do not decode are counted, not fatal."""
+    """Read a log (a file, or a folder of segments) into a :class:`RunLog`. Messages that do
+    not decode are counted, not fatal."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+    if not path.is_file() and not (path.is_dir() and segments(path)):
+        what = "no MCAP segments in this folder" if path.is_dir() else "no such file"
+        raise InputError(f"{path}: {what}")
     try:
         run = _read_run(path)
     except OSError as exc:
