@@ -5,8 +5,7 @@
   numpy, scipy, osqp, filterpy, shapely, each other, and ``controller.config``,
   ``controller.geometry`` and ``controller.wire``;
 - ``controller/io`` is the only importer of zenoh, mcap and foxglove (the live view's SDK);
-  ``controller/viz.py`` the only
-  importer of matplotlib;
+  ``controller/viz.py`` the only importer of matplotlib;
 - ``controller/runtime`` is the only part of ``controller/`` that imports ``drivers`` or
   ``sim_backend``;
 - ``drivers/`` imports nothing of ``controller/`` but the wire contract (``controller.wire``);
