@@ -81,7 +81,7 @@ def run(args) -> int:
     result = metrics_of(run_log)
     status = 0
     if args.plots:
-        result["plots"] = [str(p) for p in plot_run(run_log, args.plots)]
+        result["plots"] = [str(p) for p in plot_run(run_log, args.plots, result)]
     if args.check:
         from controller.replay.check import check_log
 

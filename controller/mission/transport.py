@@ -485,7 +485,8 @@ class TransportMission:
                 self.contacts[int(i)] = None
         f = plan.forces[0]
         self.forces.extend(float(x) for x in f if x > 0)
-        events.append(("transport", {"t": view.t, **plan.to_dict()}))
+        ids = [view.ids[int(i)] for i in self.robots]  # the plan's rows (the scene's pushers)
+        events.append(("transport", {"t": view.t, "robots": ids, **plan.to_dict()}))
 
     def _execute(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         """The plan's first interval, closed every tick: a robot holding a contact moves with

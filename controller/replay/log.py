@@ -156,6 +156,25 @@ def _sort(run: RunLog, key: wire.KeyParts, msg: Any) -> None:
             run.estops.append({"t": msg.t, "engaged": msg.engaged, "source": msg.source})
 
 
+def phases_of(run: RunLog) -> list[dict[str, Any]]:
+    """The phases the run went through, each with the time it began (from the plan events)."""
+    phases: list[dict[str, Any]] = []
+    for e in sorted(run.events, key=lambda e: e["t"]):
+        if e["phase"] and (not phases or phases[-1]["phase"] != e["phase"]):
+            phases.append({"phase": e["phase"], "t": e["t"]})
+    return phases
+
+
+def events_of(run: RunLog, kind: str) -> list[dict[str, Any]]:
+    """The run's plan events of one kind (capture, route, transport, ...), in time order."""
+    return sorted((e for e in run.events if e["kind"] == kind), key=lambda e: e["t"])
+
+
+def track(rows: list) -> metrics.Track:
+    """A track from logged rows (t, x, y, theta)."""
+    return metrics.Track.from_rows(rows)
+
+
 def _topic_figures(run: RunLog, key: str, count: int) -> dict[str, Any]:
     """Count and rate of one key, with the registry's expected rate (None for events)."""
     rate = round(metrics.rate_hz(sorted(run.stamps.get(key, []))), 3)
@@ -197,10 +216,7 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
     omeas = _track(run.object_measured)
     obest = otruth if len(otruth) else (oest if len(oest) else omeas)
     arrests = [e for e in run.events if e["kind"] == "arrest"]
-    phases: list[dict[str, Any]] = []
-    for e in sorted(run.events, key=lambda e: e["t"]):
-        if not phases or phases[-1]["phase"] != e["phase"]:
-            phases.append({"phase": e["phase"], "t": e["t"]})
+    phases = phases_of(run)
     out: dict[str, Any] = {
         "log": str(run.path),
         "complete": run.complete,

@@ -184,3 +184,22 @@ def object_clearance(
     ]
     k = int(np.argmin(d))
     return float(d[k]), float(obj.t[k])
+
+
+def phase_index(times: ArrayLike, starts: ArrayLike) -> NDArray[np.int_]:
+    """For each time, the index of the phase it falls in (phases begin at ``starts``, sorted;
+    -1 before the first)."""
+    return np.searchsorted(np.asarray(starts, float), np.asarray(times, float), side="right") - 1
+
+
+def lateral_deviation(points: ArrayLike, path: ArrayLike) -> FloatArray:
+    """Distance (m) of each point (T, 2) from a polyline (M, 2): how far the object is off its
+    route."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    p = np.asarray(path, dtype=float).reshape(-1, 2)
+    if len(p) == 0:
+        return np.full(len(pts), np.nan)
+    if len(p) == 1:
+        return np.linalg.norm(pts - p[0], axis=1)
+    d, _ = geometry.point_segment_distance(pts, p[:-1], p[1:])
+    return d.min(axis=1)

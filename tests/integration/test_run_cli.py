@@ -108,3 +108,15 @@ def test_sweep_table_and_bad_config(tmp_path, capsys):
     good = config(tmp_path)
     assert main(["sweep", str(good), str(bad), "--out-dir", str(tmp_path / "s")]) == 2
     assert not (tmp_path / "s").exists()  # checked before anything ran
+
+
+def test_run_with_the_live_view(tmp_path, capsys):
+    data = base_config_dict()
+    data["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{free_port()}"], "connect": []}
+    data["log"] = {"dir": str(tmp_path / "runs")}
+    data["viz"] = {"port": 0}  # any free port: the URL is printed
+    path = write_toml(tmp_path / "viz.toml", data)
+    code = main(["run", "--config", str(path), "--backend", "ideal", "--viz", "--max-time", "1"])
+    err = capsys.readouterr().err
+    assert code == 1  # timed out: 1 s is too short for the job, and that is all
+    assert "fleet run: live view on ws://127.0.0.1:" in err
