@@ -107,6 +107,7 @@ class McapRecorder:
         self.location = self.path.with_suffix("") if split_s > 0 else self.path
         self.segments: list[Path] = []
         self._meta: list[tuple[str, dict[str, str]]] = []
+        self._logged: dict[str, bool] = {}  # key: whether the registry logs it
         self._segment_start: int | None = None
         self._open_segment()
         self._q: queue.Queue[tuple[Any, ...] | None] = queue.Queue()
@@ -132,7 +133,7 @@ class McapRecorder:
         self._writer = Writer(self._stream, compression=CompressionType.ZSTD)
         self._writer.start(profile=PROFILE, library="fleet-controller")
         self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
+        self._channels: dict[str, tuple[int, str, bytes]] = {}  # key: (id, schema, its data)
         for name, data in self._meta:
             self._writer.add_metadata(name, data)
         self._writer.flush()
@@ -146,8 +147,11 @@ class McapRecorder:
         self._open_segment()
 
     def on_sample(self, key: str, payload: bytes, recv_time: float) -> None:
-        topic = wire.topic_for_key(self.fleet, key)
-        if topic is not None and not topic.logged:
+        logged = self._logged.get(key)
+        if logged is None:
+            topic = wire.topic_for_key(self.fleet, key)
+            logged = self._logged[key] = topic is None or topic.logged
+        if not logged:
             return  # the registry says so (status replies, liveliness)
         self._q.put((key, payload, recv_time))
 
@@ -162,16 +166,17 @@ class McapRecorder:
 
     def _channel(self, key: str) -> tuple[int, str, bytes]:
         """The channel of a bus key: (id, schema name, schema data)."""
-        ch = self._channels.get(key)
+        found = self._channels.get(key)
+        if found is not None:
+            return found
         topic = wire.topic_for_key(self.fleet, key)
         name, data = "", b""
         if topic is not None and topic.msg is not wire.Message:
             name = topic.msg.TYPE
             data = _schema_data(topic.msg)
-        if ch is None:
-            ch = self._writer.register_channel(key, "json", self._schema_id(name, data))
-            self._channels[key] = ch
-        return ch, name, data
+        ch = self._writer.register_channel(key, "json", self._schema_id(name, data))
+        self._channels[key] = (ch, name, data)
+        return self._channels[key]
 
     def _schema_id(self, name: str, data: bytes) -> int:
         if not name:
@@ -237,12 +242,13 @@ class McapRecorder:
     def _scene_channel(self, topic: str, name: str) -> tuple[int, str, bytes]:
         from controller.scene.builder import schema_bytes
 
+        found = self._channels.get(topic)
+        if found is not None:
+            return found
         data = schema_bytes(name)
-        ch = self._channels.get(topic)
-        if ch is None:
-            ch = self._writer.register_channel(topic, "json", self._schema_id(name, data))
-            self._channels[topic] = ch
-        return ch, name, data
+        ch = self._writer.register_channel(topic, "json", self._schema_id(name, data))
+        self._channels[topic] = (ch, name, data)
+        return self._channels[topic]
 
     def _write_scene(self, m: Any) -> None:
         if self.sim_epoch is not None:

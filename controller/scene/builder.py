@@ -216,11 +216,20 @@ class SceneBuilder:
         self._next_static = -math.inf
         self._dirty: set[str] = set()  # plan entities to re-send: capture, route, ...
         self._object_shown = (False, False)  # (estimate, truth) entities sent
+        self._keys: dict[str, wire.KeyParts | None] = {}
+        self._handlers = {
+            name: getattr(self, f"_on_{name}")
+            for name in wire.TOPICS
+            if hasattr(self, f"_on_{name}")
+        }
 
     # -- input
     def ingest(self, key: str, obj: Any) -> list[SceneMessage]:
         """One bus payload (decoded JSON) on ``key``: the scene messages now due."""
-        parsed = wire.parse_key(key, self.fleet)
+        if key in self._keys:
+            parsed = self._keys[key]
+        else:
+            parsed = self._keys[key] = wire.parse_key(key, self.fleet)
         if parsed is None or not isinstance(obj, dict) or self.period == math.inf:
             return []
         name = parsed.topic.name
@@ -233,7 +242,7 @@ class SceneBuilder:
                 if self.frame_t is not None:
                     out += self._frame(self.frame_t)
                 self.frame_t = t
-        handler = getattr(self, f"_on_{name}", None)
+        handler = self._handlers.get(name)
         if handler is not None:
             out += handler(self._when(t), parsed, obj) or []
         return out
@@ -393,11 +402,11 @@ class SceneBuilder:
             )
         return ents
 
-    def _role(self, rid: str) -> tuple[P.Color, str]:
+    def _role(self, rid: str, actions: dict[str, str]) -> tuple[P.Color, str]:
         r = self.robots[rid]
         if r.lost:
             return LOST, f"{rid} LINK LOST"
-        action = self._actions().get(rid)
+        action = actions.get(rid)
         if action is not None and self.phase == "transport":
             col, label = ACTION_COLORS.get(action, GREY), f"{rid} {action}"
         elif self.capture is not None and rid in self.capture.get("robots", []):
@@ -415,10 +424,11 @@ class SceneBuilder:
 
     def _robot_entities(self, st: float, everything: bool) -> list[dict[str, Any]]:
         out = []
+        actions = self._actions()
         for rid, r in self.robots.items():
             if r.pose is None:
                 continue
-            look = self._role(rid)
+            look = self._role(rid, actions)
             if not everything and look == r.shown:
                 continue
             r.shown = look
