@@ -112,6 +112,7 @@ class McapRecorder:
         self._open_segment()
         self._q: queue.Queue[tuple[Any, ...] | None] = queue.Queue()
         self._sim_t = 0.0  # the latest plausible sim time seen (dry run)
+        self._last_log_ns = 0
         self.written = 0  # bus messages
         self.scene_written = 0
         self.dropped = 0
@@ -219,9 +220,10 @@ class McapRecorder:
             return
         self._put(key, None, payload, log_ns, pub_ns)
         self.written += 1
+        self._last_log_ns = log_ns
         if self.scene is not None:
             for m in self.scene.ingest(key, obj):
-                self._write_scene(m)
+                self._write_scene(m, log_ns)
 
     def _put(self, key: str, scene_schema: str | None, data: bytes, log_ns: int, pub_ns: int):
         """Add one message on its channel (the channel is looked up again after a new segment
@@ -250,12 +252,13 @@ class McapRecorder:
         self._channels[topic] = (ch, name, data)
         return self._channels[topic]
 
-    def _write_scene(self, m: Any) -> None:
-        if self.sim_epoch is not None:
-            ns = max(0, int(round(m.stamp * 1e9)))
-        else:
-            ns = max(0, int(m.stamp * 1e9))
-        self._put(m.topic, m.schema, m.payload(), ns, ns)
+    def _write_scene(self, m: Any, log_ns: int) -> None:
+        """A scene message: stamped with the run's clock (its header times too); in the lab
+        logged at the receive time of the bus message that completed it, like that message."""
+        stamp = max(0, int(round(m.stamp * 1e9)))
+        self._put(
+            m.topic, m.schema, m.payload(), stamp if self.sim_epoch is not None else log_ns, stamp
+        )
         self.scene_written += 1
 
     def _run(self) -> None:
@@ -289,7 +292,7 @@ class McapRecorder:
         if self.scene is not None:
             try:
                 for m in self.scene.flush():
-                    self._write_scene(m)
+                    self._write_scene(m, self._last_log_ns)
             except Exception:  # noqa: BLE001 - the log matters more than its last frame
                 log.exception("could not write the last scene frame")
         self._writer.finish()

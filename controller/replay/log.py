@@ -1,9 +1,11 @@
 """Replay of a run's MCAP log: metrics, plots and re-publication on the bus (the I/O edge).
 
-``load_run`` reads a log (a crash-cut one up to the cut) into tracks and events; ``metrics``
-turns them into the ``fleet replay --json`` object with the pure functions of
-``controller.metrics``; ``plot_run`` draws PNGs; ``republish`` plays the messages back on a
-zenoh bus with their original spacing (scaled by ``speed``).
+``load_run`` reads a log (a crash-cut one up to the cut; a folder of segments as one run) into
+tracks and events; ``metrics_of`` turns them into the ``fleet replay --json`` object with the
+pure functions of ``controller.replay.metrics`` and judges them with the run's own verdict code;
+``controller.viz.plot_run`` draws PNGs; ``controller.replay.republish`` plays the messages back
+on a zenoh bus paced on the log's own time; ``controller.replay.check`` is the regression
+replay.
 """
 
 from __future__ import annotations
