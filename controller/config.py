@@ -35,11 +35,16 @@ CLOSURE_MODES = ("exact", "paper")
 HEURISTICS = ("euclid", "wavefront", "skeleton")
 TRANSPORT_STRATEGIES = ("sa", "serpentine", "downhill")
 TRANSPORT_SCHEDULES = ("geometric", "logarithmic")
-TRANSPORT_INITIAL = ("hold", "random")
+TRANSPORT_INITIAL = ("lp", "hold", "random")
 SIM_BACKENDS = ("pybullet", "ideal")
 FILTERS = ("ekf", "ukf")
 ZENOH_MODES = ("peer", "client", "router")
-MISSION_KINDS = ("capture", "stage", "hold")  # what fleet daemon --mission and build_mission run
+# what fleet daemon --mission and build_mission run ("transport": carry an object the robots
+# already hold, from where they stand; "capture": the whole job)
+MISSION_KINDS = ("capture", "transport", "stage", "hold")
+# The capture planner's node budget: candidate nodes on the object's boundary at capture.spacing
+# (its per-problem tables grow linearly with the count, the GA's work per generation too).
+CAPTURE_NODE_BUDGET = 20_000
 
 Point = tuple[float, float]
 Pose = tuple[float, float, float]
@@ -223,7 +228,7 @@ class TransportSection:
     initial_temperature: float = _rule(0.3, gt=0, max=1e6)
     cooling: float = _rule(0.95, gt=0, max=1)  # per iteration (geometric schedule)
     schedule: str = _rule("geometric", choices=TRANSPORT_SCHEDULES)
-    initial_actions: str = _rule("hold", choices=TRANSPORT_INITIAL)
+    initial_actions: str = _rule("lp", choices=TRANSPORT_INITIAL)
     block_moves: float = _rule(0.5, min=0, max=1)  # share of proposals V[j:, i] = x
     seed: int = _rule(0, min=0)
     speed: float = _rule(0.15, gt=0, max=10)  # m/s, object (centroid + mean radius x yaw rate)
@@ -317,6 +322,7 @@ class FleetConfig:
     estimation: EstimationSection = EstimationSection()
     sim: SimSection = SimSection()
     source: str = ""
+    notes: tuple[str, ...] = ()  # what the loader changed (e.g. merged polygon vertices)
 
     def robot(self, robot_id: str) -> RobotConfig:
         for r in self.robots:
@@ -434,9 +440,12 @@ def _check_rules(meta: typing.Mapping[str, Any], value: Any, path: str, src: str
         )
 
 
+_NOT_KEYS = ("source", "notes")  # FleetConfig fields the loader fills, never TOML keys
+
+
 def _build(cls: type, table: dict[str, Any], path: str, src: str) -> Any:
     hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.name != "source"}
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.name not in _NOT_KEYS}
     for key in table:
         if key not in fields:
             where = f"{path}.{key}" if path else key
@@ -553,6 +562,76 @@ def _validate_object_placement(cfg: FleetConfig, obj: ObjectSection, src: str) -
             raise ConfigError(src, f"object.{key}", "the object placed there leaves world.bounds")
 
 
+def edge_node_counts(polygon: Any, spacing: float) -> np.ndarray:
+    """Capture candidate nodes per edge at ``spacing``: max(1, floor(length / spacing)), as
+    floats (a tiny spacing gives huge counts, never an overflow)."""
+    p = np.asarray(polygon, dtype=float)
+    lengths = np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1)
+    with np.errstate(over="ignore"):
+        return np.maximum(1.0, np.floor(lengths / spacing + 1e-9))
+
+
+def capture_budget_error(polygon: Any, spacing: float) -> str | None:
+    """Why ``spacing`` gives the capture planner more nodes than its budget, or None."""
+    n = float(edge_node_counts(polygon, spacing).sum())
+    if n <= CAPTURE_NODE_BUDGET:
+        return None
+    p = np.asarray(polygon, dtype=float)
+    per = float(np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).sum())
+    least = per / (CAPTURE_NODE_BUDGET - len(p))
+    return (
+        f"{spacing:g} m gives {n:.4g} candidate nodes on the object's boundary (perimeter "
+        f"{per:.4g} m); the capture planner's budget is {CAPTURE_NODE_BUDGET}: "
+        f"use capture.spacing >= {least:.3g}"
+    )
+
+
+def merge_vertices(poly: Any, tol: float = 1e-9) -> tuple[np.ndarray, int, int]:
+    """The polygon without repeated vertices (closer than ``tol`` m, a closing copy of the first
+    one included) and without vertices in the middle of a straight edge (|sin| of the turn below
+    ``tol``, the edges going on the same way): (vertices, duplicates removed, collinear removed).
+    The shape is unchanged; what changes is what "one robot per edge" counts."""
+    p = np.asarray(poly, dtype=float)
+    dup = col = 0
+    changed = True
+    while changed and len(p) > 3:
+        changed = False
+        step = np.roll(p, -1, axis=0) - p  # edge i: p[i] -> p[i+1]
+        length = np.linalg.norm(step, axis=1)
+        if np.any(length <= tol):
+            i = int(np.argmax(length <= tol))
+            p = np.delete(p, i + 1 if i + 1 < len(p) else i, axis=0)  # keep the first vertex
+            dup, changed = dup + 1, True
+            continue
+        prev = np.roll(step, 1, axis=0)  # edge arriving at vertex i
+        cross = prev[:, 0] * step[:, 1] - prev[:, 1] * step[:, 0]
+        straight = (np.abs(cross) <= tol * np.roll(length, 1) * length) & (
+            (prev * step).sum(axis=1) > 0
+        )
+        if np.any(straight):
+            p = np.delete(p, int(np.argmax(straight)), axis=0)
+            col, changed = col + 1, True
+    return p, dup, col
+
+
+def _object(cfg: FleetConfig, src: str) -> tuple[ObjectSection, tuple[str, ...]]:
+    """The object section with its polygon merged (duplicate and collinear vertices, noted),
+    validated and within the capture planner's node budget."""
+    merged, dup, col = merge_vertices(cfg.object.polygon)
+    notes = cfg.notes
+    if dup or col:
+        notes += (
+            f"object.polygon: merged {dup} duplicate and {col} collinear vertices "
+            f"({len(cfg.object.polygon)} -> {len(merged)}; the capture's one robot per edge "
+            "counts the merged edges)",
+        )
+    obj = dataclasses.replace(cfg.object, polygon=_polygon(merged, "object.polygon", src))
+    budget = capture_budget_error(obj.polygon, cfg.capture.spacing)
+    if budget:
+        raise ConfigError(src, "capture.spacing", budget)
+    return obj, notes
+
+
 def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
     """Cross-field rules, after every key was checked on its own."""
     (x0, y0), (x1, y1) = cfg.world.bounds
@@ -564,12 +643,10 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
         dataclasses.replace(o, polygon=_polygon(o.polygon, f"obstacles[{i}].polygon", src))
         for i, o in enumerate(cfg.obstacles)
     )
-    obj = dataclasses.replace(
-        cfg.object, polygon=_polygon(cfg.object.polygon, "object.polygon", src)
-    )
+    obj, notes = _object(cfg, src)
     _validate_robots(cfg, obstacles, src)
     _validate_object_placement(cfg, obj, src)
-    return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src)
+    return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src, notes=notes)
 
 
 def parse_config(data: dict[str, Any], source: str = "") -> FleetConfig:
@@ -593,11 +670,14 @@ def load_config(path: str | Path) -> FleetConfig:
 
 
 def config_to_dict(cfg: FleetConfig) -> dict[str, Any]:
-    """The config as plain data (for logs and --json); tuples become lists."""
+    """The config as plain data (for logs and --json); tuples become lists. The loader's notes
+    are left out (they are no config key: the data must load again)."""
 
     def conv(v: Any) -> Any:
         if dataclasses.is_dataclass(v):
-            return {f.name: conv(getattr(v, f.name)) for f in dataclasses.fields(v)}
+            return {
+                f.name: conv(getattr(v, f.name)) for f in dataclasses.fields(v) if f.name != "notes"
+            }
         if isinstance(v, tuple | list):
             return [conv(x) for x in v]
         return v

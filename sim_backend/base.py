@@ -66,6 +66,11 @@ class World(Protocol):
         """True world-frame (vx, vy, wz) of the object frame origin."""
         ...
 
+    def contact_forces(self) -> dict[str, float]:
+        """Normal force (N) each robot in contact presses on the object with (truth; empty
+        where the world has no forces)."""
+        ...
+
     @property
     def object_alive(self) -> bool:
         """Whether the object's own drive is still on. It goes limp ("compromised": it moves

@@ -82,6 +82,7 @@ class IdealWorld:
                 self._drive_object()
             else:
                 self._push_object()
+            self._clip_robots()
             self._obj_vel = (self._obj - before) / self.dt
             self._obj_vel[2] = geometry.wrap_angle(self._obj[2] - before[2]) / self.dt
             self._t += self.dt
@@ -105,7 +106,8 @@ class IdealWorld:
         if moved:
             self._obj = nxt
         actual = target if moved else np.zeros(3)
-        self._give_up.update(self._t + self.dt, self.dt, target, actual)
+        pressed = not moved and self._blocked(self._obj, robots=True)
+        self._give_up.update(self._t + self.dt, self.dt, target, actual, pushed=pressed)
 
     def _push_object(self) -> None:
         """The limp object is pushed out of the robot discs that overlap it."""
@@ -127,17 +129,33 @@ class IdealWorld:
         push = -nrm * (depth[touching] - CONTACT_SLACK)[:, None]  # moves the object away
         c = geometry.transform(self._centroid[None], self._obj)[0]
         lever = near - c
-        turn = np.sum(lever[:, 0] * push[:, 1] - lever[:, 1] * push[:, 0]) / self._rbar**2
-        nxt = self._obj + np.array([*push.sum(axis=0), turn])
+        # the mean of the pushes (a squeeze from both sides moves nothing)
+        move = push.mean(axis=0)
+        turn = np.mean(lever[:, 0] * push[:, 1] - lever[:, 1] * push[:, 0]) / self._rbar**2
         # rotate about the centroid, not the frame origin
         rel = self._obj[:2] - c
         cs, sn = np.cos(turn), np.sin(turn)
-        nxt[:2] = (
-            c + push.sum(axis=0) + np.array([cs * rel[0] - sn * rel[1], sn * rel[0] + cs * rel[1]])
+        nxt = np.array(
+            [*(c + move + [cs * rel[0] - sn * rel[1], sn * rel[0] + cs * rel[1]]), self._obj[2]]
         )
-        nxt[2] = geometry.wrap_angle(nxt[2])
+        nxt[2] = geometry.wrap_angle(nxt[2] + turn)
         if not self._blocked(nxt, robots=False):
             self._obj = nxt
+
+    def _clip_robots(self) -> None:
+        """The object is solid: a robot disc still in it is put back on its surface."""
+        world = geometry.transform(self._poly, self._obj)
+        xy = self._pose[:, :2]
+        sd = geometry.polygon_signed_distance(xy, world)
+        inside = self._radius - sd > CONTACT_SLACK
+        if not np.any(inside):
+            return
+        d, closest = geometry.point_segment_distance(xy[inside], world, np.roll(world, -1, 0))
+        near = closest[np.arange(len(d)), np.argmin(d, axis=1)]
+        out = xy[inside] - near
+        out[sd[inside] < 0] *= -1.0
+        nrm = out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
+        self._pose[inside, :2] = near + nrm * (self._radius[inside] - CONTACT_SLACK)[:, None]
 
     def robot_pose(self, robot_id: str) -> np.ndarray:
         return self._pose[self._index[robot_id]].copy()
@@ -150,6 +168,10 @@ class IdealWorld:
 
     def object_velocity(self) -> np.ndarray:
         return self._obj_vel.copy()
+
+    def contact_forces(self) -> dict[str, float]:
+        """No forces in a kinematic world."""
+        return {}
 
     def check(self) -> WorldCheck:
         return check_discs(

@@ -33,14 +33,22 @@ class GiveUp:
     def alive(self) -> bool:
         return self.gave_up_at is None
 
-    def update(self, t: float, dt: float, target: np.ndarray, actual: np.ndarray) -> bool:
+    def update(
+        self,
+        t: float,
+        dt: float,
+        target: np.ndarray,
+        actual: np.ndarray,
+        pushed: bool = False,
+    ) -> bool:
         """Account ``dt`` seconds ending at ``t`` with target and actual world velocities (vx,
-        vy, ...); returns whether the object is still alive."""
+        vy, ...); ``pushed``: something presses on it (a kinematic world's contact, where a
+        held object's velocities say nothing). Returns whether the object is still alive."""
         if not self.alive or self.after <= 0:
             return self.alive
         off = float(np.hypot(*(np.asarray(actual[:2]) - np.asarray(target[:2]))))
         speed = float(np.hypot(*np.asarray(target[:2])))
-        if off > max(0.5 * speed, self.slack):
+        if pushed or off > max(0.5 * speed, self.slack):
             self.thwarted_for += dt
             if self.thwarted_for >= self.after:
                 self.gave_up_at = t

@@ -598,6 +598,17 @@ class PybulletWorld:
             self.cfg.bounds_array(),
         )
 
+    def contact_forces(self) -> dict[str, float]:
+        """The normal force (N) each robot presses on the object with now (truth, from the
+        solver's contact points; robots not touching it are left out)."""
+        out: dict[str, float] = {}
+        for rid, body in zip(self._ids, self._bodies, strict=True):
+            pts = pb.getContactPoints(bodyA=body, bodyB=self._obj, physicsClientId=self._cid)
+            total = float(sum(p[9] for p in pts))
+            if total > 0.0:
+                out[rid] = total
+        return out
+
     def apply_object_force(self, force: tuple[float, float], at: tuple[float, float] | None = None):
         """Push the object for the next step with a world-frame force (N) at a world point.
 

@@ -29,9 +29,11 @@ def run(args) -> int:
         "fleet": cfg.fleet.name,
         "robots": list(cfg.robot_ids),
         "obstacles": len(cfg.obstacles),
+        "notes": list(cfg.notes),
     }
     if args.json:
         emit_json(summary)
     else:
         print(f"{cfg.source}: ok ({len(cfg.robots)} robots, {len(cfg.obstacles)} obstacles)")
+        print("".join(f"note: {n}\n" for n in cfg.notes), end="")
     return 0

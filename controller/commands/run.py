@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from controller.commands import add_config_argument
-from controller.config import SIM_BACKENDS
+from controller.config import MISSION_KINDS, SIM_BACKENDS
 
 
 def add_arguments(parser, word: str) -> None:
@@ -30,6 +30,13 @@ def add_arguments(parser, word: str) -> None:
         "--max-time", type=float, default=None, help="sim seconds (default: sim.max_time)"
     )
     parser.add_argument("--backend", choices=SIM_BACKENDS, help="override sim.backend for this run")
+    parser.add_argument(
+        "--mission",
+        choices=MISSION_KINDS,
+        default="capture",
+        help="capture: the whole job (default); transport: carry an object the robots already "
+        "hold; stage, hold: bring-up missions",
+    )
 
 
 def run(args) -> int:
@@ -51,7 +58,7 @@ def run(args) -> int:
         if problem:
             raise InputError(f"--gui: {problem}")
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name)
-    mission = build_mission(cfg)  # MissionError: exit 1 (cli.exit_code)
+    mission = build_mission(cfg, args.mission)  # MissionError: exit 1 (cli.exit_code)
     print(f"fleet run: {cfg.source}, backend {cfg.sim.backend}, log {out}", file=sys.stderr)
     summary = DryRun(cfg, mission, out, gui=args.gui, max_time=args.max_time, viz=args.viz).run()
     ok = summary["status"] == "ok"

@@ -38,6 +38,11 @@ def build_mission(
         raise MissionError(f"unknown mission {kind!r}; expected one of {MISSION_KINDS}")
     if kind == "hold":
         return HoldMission(len(cfg.robots))
+    if kind == "transport":
+        from controller.mission.transport import transport_from_start
+
+        gen = rng if rng is not None else np.random.default_rng(cfg.transport.seed)
+        return transport_from_start(cfg, gen)
     if kind == "stage":
         return GotoMission(staging_targets(cfg), RobotLimits.from_config(cfg.robots))
     gen = rng if rng is not None else np.random.default_rng(cfg.capture.seed)

@@ -23,7 +23,8 @@ from controller.planning.approach import envelope, interception_times
 
 
 class MissionError(RuntimeError):
-    """The mission cannot be built for this fleet (e.g. too few robots for the capture)."""
+    """The mission cannot be built for this fleet (e.g. no feasible capture plan: the message
+    gives the planner's reason)."""
 
 
 @dataclass(frozen=True)
@@ -45,17 +46,12 @@ class CaptureSet:
 
 def plan_capture_set(cfg: FleetConfig, rng: np.random.Generator) -> CaptureSet:
     """The GA's capture points, reinforced to hold ``capture.hold_force`` (MissionError when the
-    GA finds no closure, or the fleet is too small to close or to hold the object)."""
-    from controller.planning.capture import CaptureParams, plan_capture
+    GA finds no feasible plan, with its reason, or the fleet is too small to hold the object)."""
+    from controller.planning.capture import plan_for_fleet
 
-    n = len(cfg.robots)
-    plan = plan_capture(
-        cfg.object_polygon(), cfg.max_robot_radius, CaptureParams.from_config(cfg.capture), rng
-    )
-    if not plan.form_closure and cfg.capture.closure == "exact":
-        raise MissionError("the capture GA found no set of points in form closure")
-    if plan.robots_needed > n:
-        raise MissionError(f"the capture needs {plan.robots_needed} robots; the fleet has {n}")
+    plan = plan_for_fleet(cfg, rng)
+    if not plan.feasible:
+        raise MissionError(f"no feasible capture plan: {plan.reason}")
     chosen = np.asarray(plan.chosen, int)
     capacity, added = None, 0
     if cfg.capture.hold_force > 0:
@@ -103,7 +99,7 @@ def _reinforce(
     r = cfg.max_robot_radius
     centres = cand + r * nrm
     d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
-    conflict = d < 2 * r + cfg.capture.clearance
+    conflict = d < 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)  # as the GA
     np.fill_diagonal(conflict, False)
     force = cfg.capture.hold_force or TOKEN_LOAD
     load = disturbances(force, force * np.sqrt(geometry.polar_moment_per_mass(poly)))

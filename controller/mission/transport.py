@@ -72,12 +72,18 @@ class TransportSettings:
     subgoal_heading: float = math.radians(8.0)
     corridor: float = 0.4
     progress_step: float = 0.05
-    contact_tolerance: float = 0.08
+    contact_tolerance: float = 0.15
     back_off: float = 0.25
     rearrange_timeout: float = 60.0
     waypoint_reached: float = 0.08
     contact_gain: float = 1.5  # 1/s, pull back onto the contact point
+    arrival_tolerance: float = 0.03  # m: a relocating robot this close to its contact arrived
     max_route_replans: int = 5
+    settle_margin: float = 0.6  # the estimate must be this share of the tolerances from the goal
+    stuck_plans: int = 3
+    park_margin: float = 0.05  # m beyond the lane's band where idle robots wait
+    turn_margin: float = 1.5  # a set chosen to turn the object produces this times the wrench
+    max_rearrangements: int = 4  # re-arrangements in a row without progress, then stalled
 
     @classmethod
     def from_config(cls, cfg: FleetConfig) -> TransportSettings:
@@ -138,6 +144,7 @@ class TransportMission:
         self.progress_t = 0.0
         self.route_replans = 0
         self.rearrangements = 0
+        self.futile = 0  # re-arrangements since the object last made progress
         self.relocations = 0
         self.moves: dict[int, list[np.ndarray]] = {}  # robot -> object-frame path (rearranging)
         self.targets: dict[int, Contact] = {}
@@ -145,6 +152,7 @@ class TransportMission:
         self.done_t: float | None = None
         self.failure: dict[str, Any] | None = None
         self.plans = 0
+        self.stuck = 0
         self.plan_energy: list[float] = []
         self.forces: list[float] = []
 
@@ -273,62 +281,57 @@ class TransportMission:
 
     # --- rearrange ----------------------------------------------------------------------------
     def _start_rearrangement(self, view: FleetView, pose: np.ndarray, events: list[Event]):
-        """Sharma Eq. 5 for the segment's direction, robots matched to the new contacts."""
-        from controller.planning.capture import CaptureParams, plan_push_arrangement
-
+        """New contacts for the segment (Eq. 5 along its direction, or a turning set when it
+        mostly turns the object); the robots nearest to them move there, the others keep their
+        contacts (one too close to a new contact lets go)."""
         self._go(Phase.REARRANGE, view.t, events)
         self.rearrangements += 1
+        self.futile += 1
         self.rearrange_t = view.t
-        d = self._direction(pose)[:2]
+        twist = self._direction(pose)
+        d = twist[:2]
         if not np.any(d):
             d = np.array([1.0, 0.0])
-        k = len(self.robots)
-        idx, value = plan_push_arrangement(
-            self.cfg.object_polygon(),
-            self.cfg.max_robot_radius,
-            d,
-            k,
-            CaptureParams.from_config(self.cfg.capture),
-            self.rng,
-        )
-        from controller.planning.capture import candidate_nodes
-
-        cand = candidate_nodes(
-            geometry.ensure_ccw(self.cfg.object_polygon()),
-            self.cfg.max_robot_radius,
-            self.cfg.capture.spacing,
-            self.cfg.capture.clearance,
-        )
-        new_pts, new_nrm = cand.points[idx], cand.normals[idx]
-        cur = np.array(
-            [
-                c.point if c is not None else geometry.inverse_transform(
-                    view.poses[i, None, :2], pose
-                )[0]
-                for i, c in self.contacts.items()
-            ]
-        )  # fmt: skip
-        cost = np.linalg.norm(cur[:, None] - new_pts[None], axis=-1)
+        cfg = self.cfg
+        r = cfg.max_robot_radius
+        # a segment that turns the object more than a little: Eq. 5 knows no torque
+        turning = abs(twist[2]) * self.model.mean_radius > 0.3  # its share of the unit twist
+        if turning:
+            new_pts, new_nrm, value, n_push = self._turning_set(twist)
+        else:
+            new_pts, new_nrm, value, n_push = self._pushing_set(d)
+        ids = list(self.contacts)
+        here = geometry.inverse_transform(view.poses[ids, :2], pose)
+        cost = np.linalg.norm(here[:, None] - (new_pts + r * new_nrm)[None], axis=-1)
         rows, cols = linear_sum_assignment(cost)
         self.targets.clear()
         self.moves.clear()
-        ids = list(self.contacts)
-        for r, c in zip(rows, cols, strict=True):
-            i = ids[r]
-            target = Contact(new_pts[c], -new_nrm[c])
-            self.targets[i] = target
-            if cost[r, c] > self.s.contact_tolerance:
-                start = geometry.inverse_transform(view.poses[i, None, :2], pose)[0]
-                end = new_pts[c] + self.cfg.robots[i].radius * new_nrm[c]
-                self.moves[i] = list(relocation_path(self.model, start, end))
+        chosen = set()
+        for row, col in zip(rows, cols, strict=True):
+            i = ids[row]
+            chosen.add(i)
+            self.targets[i] = Contact(new_pts[col], -new_nrm[col])
+            if cost[row, col] > self.s.arrival_tolerance:
+                end = new_pts[col] + cfg.robots[i].radius * new_nrm[col]
+                self.moves[i] = list(relocation_path(self.model, here[row], end))
                 self.contacts[i] = None
                 self.relocations += 1
+        centres = new_pts + r * new_nrm
+        for i in ids:
+            c = self.contacts[i]
+            if i in chosen or c is None:
+                continue
+            mine = c.point - r * c.inward
+            if np.any(np.linalg.norm(centres - mine, axis=1) < 2 * r + cfg.capture.clearance):
+                self.contacts[i] = None  # in the way of a new contact: it lets go
         events.append(
             (
                 "rearrange",
                 {
                     "t": view.t,
                     "direction": np.round(d, 4).tolist(),
+                    "pushers": n_push,
+                    "basis": "turn_capacity" if turning else "eq5",
                     "eq5_value": float(value),
                     "moving": [view.ids[i] for i in self.moves],
                     "contacts": {
@@ -338,29 +341,76 @@ class TransportMission:
             )
         )
 
+    def _pushing_set(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
+        """Sharma Eq. 5 along D: the fewest pushers that overcome the floor friction (plus one
+        for the torque), at the candidate nodes pushing hardest along D."""
+        from controller.planning.capture import (
+            CaptureParams,
+            candidate_nodes,
+            plan_push_arrangement,
+        )
+
+        cfg, m = self.cfg, self.model
+        weakest = min(cfg.robots[i].max_force for i in self.robots)
+        friction = m.floor_friction * m.mass * 9.81
+        n_push = int(min(len(self.robots), math.ceil(friction / weakest) + 1))
+        r = cfg.max_robot_radius
+        poly = geometry.ensure_ccw(cfg.object_polygon())
+        params = CaptureParams.from_config(cfg.capture)
+        idx, value = plan_push_arrangement(poly, r, d, n_push, params, self.rng)
+        cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
+        return cand.points[idx], cand.normals[idx], float(value), n_push
+
+    def _turning_set(self, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
+        """A segment that mostly turns the object: Eq. 5 has no torque, so the set is the
+        fewest candidate nodes whose contact forces (within ``max_force``) produce the wrench
+        the turn needs with a margin (the capacity LP of ``planning.hold``, greedy with swaps);
+        the value reported is that capacity (≥ 1: the set can turn the object)."""
+        from controller.planning.capture import CaptureParams, make_problem
+        from controller.planning.hold import reinforce
+
+        cfg, m = self.cfg, self.model
+        r = cfg.max_robot_radius
+        poly = geometry.ensure_ccw(cfg.object_polygon())
+        prob = make_problem(poly, r, CaptureParams.from_config(cfg.capture))
+        need = required_wrench(twist * self.params.speed, m.mass, m.floor_friction, m.mean_radius)
+        weakest = min(cfg.robots[i].max_force for i in self.robots)
+        res = reinforce(
+            prob.cand.points,
+            prob.cand.normals,
+            m.centroid,
+            np.zeros(0, int),
+            np.ones(len(prob.cand.points), bool),
+            prob.conflict,
+            weakest,
+            -self.s.turn_margin * need[None],
+            len(self.robots),
+        )
+        return (
+            prob.cand.points[res.chosen],
+            prob.cand.normals[res.chosen],
+            float(res.capacity),
+            len(res.chosen),
+        )
+
     def _rearrange(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
-        """Movers follow their path around the object; the others hold still."""
+        """Movers follow their path around the object; the others hold still. (The stall clock
+        waits: re-arranging makes no progress by design; it has its own timeout.)"""
+        self.progress_t = view.t
         vel = np.zeros((self.n, 2))
         hold = np.ones(self.n, bool)
-        for i, path in list(self.moves.items()):
-            here = view.poses[i, :2]
-            world = geometry.transform(np.asarray(path), pose)
-            while len(world) > 1 and np.linalg.norm(world[0] - here) < self.s.waypoint_reached:
-                path.pop(0)
-                world = world[1:]
-            err = world[0] - here
-            dist = float(np.linalg.norm(err))
-            if len(world) == 1 and dist < self.s.contact_tolerance:
-                del self.moves[i]
-                self.contacts[i] = self.targets[i]
-                continue
-            speed = min(1.5 * dist, self.cfg.robots[i].max_speed)
-            vel[i] = err / max(dist, 1e-9) * speed
+        for i in self.moves:
             hold[i] = False
+        touch = np.zeros(self.n, bool)
+        for i, c in self.contacts.items():
+            touch[i] = c is not None
+        self._follow_paths(view, pose, vel, touch)
+        self._park(view, pose, vel, hold)
         if not self.moves:
             for i, c in self.targets.items():
                 self.contacts[i] = c
-            if self._can_push(pose):
+            self.targets.clear()
+            if self._can_push(pose) or self.futile < self.s.max_rearrangements:
                 self._go(Phase.TRANSPORT, view.t, events)
                 return self._transport(view, pose, events)
             return self._fail(
@@ -368,22 +418,46 @@ class TransportMission:
             )
         if view.t - self.rearrange_t > self.s.rearrange_timeout:
             return self._fail(Reason.STALLED, "re-arrangement timed out", view, events)
-        touch = np.zeros(self.n, bool)
-        for i, c in self.contacts.items():
-            touch[i] = c is not None
         return self._intent(vel, events, pose, touch, hold)
+
+    def _park(self, view: FleetView, pose: np.ndarray, vel: np.ndarray, hold: np.ndarray) -> None:
+        """Robots without a contact or a path leave the relocation lane: each one whose disc
+        reaches into the lane's band backs straight away from the object until it is clear
+        (a robot left on the lane where its last path ended blocks every path that passes)."""
+        if not self.moves:
+            return
+        m, r = self.model, self.cfg.max_robot_radius
+        clear = 5.0 * r + self.s.park_margin  # the lane at 3r: its robots reach out to 4r
+        hull = geometry.convex_hull(m.polygon)
+        for i in self.robots:
+            i = int(i)
+            if i in self.moves or self.contacts[i] is not None:
+                continue
+            local = geometry.inverse_transform(view.poses[i, None, :2], pose)
+            d, closest = geometry.point_segment_distance(local, hull, np.roll(hull, -1, axis=0))
+            k = int(np.argmin(d[0]))
+            if d[0, k] >= clear or geometry.points_in_polygon(local, hull)[0]:
+                continue
+            out = (local[0] - closest[0, k]) / max(float(d[0, k]), 1e-9)
+            speed = min(1.5 * (clear - float(d[0, k])) + 0.05, self.cfg.robots[i].max_speed)
+            vel[i] = geometry.rot(float(pose[2])) @ out * speed
+            hold[i] = False
 
     # --- transport ----------------------------------------------------------------------------
     def _transport(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         goal = np.asarray(self.cfg.object.goal, float)
-        if self._at(pose, goal, self.s.tolerance, self.s.heading_tolerance):
+        m = self.s.settle_margin  # stop well inside: the estimate is a centimetre and a degree off
+        if self._at(pose, goal, m * self.s.tolerance, m * self.s.heading_tolerance):
             self.done_t = view.t
             self._go(Phase.DONE, view.t, events)
             events.append(("delivered", {"t": view.t, "pose": np.round(pose, 4).tolist()}))
             return self._done(view, pose, events)
         stall = self._stalled(view, pose)
-        if stall:
+        if stall and self.futile >= self.s.max_rearrangements:
             return self._fail(Reason.STALLED, stall, view, events)
+        if stall or view.t - self.progress_t > self.s.stall_timeout / 2:
+            # receding-horizon plans can keep re-positioning without ever pushing: re-arrange
+            self.stuck = self.s.stuck_plans
         if self._off_route(pose):
             if self.route_replans >= self.s.max_route_replans:
                 return self._fail(Reason.STALLED, "left the route corridor too often", view, events)
@@ -393,6 +467,12 @@ class TransportMission:
         if self._subgoal_reached(pose):
             self.subgoal += 1
             return self._begin_segment(view, pose, events)
+        if self.stuck >= self.s.stuck_plans:  # the contacts cannot push as the route asks
+            self.stuck = 0
+            self.planner.reset()
+            self.last_plan = None
+            self._start_rearrangement(view, pose, events)
+            return self._rearrange(view, pose, events)
         due = self.plan_t is None or self.last_plan is None
         due = due or view.t - self.plan_t >= self.last_plan.interval - 1e-9
         if due:
@@ -412,23 +492,38 @@ class TransportMission:
         return self._at(pose, g, self.s.subgoal_tolerance, self.s.subgoal_heading)
 
     def _remaining(self, pose: np.ndarray) -> float:
+        """What is left of the route (m): the way to the nearest route segment, the rest of
+        that segment and every later one, turns counted as arc at the mean radius. (A straight
+        line to the goal would call a detour around an obstacle no progress.)"""
+        wp = self.route.waypoints
+        r = self.model.mean_radius
         goal = np.asarray(self.cfg.object.goal, float)
-        d = float(np.linalg.norm(pose[:2] - goal[:2]))
-        return d + self.model.mean_radius * abs(geometry.wrap_angle(pose[2] - goal[2]))
+        if len(wp) < 2:
+            return float(np.linalg.norm(pose[:2] - goal[:2])) + r * abs(
+                geometry.wrap_angle(pose[2] - goal[2])
+            )
+        step = np.linalg.norm(np.diff(wp[:, :2], axis=0), axis=1)
+        step = step + r * np.abs(geometry.wrap_angle(np.diff(wp[:, 2])))
+        tail = np.concatenate([np.cumsum(step[::-1])[::-1][1:], [0.0]])  # after segment j
+        dist, closest = geometry.point_segment_distance(pose[None, :2], wp[:-1, :2], wp[1:, :2])
+        j = int(np.argmin(dist[0]))
+        rest = float(np.linalg.norm(wp[j + 1, :2] - closest[0, j]))
+        turn = r * abs(geometry.wrap_angle(pose[2] - wp[j + 1, 2]))
+        return float(dist[0, j]) + rest + turn + float(tail[j])
 
     def _stalled(self, view: FleetView, pose: np.ndarray) -> str:
         rem = self._remaining(pose)
         if rem < self.best_remaining - self.s.progress_step:
             self.best_remaining = rem
             self.progress_t = view.t
+            self.futile = 0
         if view.t - self.progress_t > self.s.stall_timeout:
             return f"no progress for {self.s.stall_timeout:g} s, {rem:.2f} m from the goal"
         return ""
 
     def _off_route(self, pose: np.ndarray) -> bool:
         wp = self.route.waypoints
-        d = geometry.polygon_boundary_distance(pose[None, :2], wp[:, :2]) if len(wp) > 2 else None
-        if d is None:
+        if len(wp) < 2:
             return False
         seg_a, seg_b = wp[:-1, :2], wp[1:, :2]
         dist, _ = geometry.point_segment_distance(pose[None, :2], seg_a, seg_b)
@@ -451,11 +546,16 @@ class TransportMission:
                     max_force=r.max_force,
                     max_speed=r.max_speed,
                     contact=None if c is None else (c.point, c.inward),
-                    action=self.actions[int(i)],
+                    action="relocate" if int(i) in self.moves else self.actions[int(i)],
                     id=r.id,
+                    target=self._target_of(int(i)),
                 )
             )
         return tuple(out)
+
+    def _target_of(self, i: int) -> tuple[np.ndarray, np.ndarray] | None:
+        t = self.targets.get(i) if i in self.moves else None
+        return None if t is None else (t.point, t.inward)
 
     def _local_plan(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> None:
         cfg = self.cfg
@@ -472,21 +572,72 @@ class TransportMission:
         self.plan_t = view.t
         self.last_plan = plan
         self.plans += 1
+        first_ok = plan.lp_status[0] == "optimal" if plan.lp_status else True
+        self.stuck = 0 if first_ok or self.moves else self.stuck + 1
         self.plan_energy.append(plan.energy.total)
+        # a relocation costs seconds of travel the kinematic model does not pay in full: the
+        # robots leave their contacts only when the contacts they have cannot push as asked
+        relocate_ok = not self._can_push(pose)
         for k, i in enumerate(self.robots):
+            i = int(i)
             action = plan.first_actions[k]
-            self.actions[int(i)] = action
-            if action_code(action) == RELOCATE and self.contacts[int(i)] is not None:
-                self.relocations += 1
+            self.actions[i] = action
             p, nv = plan.contact_points[k], plan.contact_normals[k]
+            if i in self.moves:
+                continue  # committed to a relocation: it finishes it first
             if np.all(np.isfinite(p)) and action_code(action) in ATTACHED:
-                self.contacts[int(i)] = Contact(p.copy(), nv.copy())
+                self.contacts[i] = Contact(p.copy(), nv.copy())
+            elif action_code(action) == RELOCATE and np.all(np.isfinite(p)) and relocate_ok:
+                self._commit_relocation(i, Contact(p.copy(), nv.copy()), view, pose)
             elif action_code(action) == RELOCATE:
-                self.contacts[int(i)] = None
+                self.actions[i] = "follow"
         f = plan.forces[0]
         self.forces.extend(float(x) for x in f if x > 0)
+        moving = {
+            view.ids[i]: float(np.sum(np.linalg.norm(np.diff(np.asarray(p), axis=0), axis=1)))
+            for i, p in self.moves.items()
+        }
         ids = [view.ids[int(i)] for i in self.robots]  # the plan's rows (the scene's pushers)
-        events.append(("transport", {"t": view.t, "robots": ids, **plan.to_dict()}))
+        events.append(
+            ("transport", {"t": view.t, "robots": ids, **plan.to_dict(), "relocating": moving})
+        )
+
+    def _commit_relocation(self, i: int, target: Contact, view: FleetView, pose: np.ndarray):
+        """A robot the plan relocates goes to that contact along the lane around the object,
+        and keeps to it until it arrives (a plan made every interval would otherwise move the
+        target before it gets there)."""
+        r = self.cfg.robots[i].radius
+        start = geometry.inverse_transform(view.poses[i, None, :2], pose)[0]
+        end = target.point - r * target.inward
+        cur = self.contacts[i]
+        if cur is not None and np.linalg.norm(cur.point - target.point) < 2 * r:
+            self.contacts[i] = target  # a short move along the boundary: stay attached
+            return
+        self.moves[i] = list(relocation_path(self.model, start, end))
+        self.targets[i] = target
+        self.contacts[i] = None
+        self.relocations += 1
+
+    def _follow_paths(
+        self, view: FleetView, pose: np.ndarray, vel: np.ndarray, touch: np.ndarray
+    ) -> None:
+        """Robots on a committed path: pure pursuit of its next point; arrival attaches them;
+        on the last leg a robot may touch the object (it is coming to its contact)."""
+        for i, path in list(self.moves.items()):
+            here = view.poses[i, :2]
+            world = geometry.transform(np.asarray(path), pose)
+            while len(world) > 1 and np.linalg.norm(world[0] - here) < self.s.waypoint_reached:
+                path.pop(0)
+                world = world[1:]
+            err = world[0] - here
+            dist = float(np.linalg.norm(err))
+            if len(world) == 1 and dist < self.s.arrival_tolerance:
+                del self.moves[i]
+                self.contacts[i] = self.targets.pop(i)
+                continue
+            speed = min(1.5 * dist + 0.05, self.cfg.robots[i].max_speed)
+            vel[i] = err / max(dist, 1e-9) * speed
+            touch[i] = len(world) <= 2
 
     def _execute(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         """The plan's first interval, closed every tick: a robot holding a contact moves with
@@ -502,6 +653,8 @@ class TransportMission:
         for k, i in enumerate(self.robots):
             code = action_code(plan.first_actions[k])
             c = self.contacts[int(i)]
+            if int(i) in self.moves:
+                continue  # on its committed path (below)
             if code not in ATTACHED or c is None or code in (SLIDE_LEFT, SLIDE_RIGHT):
                 vel[i] = plan.velocities[k]
                 touch[i] = code in ATTACHED
@@ -517,6 +670,7 @@ class TransportMission:
             vmax = self.cfg.robots[i].max_speed
             vel[i] = v if speed <= vmax else v * vmax / speed
             touch[i] = True
+        self._follow_paths(view, pose, vel, touch)
         return self._intent(vel, events, pose, touch, None, twist)
 
     # --- done ---------------------------------------------------------------------------------
@@ -565,3 +719,49 @@ class TransportMission:
             "planned_force_mean_n": float(f.mean()) if len(f) else None,
             "transport_failure": self.failure,
         }
+
+
+class _Ready:
+    """Waits for every robot's and the object's first estimates, then hands over."""
+
+    def __init__(self, cfg: FleetConfig, make) -> None:
+        self.cfg, self.make, self.n = cfg, make, len(cfg.robots)
+        self.inner: TransportMission | None = None
+
+    def plan(self, view: FleetView) -> Intent:
+        if self.inner is None:
+            ready = view.object_pose is not None and bool(np.all(view.present & ~view.stale))
+            if not ready:
+                return Intent(np.zeros((self.n, 2)), Phase.PLAN, stop=True)
+            self.inner = self.make(view)
+        return self.inner.plan(view)
+
+    def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
+        if self.inner is None:
+            return MissionOutput(np.zeros((self.n, 3)), intent.phase, list(intent.events))
+        return self.inner.safety(view, intent)
+
+    def summary(self) -> dict[str, Any]:
+        return {} if self.inner is None else self.inner.summary()
+
+
+def transport_from_start(cfg: FleetConfig, rng: np.random.Generator, reach: float = 0.03):
+    """``fleet run/daemon --mission transport``: carry an object the robots already hold. The
+    robots whose discs are within ``reach`` m of the object's surface at the first estimates
+    hold their nearest boundary point; the others are free."""
+
+    def make(view: FleetView) -> TransportMission:
+        pose = np.asarray(view.object_pose, float)
+        poly = geometry.ensure_ccw(cfg.object_polygon())
+        local = geometry.inverse_transform(view.poses[:, :2], pose)
+        a, b = poly, np.roll(poly, -1, axis=0)
+        d, closest = geometry.point_segment_distance(local, a, b)
+        j = np.argmin(d, axis=1)
+        near = closest[np.arange(len(local)), j]
+        radii = np.array([r.radius for r in cfg.robots])
+        gap = d[np.arange(len(local)), j] - radii
+        held = np.flatnonzero(gap < reach)
+        normals = geometry.outward_normals(poly)[j]
+        return TransportMission(cfg, rng, SafetyStage(cfg), held, near[held], normals[held])
+
+    return _Ready(cfg, make)

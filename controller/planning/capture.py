@@ -1,30 +1,50 @@
 """Capture points in form closure by a genetic algorithm (Sharma et al. 2007, §2 and §4.1).
 
-Definitions follow the capture issue (they stand over the paper):
+Definitions follow the capture issues (they stand over the paper):
 
 - Candidate nodes along each counter-clockwise edge at ``spacing``; a node is dropped when a
   robot disc of radius r at ``p + (r + clearance)·n`` would overlap the object.
 - A robot at node i pushes with ``−n_i``; its moment about the area centroid c is
   ``m_i = cross(p_i − c, −n_i)``. ``N_ccw = #{m > τ}``, ``N_cw = #{m < −τ}``; ``M_ccw``, ``M_cw``
   the sums of those moments.
-- Objective ``f = (|M_cw| + |M_ccw|) / N^k · 1 / (|N_cw − N_ccw| + ε)``.
+- Objective (Eq. 3) ``f = (|M_cw| + |M_ccw|) / N^k · 1 / (|N_cw − N_ccw| + ε)``.
 - Paper constraints: the push normals positively span the plane (translation closure), moments
   both ways, at most one robot per edge, robot centres ``p + r·n`` at least ``2r + clearance``
-  apart. Violations get the paper's penalty −1e20.
+  apart. Violations get the paper's penalty −1e20; for selection and elitism infeasible strings
+  are ranked by their count of violated constraints (fewer first), feasible ones by f.
+- The fleet: a plan uses at most ``max_robots`` robots (the fleet size); the closure test takes
+  sets of up to ``MAX_CLOSURE_SET`` (200) robots. ``plan_for_fleet`` spaces robot centres by
+  ``2r + max(capture.clearance, approach.safety_margin)``: the approach's safety filter keeps
+  them that far apart, so closer points could never all be reached.
 - ``closure = "exact"`` also demands first-order form closure: the wrenches ``(−n_i, m_i)``
-  positively span R³ (checked in the GA by supporting planes through pairs of wrenches, and
-  certified at the end by an LP). On polygons with fewer than four edges the one-per-edge rule
-  yields (frictionless planar form closure needs four contacts).
+  positively span R³ (checked in the GA by supporting planes through pairs of the chosen
+  wrenches, and certified at the end by an LP). On polygons with fewer than four edges the
+  one-per-edge rule yields (frictionless planar form closure needs four contacts).
 
-The GA: binary strings (one bit per node), the whole population evaluated at once with numpy,
-tournament selection, two-point crossover, mutation as moves of a robot along the boundary
-(or adding/removing one), elitism, and a local search of the best string's one-move
-neighbours inside the same evaluation budget. Pure: arrays in, results out, a seeded generator.
+Cost: the problem holds O(K) arrays for K candidate nodes (no pair or triple tables); every
+constraint is checked on each string's chosen nodes only, O(n²) for the spacing and O(n³) for
+the closure test with n the string's robot count, without matrix products (no BLAS threads).
+The node count is bounded by ``controller.config.CAPTURE_NODE_BUDGET`` (a ``capture.spacing``
+error at config load, an infeasible plan naming ``capture.spacing`` here).
+
+The GA: binary strings (one bit per node) starting with 3–6 robots, the whole population
+evaluated at once with numpy, tournament selection, two-point crossover, mutation (probability
+``mutation`` per child) as moves of a robot along the boundary (or adding/removing one),
+elitism, a local search of the best string's one-move neighbours, and a restart once a run has
+stalled (``stall`` = 20 generations, tuned on a seeded suite the bench does not report), all
+inside the budget of population × generations evaluations. Pure: arrays in, results out, a
+seeded generator.
+
+The outcome is a ``CapturePlan`` with ``feasible`` and a ``reason`` naming the constraint that
+could not be met; an infeasible problem is never an exception.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,10 +53,19 @@ from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment, linprog
 
 from controller import geometry
+from controller.config import CAPTURE_NODE_BUDGET, capture_budget_error, edge_node_counts
 
 FloatArray = NDArray[np.float64]
-PENALTY = -1e20
-MAX_SET = 8  # the largest robot set whose closure the GA checks (more bits: infeasible)
+BoolArray = NDArray[np.bool_]
+PENALTY = -1e20  # the paper's penalty on an infeasible string's objective
+INFEASIBLE_RANK = -1e30  # rank of an infeasible string: this times its violation count
+# The closure test's memory grows with n³ for a string of n robots: it runs on rows in chunks of
+# at most CLOSURE_CHUNK pair-against-wrench entries, and on strings of at most MAX_CLOSURE_SET
+# robots (a larger set counts as not closed; the fleet limit is the working cap).
+CLOSURE_CHUNK = 4_000_000
+MAX_CLOSURE_SET = 200
+# the constraints, in the order a diagnosis names them
+CONSTRAINTS = ("robots", "fleet", "moments", "translation", "one_per_edge", "spacing", "closure")
 
 
 @dataclass(frozen=True)
@@ -67,6 +96,12 @@ class CaptureParams:
             closure=c.closure,
         )
 
+    @property
+    def min_robots(self) -> int:
+        """Fewest robots that can satisfy the closure: 4 frictionless contacts for first-order
+        form closure (exact), 3 for the paper's translation closure."""
+        return 4 if self.closure == "exact" else 3
+
 
 @dataclass(frozen=True)
 class Candidates:
@@ -74,6 +109,7 @@ class Candidates:
     normals: FloatArray  # (K, 2) outward unit normals
     edges: NDArray[np.int64]  # (K,) edge index
     n_edges: int
+    total: int = 0  # nodes before the robot-disc test dropped any
 
 
 def candidate_nodes(
@@ -81,13 +117,15 @@ def candidate_nodes(
 ) -> Candidates:
     """Nodes along each edge of the (counter-clockwise) polygon, those a robot disc fits at."""
     poly = geometry.ensure_ccw(polygon)
+    budget = capture_budget_error(poly, spacing)
+    if budget:
+        raise ValueError(f"capture.spacing: {budget}")
     a = poly
     b = np.roll(poly, -1, axis=0)
     normals = geometry.outward_normals(poly)
+    counts = edge_node_counts(poly, spacing).astype(np.int64)
     pts, nrm, edg = [], [], []
-    for e in range(len(poly)):
-        length = float(np.linalg.norm(b[e] - a[e]))
-        m = max(1, int(np.floor(length / spacing + 1e-9)))
+    for e, m in enumerate(counts):
         s = (np.arange(m) + 0.5) / m
         pts.append(a[e] + s[:, None] * (b[e] - a[e]))
         nrm.append(np.repeat(normals[e][None], m, axis=0))
@@ -95,27 +133,30 @@ def candidate_nodes(
     p, n, ed = np.concatenate(pts), np.concatenate(nrm), np.concatenate(edg)
     centres = p + (robot_radius + clearance) * n
     keep = ~geometry.discs_hit_polygon(centres, robot_radius, poly)
-    return Candidates(p[keep], n[keep], ed[keep], len(poly))
+    return Candidates(p[keep], n[keep], ed[keep], len(poly), len(p))
 
 
 @dataclass
 class Problem:
-    """Everything the objective needs, precomputed per node and per node pair."""
+    """Everything the objective needs, precomputed per node (O(K) memory)."""
 
     cand: Candidates
     centroid: FloatArray
     moments: FloatArray  # (K,)
-    ccw: FloatArray  # (K,) 1.0 where m > tau
-    cw: FloatArray
-    conflict: NDArray[np.bool_]  # (K, K) robot discs too close
+    centres: FloatArray  # (K, 2) robot centres p + r·n
+    min_gap: float  # 2r + clearance: the least distance between two robot centres
     wrench: FloatArray  # (K, 3)
+    unit_wrench: FloatArray  # (K, 3) the wrenches scaled to unit length
     angles: FloatArray  # (K,) push direction angles
     one_per_edge: bool
     params: CaptureParams
+    robot_radius: float = 0.0
+    max_robots: int | None = None  # the fleet size (None: no limit)
     n_robots_note: str = ""
-    side_neg: NDArray[np.bool_] | None = None  # (K, K, K) wrench i below the plane of (a, b)
-    side_pos: NDArray[np.bool_] | None = None
-    pair_plane: NDArray[np.bool_] | None = None  # (K, K) the pair spans a plane
+    table: FloatArray = field(default_factory=lambda: np.zeros((1, _COLUMNS)))  # node_table
+
+    def __post_init__(self) -> None:
+        self.table = node_table(self)
 
 
 def make_problem(
@@ -123,8 +164,11 @@ def make_problem(
     robot_radius: float,
     params: CaptureParams,
     cand: Candidates | None = None,
+    max_robots: int | None = None,
 ) -> Problem:
-    """The GA's problem; ``cand`` replaces the candidate nodes (hand-made contact sets)."""
+    """The GA's problem; ``cand`` replaces the candidate nodes (hand-made contact sets);
+    ``max_robots`` is the most robots a plan may use (the fleet size; None: no limit).
+    Raises ValueError naming ``capture.spacing`` past the node budget."""
     poly = geometry.ensure_ccw(polygon)
     if cand is None:
         cand = candidate_nodes(poly, robot_radius, params.spacing, params.clearance)
@@ -132,10 +176,6 @@ def make_problem(
     f = -cand.normals
     rel = cand.points - c
     m = rel[:, 0] * f[:, 1] - rel[:, 1] * f[:, 0]
-    centres = cand.points + robot_radius * cand.normals
-    d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
-    conflict = d < 2 * robot_radius + params.clearance - 1e-12
-    np.fill_diagonal(conflict, False)
     one_per_edge = not (params.closure == "exact" and len(poly) < 4)
     note = (
         ""
@@ -144,21 +184,20 @@ def make_problem(
         "rule (planar form closure needs 4 frictionless contacts)"
     )
     wrench = np.column_stack([f, m])
-    neg, pos, plane = _side_tables(wrench)
+    norm = np.sqrt((wrench * wrench).sum(axis=1, keepdims=True))
     return Problem(
-        side_neg=neg,
-        side_pos=pos,
-        pair_plane=plane,
         cand=cand,
         centroid=c,
         moments=m,
-        ccw=(m > params.tau).astype(float),
-        cw=(m < -params.tau).astype(float),
-        conflict=conflict,
+        centres=cand.points + robot_radius * cand.normals,
+        min_gap=2 * robot_radius + params.clearance,
         wrench=wrench,
+        unit_wrench=wrench / np.maximum(norm, 1e-12),
         angles=np.arctan2(f[:, 1], f[:, 0]),
         one_per_edge=one_per_edge,
         params=params,
+        robot_radius=robot_radius,
+        max_robots=max_robots,
         n_robots_note=note,
     )
 
@@ -166,95 +205,188 @@ def make_problem(
 # --------------------------------------------------------------------------- evaluation
 
 
-def _chosen_index(x: NDArray[np.bool_], size: int) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-    """Indices of the set bits of each row, padded to ``size`` (mask says which are real)."""
-    order = np.argsort(~x, axis=1, kind="stable")[:, :size]
-    mask = np.take_along_axis(x, order, axis=1)
-    return order, mask
+_STEPS = np.arange(CAPTURE_NODE_BUDGET + 1)[None]  # 0, 1, 2, ... per node or robot (read only)
+# columns of the per-node table (one extra all-padding row at index K)
+_ABSM, _SIGN, _ANGLE, _CX, _CY, _EDGE = 0, 1, 2, 3, 4, 5
+_W0, _W1, _W2 = 6, 7, 8  # the unit wrench
+_COLUMNS = 9
 
 
-def translation_closure(prob: Problem, x: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """Push directions positively span the plane: the largest angular gap is below π."""
-    ang = np.where(x, prob.angles[None], np.inf)
-    s = np.sort(ang, axis=1)
-    cnt = x.sum(1)
-    ok = np.zeros(len(x), bool)
-    for c in np.unique(cnt):
-        if c < 3:
-            continue
-        rows = cnt == c
-        a = s[rows, :c]
-        gaps = np.diff(np.concatenate([a, a[:, :1] + 2 * np.pi], axis=1), axis=1)
-        ok[rows] = gaps.max(1) < np.pi - 1e-9
-    return ok
+def node_table(prob: Problem) -> FloatArray:
+    """(K + 1, 9) per node: |moment| (0 when |m| ≤ τ), its sign (−1, 0, 1), push angle, robot
+    centre x and y, edge, the unit wrench. Row K pads strings to a common length: no moment, an
+    angle that sorts last, edge −1, no wrench."""
+    k, tau = len(prob.cand.points), prob.params.tau
+    m = prob.moments
+    t = np.zeros((k + 1, _COLUMNS))
+    t[:k, _ABSM] = np.where(np.abs(m) > tau, np.abs(m), 0.0)
+    t[:k, _SIGN] = (m > tau).astype(float) - (m < -tau)
+    t[:k, _ANGLE], t[:k, _CX], t[:k, _CY] = prob.angles, prob.centres[:, 0], prob.centres[:, 1]
+    t[:k, _EDGE] = prob.cand.edges
+    t[:k, _W0 : _W2 + 1] = prob.unit_wrench
+    t[k, _ANGLE], t[k, _EDGE] = 10.0, -1.0
+    return t
 
 
-def wrench_closure(prob: Problem, x: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """First-order form closure: the wrenches positively span R³. A set fails iff some closed
-    half-space holds them all; its boundary plane can be taken through two of them (a set of
-    rank ≤ 2 lies in such a plane; rank ≤ 1 fails translation closure before this check). The
-    sign of every wrench against every pair's plane is tabulated once per problem."""
-    cnt = x.sum(1)
-    ok = np.zeros(len(x), bool)
-    rows = np.flatnonzero((cnt >= 4) & (cnt <= MAX_SET))
-    if len(rows) == 0:
-        return ok
-    size = int(cnt[rows].max())
-    idx, mask = _chosen_index(x[rows], size)
-    a = idx[:, :, None, None]
-    b = idx[:, None, :, None]
-    i = idx[:, None, None, :]
-    real = mask[:, None, None, :]
-    neg = np.any(prob.side_neg[a, b, i] & real, axis=-1)
-    pos = np.any(prob.side_pos[a, b, i] & real, axis=-1)
-    pair_ok = (
-        mask[:, :, None] & mask[:, None, :] & prob.pair_plane[idx[:, :, None], idx[:, None, :]]
-    )
-    one_side = pair_ok & ~(neg & pos)
-    ok[rows] = ~one_side.any(axis=(1, 2))
-    return ok
+@dataclass
+class _Chosen:
+    """The chosen nodes of each string: indices ascending, padded with K to the largest count
+    (P, n); their table rows (P, n, 8); the counts (P,)."""
+
+    idx: NDArray[np.int64]
+    t: FloatArray
+    cnt: NDArray[np.int64]
+
+    @classmethod
+    def of(cls, prob: Problem, x: BoolArray) -> _Chosen:
+        k = x.shape[1]
+        cnt = np.count_nonzero(x, axis=1)
+        size = int(cnt.max()) if len(x) else 0
+        idx = np.full((len(x), size), k, np.int64)
+        idx[_STEPS[:, :size] < cnt[:, None]] = x.ravel().nonzero()[0] % k  # row-major: in order
+        return cls(idx, prob.table[idx], cnt)
+
+    @property
+    def mask(self) -> BoolArray:
+        return _STEPS[:, : self.idx.shape[1]] < self.cnt[:, None]
+
+    def rows(self, keep: BoolArray) -> _Chosen:
+        """The chosen nodes of some rows, padded to their own largest count."""
+        size = int(self.cnt[keep].max()) if np.any(keep) else 0
+        return _Chosen(self.idx[keep, :size], self.t[keep, :size], self.cnt[keep])
 
 
-def _side_tables(wrench: FloatArray, tol: float = 1e-9):
-    """Signs of every wrench against the plane through every pair of wrenches (unit-scaled)."""
-    w = wrench / np.maximum(np.linalg.norm(wrench, axis=1, keepdims=True), 1e-12)
-    y = np.cross(w[:, None, :], w[None, :, :])  # (K, K, 3)
-    d = np.einsum("abk,ik->abi", y, w)
-    return d < -tol, d > tol, np.linalg.norm(y, axis=-1) > 1e-9
-
-
-def evaluate(prob: Problem, x: NDArray[np.bool_]) -> tuple[FloatArray, NDArray[np.int64]]:
-    """Objective of every string (P, K) and its count of violated constraints (0: feasible)."""
+def _moment_sums(prob: Problem, ch: _Chosen) -> tuple[FloatArray, BoolArray]:
+    """Eq. 3 for every string, and whether it resists moments only one way (or none)."""
     p = prob.params
-    xf = x.astype(float)
-    n = xf.sum(1)
-    n_ccw = xf @ prob.ccw
-    n_cw = xf @ prob.cw
-    m_ccw = xf @ (prob.moments * prob.ccw)
-    m_cw = xf @ (prob.moments * prob.cw)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        f = (
-            (np.abs(m_cw) + np.abs(m_ccw))
-            / np.maximum(n, 1) ** p.k
-            / (np.abs(n_cw - n_ccw) + p.epsilon)
-        )
-    viol = np.zeros(len(x), dtype=np.int64)
-    viol += n < 3
-    viol += ~translation_closure(prob, x)
-    viol += (n_ccw < 1) | (n_cw < 1)
-    if prob.one_per_edge:
-        per_edge = np.zeros((len(x), prob.cand.n_edges))
-        np.add.at(per_edge.T, prob.cand.edges, xf.T)
-        viol += np.any(per_edge > 1, axis=1)
-    viol += ((xf @ prob.conflict.astype(float)) * xf).sum(1) > 0
+    sign = ch.t[..., _SIGN]
+    n_ccw, n_cw = (sign > 0).sum(axis=1), (sign < 0).sum(axis=1)
+    n = np.maximum(ch.cnt, 1).astype(float)
+    f = ch.t[..., _ABSM].sum(axis=1) / (n if p.k == 1 else n**p.k)
+    f /= np.abs(n_cw - n_ccw) + p.epsilon
+    return f, (n_ccw == 0) | (n_cw == 0)
+
+
+def _translation_ok(ch: _Chosen) -> BoolArray:
+    """Push directions positively span the plane: the largest angular gap is below π."""
+    size = ch.idx.shape[1]
+    if size < 3:
+        return np.zeros(len(ch.cnt), bool)
+    a = ch.t[..., _ANGLE].copy()
+    a.sort(axis=1)  # padding (10) sorts last
+    inner = np.where(_STEPS[:, : size - 1] < ch.cnt[:, None] - 1, a[:, 1:] - a[:, :-1], -np.inf)
+    last = a[np.arange(len(a)), np.maximum(ch.cnt - 1, 0)]
+    wrap = a[:, 0] + 2 * np.pi - last
+    return (ch.cnt >= 3) & (np.maximum(inner.max(axis=1), wrap) < np.pi - 1e-9)
+
+
+def _shared_edge(ch: _Chosen) -> BoolArray:
+    """Two robots on one edge."""
+    if ch.idx.shape[1] < 2:
+        return np.zeros(len(ch.cnt), bool)
+    e = ch.t[..., _EDGE].copy()
+    e.sort(axis=1)  # padding (−1) sorts first
+    return ((e[:, 1:] == e[:, :-1]) & (e[:, 1:] >= 0)).any(axis=1)
+
+
+@functools.lru_cache(maxsize=64)
+def _pairs(n: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Index pairs a < b of n items (cached: read only)."""
+    a, b = np.triu_indices(n, 1)
+    return a, b
+
+
+def _pair_distances(ch: _Chosen) -> tuple[FloatArray, BoolArray]:
+    """Squared distances between the chosen robot centres, pair by pair (P, n(n−1)/2), and
+    which pairs are real (b < count: padding sorts last)."""
+    a, b = _pairs(ch.idx.shape[1])
+    dx = ch.t[:, a, _CX] - ch.t[:, b, _CX]
+    dy = ch.t[:, a, _CY] - ch.t[:, b, _CY]
+    return dx * dx + dy * dy, b[None] < ch.cnt[:, None]
+
+
+def _too_close(prob: Problem, ch: _Chosen) -> BoolArray:
+    d2, real = _pair_distances(ch)
+    return (real & (d2 < (prob.min_gap - 1e-12) ** 2)).any(axis=1)
+
+
+def _closest_pair(ch: _Chosen) -> FloatArray:
+    """The least distance between two chosen robot centres (inf with fewer than two)."""
+    d2, real = _pair_distances(ch)
+    return np.sqrt(np.where(real, d2, np.inf).min(axis=1, initial=np.inf))
+
+
+def _wrench_closure(prob: Problem, ch: _Chosen, tol: float = 1e-9) -> BoolArray:
+    """First-order form closure: the chosen wrenches positively span R³. A set fails iff some
+    closed half-space holds them all; its boundary plane can be taken through two of them (a set
+    of rank ≤ 2 lies in such a plane; rank ≤ 1 fails translation closure before this check).
+    Work and memory per string grow with n³ (n its robot count), not with K."""
+    a, b = _pairs(ch.idx.shape[1])
+    ia, ib = ch.idx[:, a], ch.idx[:, b]  # (P, m): the pairs
+    w0, w1, w2 = prob.table[:, _W0], prob.table[:, _W1], prob.table[:, _W2]
+    u0, u1, u2, v0, v1, v2 = w0[ia], w1[ia], w2[ia], w0[ib], w1[ib], w2[ib]
+    y0, y1, y2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0  # pair plane normals
+    plane = y0 * y0 + y1 * y1 + y2 * y2 > 1e-18
+    side = (  # (P, m, n): every chosen wrench against every pair's plane (padding: 0)
+        y0[..., None] * ch.t[:, None, :, _W0]
+        + y1[..., None] * ch.t[:, None, :, _W1]
+        + y2[..., None] * ch.t[:, None, :, _W2]
+    )
+    one_side = plane & ~((side < -tol).any(axis=-1) & (side > tol).any(axis=-1))
+    return (ch.cnt >= 4) & ~one_side.any(axis=1)
+
+
+def _closure_in_chunks(prob: Problem, ch: _Chosen) -> BoolArray:
+    n = ch.idx.shape[1]
+    step = max(1, CLOSURE_CHUNK // max(1, n * n * (n - 1) // 2))
+    if step >= len(ch.cnt):
+        return _wrench_closure(prob, ch)
+    rows = [ch.rows(np.arange(len(ch.cnt)) // step == c) for c in range(-(-len(ch.cnt) // step))]
+    return np.concatenate([_wrench_closure(prob, part) for part in rows])
+
+
+def constraint_flags(prob: Problem, x: BoolArray) -> tuple[FloatArray, dict[str, BoolArray]]:
+    """Eq. 3 for every string (P, K) (unpenalised) and which constraints each violates.
+
+    ``closure`` (exact mode) is checked only on strings meeting every other constraint and
+    counts as violated on the others (not shown to hold)."""
+    p = prob.params
+    ch = _Chosen.of(prob, np.asarray(x, bool))
+    f, one_way = _moment_sums(prob, ch)
+    none = np.zeros(len(ch.cnt), bool)
+    flags = {
+        "robots": ch.cnt < 3,
+        "fleet": none if prob.max_robots is None else ch.cnt > prob.max_robots,
+        "moments": one_way,
+        "translation": ~_translation_ok(ch),
+        "one_per_edge": _shared_edge(ch) if prob.one_per_edge else none,
+        "spacing": _too_close(prob, ch),
+    }
     if p.closure == "exact":
-        cheap_ok = viol == 0
-        closed = np.zeros(len(x), bool)
-        if np.any(cheap_ok):
-            closed[cheap_ok] = wrench_closure(prob, x[cheap_ok])
-        viol += ~closed
-    f = np.where(viol == 0, f, PENALTY)
-    return f, viol
+        rest = ~(flags["robots"] | flags["fleet"] | one_way | flags["translation"])
+        rest &= ~(flags["one_per_edge"] | flags["spacing"])
+        rest &= ch.cnt <= MAX_CLOSURE_SET
+        closed = none.copy()
+        if np.any(rest):
+            closed[rest] = _closure_in_chunks(prob, ch.rows(rest))
+        flags["closure"] = ~closed
+    return f, flags
+
+
+def evaluate(prob: Problem, x: BoolArray) -> tuple[FloatArray, NDArray[np.int64]]:
+    """Objective of every string (P, K), the paper's penalty on infeasible ones, and its count
+    of violated constraints (0: feasible)."""
+    f, flags = constraint_flags(prob, x)
+    viol = np.zeros(len(f), np.int64)
+    for bad in flags.values():
+        viol += bad
+    return np.where(viol == 0, f, PENALTY), viol
+
+
+def rank_strings(f: FloatArray, viol: NDArray[np.int64]) -> FloatArray:
+    """Selection key: feasible strings by objective, infeasible ones below them by their count
+    of violations (``-1e30 · v``: distinct in float64, unlike ``-1e30 - v``)."""
+    return np.where(viol == 0, f, INFEASIBLE_RANK * viol)
 
 
 def certify_form_closure(points: FloatArray, normals: FloatArray, centroid: FloatArray) -> bool:
@@ -275,131 +407,204 @@ def certify_form_closure(points: FloatArray, normals: FloatArray, centroid: Floa
 
 
 def _initial(k: int, size: int, rng: np.random.Generator, lo: int = 3, hi: int = 6) -> np.ndarray:
+    """``size`` strings of ``lo``..``hi`` robots at distinct random nodes."""
+    order = rng.random((size, k)).argsort(axis=1)  # a random permutation per string
+    count = np.minimum(rng.integers(lo, hi + 1, size), k)
     x = np.zeros((size, k), bool)
-    for r in range(size):
-        x[r, rng.choice(k, size=min(k, int(rng.integers(lo, hi + 1))), replace=False)] = True
+    x[np.arange(size)[:, None], order] = _STEPS[:, :k] < count[:, None]
     return x
 
 
-def _mutate(x: np.ndarray, rate: float, rng: np.random.Generator) -> np.ndarray:
-    """Per child with probability ``rate``: move one robot 1–2 nodes along the boundary (70 %),
-    jump it anywhere (10 %), add one (10 %) or remove one (10 %; never below three)."""
-    p, k = x.shape
-    out = x.copy()
-    rows = np.flatnonzero(rng.random(p) < rate)
-    if len(rows) == 0:
-        return out
-    sub = out[rows]
-    cnt = sub.sum(1)
-    pick = np.argmax(rng.random((len(rows), k)) * sub, axis=1)  # a random set bit
-    u = rng.random(len(rows))
-    shift = np.array([-2, -1, 1, 2])[rng.integers(0, 4, len(rows))]
-    target = np.where(u < 0.7, (pick + shift) % k, rng.integers(0, k, len(rows)))
-    r = np.arange(len(rows))
-    move = (u < 0.8) & (cnt > 0)
-    add = ~move & ((u < 0.9) | (cnt <= 3))
-    remove = ~move & ~add
-    sub[r[move], pick[move]] = False
-    sub[r[move | add], target[move | add]] = True
-    sub[r[remove], pick[remove]] = False
-    out[rows] = sub
-    return out
+def _mutate(x: np.ndarray, rows: list[int], rng: np.random.Generator) -> np.ndarray:
+    """For each of ``rows``: move one robot 1–2 nodes along the boundary (70 %), jump it
+    anywhere (10 %), add one (10 %) or remove one (10 %; never below three). Changes ``x`` in
+    place and returns it (a loop: only a few children mutate)."""
+    k = x.shape[1]
+    for r in rows:
+        on = x[r].nonzero()[0]
+        u, v, w = rng.random(3).tolist()
+        jump = int(w * 4 * k)
+        pick = int(on[int(v * len(on))]) if len(on) else -1  # a random robot
+        if u < 0.8 and pick >= 0:
+            x[r, pick] = False
+            x[r, (pick + _SHIFTS[jump % 4]) % k if u < 0.7 else jump // 4] = True
+        elif u < 0.9 or len(on) <= 3:
+            x[r, jump // 4] = True
+        else:
+            x[r, pick] = False
+    return x
 
 
-def _neighbours(best: np.ndarray) -> np.ndarray:
-    """Every one-move neighbour of a string: one robot relocated to any free node."""
+_SHIFTS = (-2, -1, 1, 2)
+
+
+def _breed(
+    pop: np.ndarray, key: FloatArray, n_child: int, p: CaptureParams, rng: np.random.Generator
+) -> np.ndarray:
+    """Children by size-2 tournaments on ``key``, two-point crossover (probability
+    ``p.crossover``) and mutation (probability ``p.mutation`` per child)."""
+    n, k = pop.shape
+    u = rng.random((n_child, 8))  # 4 tournament entrants, 2 cuts, crossover and mutation coins
+    t = (u[:, :4] * n).astype(np.int64)
+    kt = key[t]
+    pa = np.where(kt[:, 0] >= kt[:, 1], t[:, 0], t[:, 1])
+    pb = np.where(kt[:, 2] >= kt[:, 3], t[:, 2], t[:, 3])
+    cuts = (u[:, 4:6] * (k + 1)).astype(np.int64)
+    cuts.sort(axis=1)
+    cuts[u[:, 6] >= p.crossover] = 0  # no crossover: an empty segment
+    cols = _STEPS[:, :k]
+    seg = (cols >= cuts[:, :1]) & (cols < cuts[:, 1:])
+    kids = np.where(seg, pop[pb], pop[pa])
+    return _mutate(kids, (u[:, 7] < p.mutation).nonzero()[0].tolist(), rng)
+
+
+def _moves(best: np.ndarray) -> NDArray[np.int64]:
+    """Every one-move neighbour of a string as (node to clear, node to set) pairs: one robot
+    relocated to any free node. O(n·K) pairs, materialised a batch at a time."""
     on = np.flatnonzero(best)
     off = np.flatnonzero(~best)
-    out = np.repeat(best[None], len(on) * len(off), axis=0)
-    r = np.arange(len(out))
-    out[r, np.repeat(on, len(off))] = False
-    out[r, np.tile(off, len(on))] = True
+    return np.column_stack([np.repeat(on, len(off)), np.tile(off, len(on))])
+
+
+def _apply_moves(best: np.ndarray, moves: NDArray[np.int64]) -> np.ndarray:
+    out = np.repeat(best[None], len(moves), axis=0)
+    r = np.arange(len(moves))
+    out[r, moves[:, 0]] = False
+    out[r, moves[:, 1]] = True
     return out
 
 
 @dataclass
 class GAResult:
-    best: np.ndarray
-    objective: float
+    best: np.ndarray  # the best feasible string (all False when none was found)
+    objective: float  # its objective (PENALTY when none was found)
     evaluations: int
     history: list[float] = field(default_factory=list)
+    closest: np.ndarray | None = None  # the string with the fewest violations seen
+    closest_violations: int = 0
+
+    @property
+    def found(self) -> bool:
+        return self.objective > PENALTY
+
+
+@dataclass
+class _Search:
+    """The GA's memory across generations: the best feasible and the closest strings seen,
+    the current run's progress and the local-search queue of the elite's moves."""
+
+    k: int
+    best_x: np.ndarray | None = None
+    best_f: float = -np.inf
+    closest_x: np.ndarray | None = None
+    closest_v: int = 1 << 30
+    run_best: float = -np.inf
+    since: int = 0
+    queue: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    queue_of: bytes = b""
+
+    def note(self, x: np.ndarray, f: FloatArray, v: NDArray[np.int64]) -> None:
+        """Remember the best feasible and the least violating strings of a batch."""
+        if len(v) == 0:
+            return
+        ok = np.where(v == 0, f, -np.inf)
+        i = int(np.argmax(ok))
+        if ok[i] > self.best_f:
+            self.best_x, self.best_f = x[i].copy(), float(ok[i])
+        j = int(np.argmin(v))
+        if v[j] < self.closest_v:
+            self.closest_x, self.closest_v = x[j].copy(), int(v[j])
+
+    def progress(self, elite: np.ndarray, f: float, v: int, rng: np.random.Generator) -> None:
+        """Count generations without a better feasible elite; queue a new elite's moves."""
+        if v == 0 and f > self.run_best + 1e-12:
+            self.run_best, self.since = f, 0
+        else:
+            self.since += 1
+        if v == 0 and elite.tobytes() != self.queue_of:
+            moves = _moves(elite)
+            self.queue = moves[rng.permutation(len(moves))]
+            self.queue_of = elite.tobytes()
+
+    def converged(self, stall: int) -> bool:
+        return self.since >= stall and len(self.queue) == 0
+
+    def restart(self) -> None:
+        self.run_best, self.since, self.queue_of = -np.inf, 0, b""
+
+    def take(self, n: int) -> NDArray[np.int64]:
+        out, self.queue = self.queue[:n], self.queue[n:]
+        return out
+
+    def result(self, evaluations: int, history: list[float]) -> GAResult:
+        found = self.best_x is not None
+        return GAResult(
+            best=self.best_x if found else np.zeros(self.k, bool),
+            objective=self.best_f if found else PENALTY,
+            evaluations=evaluations,
+            history=history,
+            closest=self.closest_x,
+            closest_violations=self.closest_v,
+        )
+
+
+Objective = Callable[[np.ndarray], tuple[FloatArray, NDArray[np.int64]]]
+Rank = Callable[[FloatArray, NDArray[np.int64]], FloatArray]
 
 
 def run_ga(
-    prob: Problem, rng: np.random.Generator, objective=None, stall: int = 40, init=(3, 6)
+    prob: Problem,
+    rng: np.random.Generator,
+    objective: Objective | None = None,
+    stall: int = 20,
+    init: tuple[int, int] = (3, 6),
+    rank: Rank = rank_strings,
 ) -> GAResult:
-    """The GA on ``prob`` (objective ``evaluate`` unless another (f, viol) function is given).
+    """The GA on ``prob`` (objective ``evaluate`` unless another (f, viol) function is given;
+    ``rank`` orders strings for selection and elitism).
 
     Within the budget (population × generations evaluations) a run that has converged (no
     better string for ``stall`` generations and its best string's neighbourhood searched)
-    restarts from a fresh population; the best string ever found is the answer.
+    restarts from a fresh population; the best string ever found is the answer. Initial
+    strings hold ``init`` robots, at most ``prob.max_robots``.
     """
     p = prob.params
     fn = objective or (lambda x: evaluate(prob, x))
     k = len(prob.cand.points)
-    pop_n = p.population
-    pop = _initial(k, pop_n, rng, *init)
+    hi = min(init[1], prob.max_robots or init[1])
+    lo = min(init[0], hi)
+    pop = _initial(k, p.population, rng, lo, hi)
     f, v = fn(pop)
-    evals = pop_n
+    search = _Search(k)
+    search.note(pop, f, v)
+    evals = len(pop)
     history: list[float] = []
-    best_x, best_f = pop[0].copy(), -np.inf
-    run_best, since = -np.inf, 0
-    queue = np.zeros((0, k), bool)
-    queue_of = b""
     for _ in range(p.generations):
-        # rank: feasible by objective, infeasible by fewer violations
-        key = np.where(v == 0, f, -1e30 - v)
+        key = rank(f, v)
         elite = int(np.argmax(key))
-        best = pop[elite]
-        if v[elite] == 0 and f[elite] > best_f:
-            best_x, best_f = best.copy(), float(f[elite])
-        if v[elite] == 0 and f[elite] > run_best + 1e-12:
-            run_best, since = float(f[elite]), 0
-        else:
-            since += 1
-        # local search: the best feasible string's relocation neighbours, a slice per
-        # generation (inside the budget) until they are exhausted or a better one turns up
-        if v[elite] == 0 and best.tobytes() != queue_of:
-            queue = _neighbours(best)
-            queue = queue[rng.permutation(len(queue))]
-            queue_of = best.tobytes()
-        if since >= stall and len(queue) == 0:
-            # converged: restart (the best ever is kept aside)
-            new = _initial(k, pop_n - 1, rng, *init)
-            run_best, since, queue_of = -np.inf, 0, b""
-        else:
-            nb = queue[: pop_n // 2]
-            queue = queue[pop_n // 2 :]
-            n_child = pop_n - 1 - len(nb)
-            # tournament selection (size 2)
-            a = rng.integers(pop_n, size=(n_child, 2))
-            pa = np.where(key[a[:, 0]] >= key[a[:, 1]], a[:, 0], a[:, 1])
-            b = rng.integers(pop_n, size=(n_child, 2))
-            pb = np.where(key[b[:, 0]] >= key[b[:, 1]], b[:, 0], b[:, 1])
-            kids = pop[pa].copy()
-            cross = rng.random(n_child) < p.crossover
-            cuts = np.sort(rng.integers(0, k + 1, size=(n_child, 2)), axis=1)
-            cols = np.arange(k)[None]
-            seg = (cols >= cuts[:, :1]) & (cols < cuts[:, 1:]) & cross[:, None]
-            kids[seg] = pop[pb][seg]
-            kids = _mutate(kids, p.mutation, rng)
-            new = np.vstack([nb, kids])
-        fn_new, v_new = fn(new)
+        search.progress(pop[elite], float(f[elite]), int(v[elite]), rng)
+        if search.converged(stall):  # restart (the best ever is kept aside)
+            search.restart()
+            new = _initial(k, p.population, rng, lo, hi)
+            pop, (f, v) = new, fn(new)
+            fn_new, v_new = f, v
+        else:  # the elite, a batch of its neighbours, children
+            moves = search.take(p.population // 2)
+            nxt = np.empty_like(pop)
+            nxt[0] = pop[elite]
+            nxt[1 : 1 + len(moves)] = _apply_moves(pop[elite], moves)
+            nxt[1 + len(moves) :] = _breed(pop, key, p.population - 1 - len(moves), p, rng)
+            new = nxt[1:]
+            fn_new, v_new = fn(new)
+            pop, f, v = (
+                nxt,
+                np.concatenate((f[elite : elite + 1], fn_new)),
+                np.concatenate((v[elite : elite + 1], v_new)),
+            )
         evals += len(new)
-        pop = np.vstack([best[None], new])
-        f = np.concatenate([[f[elite]], fn_new])
-        v = np.concatenate([[v[elite]], v_new])
-        if since == 0 and run_best == -np.inf:  # a restart: the old elite leaves the population
-            pop, f, v = pop[1:], f[1:], v[1:]
-            pop = np.vstack([pop, _initial(k, 1, rng, *init)])
-            f1, v1 = fn(pop[-1:])
-            f, v = np.concatenate([f, f1]), np.concatenate([v, v1])
-            evals += 1
-        cur = np.where(v == 0, f, -np.inf).max()
-        if cur > best_f:
-            best_x, best_f = pop[int(np.argmax(np.where(v == 0, f, -np.inf)))].copy(), float(cur)
-        history.append(best_f if np.isfinite(best_f) else PENALTY)
-    return GAResult(best_x, best_f if np.isfinite(best_f) else PENALTY, evals, history)
+        search.note(new, fn_new, v_new)
+        history.append(search.best_f if np.isfinite(search.best_f) else PENALTY)
+    return search.result(evals, history)
 
 
 # --------------------------------------------------------------------------- results
@@ -411,7 +616,7 @@ class CapturePlan:
     normals: FloatArray
     edges: NDArray[np.int64]
     chosen: NDArray[np.int64]
-    points: FloatArray  # (M, 2) object frame
+    points: FloatArray  # (M, 2) object frame (empty when infeasible)
     push_normals: FloatArray  # (M, 2) outward normals at the points (robots push along −n)
     robots_needed: int
     objective: float
@@ -425,9 +630,17 @@ class CapturePlan:
     history: list[float]
     closure: str
     note: str = ""
+    feasible: bool = False  # zero violations and (exact mode) the LP certificate
+    reason: str = ""  # why not feasible: the constraint that could not be met
+    violated: list[str] = field(default_factory=list)  # machine-readable: CONSTRAINTS, ...
+    max_robots: int | None = None  # the fleet size the plan was limited to
 
     def to_json(self) -> dict[str, Any]:
         return {
+            "feasible": self.feasible,
+            "reason": self.reason,
+            "violated": list(self.violated),
+            "max_robots": self.max_robots,
             "candidates": self.candidates.round(6).tolist(),
             "normals": self.normals.round(6).tolist(),
             "edges": self.edges.tolist(),
@@ -447,18 +660,56 @@ class CapturePlan:
             "note": self.note,
         }
 
+    def text(self) -> str:
+        """A few lines for a person: the outcome, then one line per capture point."""
+        if not self.feasible:
+            return f"capture: infeasible: {self.reason}"
+        lines = [
+            f"capture: {self.robots_needed} robots, objective {self.objective:.4g}, "
+            f"N_cw {self.N_cw} N_ccw {self.N_ccw}, form closure {self.form_closure}, "
+            f"{self.evaluations} evaluations"
+        ]
+        lines += [
+            f"  point ({p[0]:.3f}, {p[1]:.3f}) normal ({n[0]:.2f}, {n[1]:.2f})"
+            for p, n in zip(self.points, self.push_normals, strict=True)
+        ]
+        return "\n".join(lines)
+
+    @classmethod
+    def refused(
+        cls, params: CaptureParams, reason: str, violated: list[str], max_robots: int | None
+    ) -> CapturePlan:
+        """An infeasible plan with no candidates (the problem could not be built)."""
+        none2, none = np.zeros((0, 2)), np.zeros(0, np.int64)
+        return cls(none2, none2, none, none, none2, none2, 0, PENALTY, 0.0, 0.0, 0, 0, False,
+                   False, 0, [], params.closure, feasible=False, reason=reason,
+                   violated=violated, max_robots=max_robots)  # fmt: skip
+
 
 def describe(
-    prob: Problem, bits: np.ndarray, evaluations: int, history: list[float]
+    prob: Problem,
+    bits: np.ndarray,
+    evaluations: int,
+    history: list[float],
+    reason: str = "",
+    violated: list[str] | None = None,
 ) -> CapturePlan:
-    """The plan for a chosen string, with the paper's check and the exact certificate."""
-    chosen = np.flatnonzero(bits)
+    """The plan for a chosen string, with the paper's check and the exact certificate.
+    Feasible iff the string has zero violations and, in exact mode, the LP certificate;
+    ``reason`` and ``violated`` explain an infeasible one (the string is then not used)."""
     f, v = evaluate(prob, bits[None])
     paper = CaptureParams(**{**prob.params.__dict__, "closure": "paper"})
     _, v_paper = evaluate(Problem(**{**prob.__dict__, "params": paper}), bits[None])
+    chosen = np.flatnonzero(bits)
+    pts, nrm = prob.cand.points[chosen], prob.cand.normals[chosen]
+    certified = certify_form_closure(pts, nrm, prob.centroid)
+    feasible = bool(len(chosen) > 0 and v[0] == 0 and (certified or prob.params.closure == "paper"))
+    if not feasible and not reason and len(chosen):
+        reason, violated = "the LP certificate rejects the GA's closure test", ["closure"]
+    if not feasible:
+        chosen, pts, nrm = chosen[:0], pts[:0], nrm[:0]
     m = prob.moments[chosen]
-    pts = prob.cand.points[chosen]
-    nrm = prob.cand.normals[chosen]
+    tau = prob.params.tau
     return CapturePlan(
         candidates=prob.cand.points,
         normals=prob.cand.normals,
@@ -467,39 +718,191 @@ def describe(
         points=pts,
         push_normals=nrm,
         robots_needed=len(chosen),
-        objective=float(f[0]),
-        M_cw=float(m[m < -prob.params.tau].sum()),
-        M_ccw=float(m[m > prob.params.tau].sum()),
-        N_cw=int((m < -prob.params.tau).sum()),
-        N_ccw=int((m > prob.params.tau).sum()),
-        paper_feasible=bool(v_paper[0] == 0),
-        form_closure=certify_form_closure(pts, nrm, prob.centroid),
+        objective=float(f[0]) if feasible else PENALTY,
+        M_cw=float(m[m < -tau].sum()),
+        M_ccw=float(m[m > tau].sum()),
+        N_cw=int((m < -tau).sum()),
+        N_ccw=int((m > tau).sum()),
+        paper_feasible=bool(feasible and v_paper[0] == 0),
+        form_closure=bool(feasible and certified),
         evaluations=evaluations,
         history=history,
         closure=prob.params.closure,
         note=prob.n_robots_note,
+        feasible=feasible,
+        reason="" if feasible else reason,
+        violated=[] if feasible else list(violated or []),
+        max_robots=prob.max_robots,
     )
 
 
-def plan_capture(
-    polygon: FloatArray, robot_radius: float, params: CaptureParams, rng: np.random.Generator
-) -> CapturePlan:
-    """Capture points for a polygon (object frame) by the GA."""
-    prob = make_problem(polygon, robot_radius, params)
-    if len(prob.cand.points) < 3:
-        raise ValueError(
-            f"only {len(prob.cand.points)} candidate nodes: capture.spacing is too coarse for "
-            "this object or the robots are too large"
+# --------------------------------------------------------------------------- why infeasible
+
+
+def _need(p: CaptureParams) -> str:
+    if p.closure == "exact":
+        return "first-order form closure needs 4 robots at least (frictionless contacts)"
+    return "the paper's closure needs 3 robots at least"
+
+
+def packing_bound(prob: Problem) -> int:
+    """An upper bound on how many robots fit around the object at once (centres at least
+    ``min_gap`` apart): the candidates, in boundary order, split into runs whose centres are all
+    pairwise too close (one robot per run at most); the last run joins the first if it can."""
+    c, gap = prob.centres, prob.min_gap - 1e-12
+    runs: list[tuple[int, int]] = []
+    start = 0
+    while start < len(c):
+        end = start + 1
+        while end < len(c) and np.all(np.hypot(*(c[start:end] - c[end]).T) < gap):
+            end += 1
+        runs.append((start, end))
+        start = end
+    if len(runs) > 1:
+        ends = np.vstack([c[slice(*runs[0])], c[slice(*runs[-1])]])
+        d = np.hypot(*(ends[:, None] - ends[None]).transpose(2, 0, 1))
+        if np.all(d[~np.eye(len(ends), dtype=bool)] < gap):
+            return len(runs) - 1
+    return len(runs)
+
+
+def structural_reason(prob: Problem) -> tuple[str, list[str]]:
+    """Why no plan can exist, found without search (or "" when the GA must look)."""
+    p, cand, r = prob.params, prob.cand, prob.robot_radius
+    need, why, k = p.min_robots, _need(prob.params), len(prob.cand.points)
+    if k < need and cand.total >= need:
+        return (
+            f"robots too large for the object: a robot of radius {r:g} m fits at only {k} of "
+            f"the {cand.total} candidate nodes (capture.spacing {p.spacing:g} m); {why}",
+            ["robots"],
         )
+    if k < need:
+        return (
+            f"too few candidate nodes: capture.spacing {p.spacing:g} m gives {k} on this object; "
+            f"{why}: use a finer capture.spacing",
+            ["robots"],
+        )
+    if prob.max_robots is not None and prob.max_robots < need:
+        return f"closure impossible with the fleet: {why}; the fleet has {prob.max_robots}", [
+            "fleet"
+        ]
+    edges = len(np.unique(cand.edges))
+    if prob.one_per_edge and edges < need:
+        return (
+            f"one robot per edge: only {edges} edges have room for a robot of radius {r:g} m; "
+            f"{why}",
+            ["one_per_edge"],
+        )
+    fit = packing_bound(prob)
+    if fit < need:
+        return (
+            f"robots too large for the object: at most {fit} robots of radius {r:g} m fit around "
+            f"it with centres {prob.min_gap:.3g} m (2·radius + clearance) apart; {why}",
+            ["spacing"],
+        )
+    return "", []
+
+
+def _closest_reason(prob: Problem, res: GAResult) -> tuple[str, list[str]]:
+    """What the least violating string the GA saw gets wrong."""
+    head = f"the GA found no feasible capture in {res.evaluations} evaluations"
+    if res.closest is None:
+        return head, []
+    x = res.closest[None]
+    _, flags = constraint_flags(prob, x)
+    bad = [name for name in CONSTRAINTS if name in flags and flags[name][0]]
+    if "closure" in bad and len(bad) > 1:
+        bad.remove("closure")  # closure is only checked once the others hold
+    n = int(x.sum())
+    gap = float(_closest_pair(_Chosen.of(prob, x))[0])
+    detail = {
+        "robots": f"{n} robots, at least 3 needed",
+        "fleet": f"{n} robots, the fleet has {prob.max_robots}",
+        "moments": "clockwise and counter-clockwise moments are not both resisted",
+        "translation": "the push directions leave a half-plane free (translation closure)",
+        "one_per_edge": "two robots on one edge",
+        "spacing": f"robot centres {gap:.3g} m apart where {prob.min_gap:.3g} m "
+        "(2·radius + clearance) is needed",
+        "closure": "the wrenches do not positively span R³ (first-order form closure)",
+    }
+    text = "; ".join(f"{b}: {detail[b]}" for b in bad)
+    return f"{head}; the closest plan ({n} robots) violates {text}", bad
+
+
+def _retry_without_fleet(prob: Problem, rng: np.random.Generator) -> tuple[str, GAResult | None]:
+    """The GA once more without the fleet limit: a capture that needs more robots than the
+    fleet has gives the reason; one within the fleet after all is returned."""
+    if prob.max_robots is None or prob.max_robots >= len(prob.cand.points):
+        return "", None
+    res = run_ga(Problem(**{**prob.__dict__, "max_robots": None}), rng)
+    if not res.found:
+        return "", None
+    m = int(res.best.sum())
+    if m > prob.max_robots:
+        return (
+            f"closure impossible with the fleet: the best capture found needs {m} robots; "
+            f"the fleet has {prob.max_robots}",
+            None,
+        )
+    return "", res
+
+
+def plan_capture(
+    polygon: FloatArray,
+    robot_radius: float,
+    params: CaptureParams,
+    rng: np.random.Generator,
+    max_robots: int | None = None,
+) -> CapturePlan:
+    """Capture points for a polygon (object frame) by the GA, with at most ``max_robots``
+    robots (the fleet size; None: no limit). Always a plan: check ``feasible`` and ``reason``."""
+    poly = geometry.ensure_ccw(polygon)
+    budget = capture_budget_error(poly, params.spacing)
+    if budget:
+        return CapturePlan.refused(params, f"capture.spacing: {budget}", ["budget"], max_robots)
+    prob = make_problem(poly, robot_radius, params, max_robots=max_robots)
+    reason, violated = structural_reason(prob)
+    if reason:
+        return describe(prob, np.zeros(len(prob.cand.points), bool), 0, [], reason, violated)
     res = run_ga(prob, rng)
-    return describe(prob, res.best, res.evaluations, res.history)
+    if not res.found:
+        reason, retry = _retry_without_fleet(prob, rng)
+        violated = ["fleet"] if reason else []
+        if retry is not None:
+            res = GAResult(retry.best, retry.objective, res.evaluations + retry.evaluations,
+                           retry.history)  # fmt: skip
+        elif not reason:
+            reason, violated = _closest_reason(prob, res)
+    return describe(prob, res.best, res.evaluations, res.history, reason, violated)
+
+
+def plan_for_fleet(cfg: Any, rng: np.random.Generator | None = None) -> CapturePlan:
+    """The capture plan for a config: its object, the fleet's largest robot radius, at most as
+    many robots as the fleet has, the ``[capture]`` parameters (``rng`` from capture.seed).
+
+    The robots' spacing uses the larger of ``capture.clearance`` and ``approach.safety_margin``:
+    the approach's safety filter keeps robot centres ``r_i + r_j + safety_margin`` apart, so
+    points closer than that could never all be reached."""
+    params = CaptureParams.from_config(cfg.capture)
+    clearance = max(params.clearance, cfg.approach.safety_margin)
+    return plan_capture(
+        cfg.object_polygon(),
+        cfg.max_robot_radius,
+        dataclasses.replace(params, clearance=clearance),
+        rng if rng is not None else np.random.default_rng(cfg.capture.seed),
+        max_robots=len(cfg.robots),
+    )
 
 
 def brute_force_capture(
-    polygon: FloatArray, robot_radius: float, params: CaptureParams, sizes=range(3, 7)
+    polygon: FloatArray,
+    robot_radius: float,
+    params: CaptureParams,
+    sizes=range(3, 7),
+    max_robots: int | None = None,
 ) -> tuple[float, np.ndarray]:
     """The exact optimum over node subsets of the given sizes (vectorized per chunk)."""
-    prob = make_problem(polygon, robot_radius, params)
+    prob = make_problem(polygon, robot_radius, params, max_robots=max_robots)
     k = len(prob.cand.points)
     best_f, best = PENALTY, np.zeros(k, bool)
     for s in sizes:
@@ -525,27 +928,25 @@ def brute_force_capture(
 
 
 def push_objective(
-    cand: Candidates,
-    direction: FloatArray,
-    n: int,
-    conflict: NDArray[np.bool_],
-    x: NDArray[np.bool_],
+    prob: Problem, direction: FloatArray, n: int, x: NDArray[np.bool_]
 ) -> tuple[FloatArray, NDArray[np.int64]]:
     """Eq. 5: D·ΣF_i over strings of exactly n nodes, spacing kept, D inside the cone of the
     chosen push directions."""
     d = np.asarray(direction, float) / np.linalg.norm(direction)
-    f_push = -cand.normals
-    xf = x.astype(float)
-    val = xf @ (f_push @ d)
-    viol = (xf.sum(1) != n).astype(np.int64)
-    viol += ((xf @ conflict.astype(float)) * xf).sum(1) > 0
+    f_push = -prob.cand.normals
+    ch = _Chosen.of(prob, x)
+    mask = ch.mask
+    proj = f_push[:, 0] * d[0] + f_push[:, 1] * d[1]  # (no BLAS call in the loop)
+    val = np.where(mask, proj[np.minimum(ch.idx, len(proj) - 1)], 0.0).sum(axis=1)
+    viol = (ch.cnt != n).astype(np.int64)
+    viol += _too_close(prob, ch)
     # D in cone(F): some chosen F on each side of D (or along it) within a half-turn
-    psi = np.arctan2(f_push[:, 0] * d[1] - f_push[:, 1] * d[0], f_push @ d)  # angle F → D
-    along = np.abs(psi) < 1e-9
-    left = np.where(x & (psi > 0), psi, np.inf).min(1)
-    right = np.where(x & (psi < 0), -psi, np.inf).min(1)
-    in_cone = np.any(x & along[None], axis=1) | (left + right <= np.pi)
-    viol += ~in_cone
+    psi = np.arctan2(f_push[:, 0] * d[1] - f_push[:, 1] * d[0], proj)  # angle F → D
+    psi = np.where(mask, psi[np.minimum(ch.idx, len(psi) - 1)], np.nan)
+    along = np.any(np.abs(psi) < 1e-9, axis=1)
+    left = np.where(psi > 0, psi, np.inf).min(axis=1, initial=np.inf)
+    right = np.where(psi < 0, -psi, np.inf).min(axis=1, initial=np.inf)
+    viol += ~(along | (left + right <= np.pi))
     return np.where(viol == 0, val, PENALTY), viol
 
 
@@ -561,7 +962,7 @@ def plan_push_arrangement(
     prob = make_problem(polygon, robot_radius, params)
 
     def fn(x: np.ndarray):
-        return push_objective(prob.cand, direction, n, prob.conflict, x)
+        return push_objective(prob, direction, n, x)
 
     res = run_ga(prob, rng, objective=fn, init=(n, n))  # strings start with exactly n robots
     return np.flatnonzero(res.best), res.objective
@@ -575,7 +976,7 @@ def brute_force_push(
     combos = np.array(list(itertools.combinations(range(k), n)), dtype=np.int64)
     x = np.zeros((len(combos), k), bool)
     np.put_along_axis(x, combos, True, axis=1)
-    f, _ = push_objective(prob.cand, direction, n, prob.conflict, x)
+    f, _ = push_objective(prob, direction, n, x)
     i = int(np.argmax(f))
     return np.flatnonzero(x[i]), float(f[i])
 

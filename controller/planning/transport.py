@@ -40,7 +40,7 @@ import numpy as np
 
 from controller import geometry
 from controller.planning.contact_lp import ContactForceLP, twist_for_wrench
-from controller.planning.transport_model import Rollout, Trace, hold_matrix
+from controller.planning.transport_model import Rollout, Trace, hold_matrix, lp_matrix
 from controller.planning.transport_types import (
     ACTIONS,
     FOLLOW,
@@ -93,6 +93,8 @@ def initial_matrix(
         return np.vstack([m[shift:], np.repeat(m[-1:], shift, axis=0)]).astype(np.int64)
     if params.initial_actions == "random":
         return rng.integers(0, len(ACTIONS), size=(n, k)).astype(np.int64)
+    if params.initial_actions == "lp":
+        return lp_matrix(roll, n)
     return hold_matrix(roll, n)
 
 
@@ -321,9 +323,9 @@ def plan_local(
         e = roll.energy(trace)
         return make_plan(roll, trace, e, "ok", group=group)
     start = roll.run(initial_matrix(roll, rng, previous, shift))
-    if previous is not None and params.initial_actions == "hold":
+    if previous is not None and params.initial_actions == "lp":
         # the previous plan shifted, or the least-force pushing set now: the better start
-        fresh = roll.run(hold_matrix(roll, params.intervals))
+        fresh = roll.run(lp_matrix(roll, params.intervals))
         if roll.energy(fresh).total < roll.energy(start).total:
             start = fresh
     best, accepted = anneal(roll, start, params, rng, downhill=params.strategy == "downhill")

@@ -351,13 +351,16 @@ def relocation_scan(
     wrench: FloatArray,
     lp: ContactForceLP,
     candidates: IntArray | None = None,
+    taken: FloatArray | None = None,
 ) -> tuple[int, FloatArray]:
     """Vass §4 / Fig. 5: the contact node for a relocating robot that minimises the summed
     normal forces of all contacts (the others, all pushing, plus it) making ``wrench``.
 
     contacts: (n,) nodes of the other robots in contact; max_force, radii: theirs (N, m);
     candidate_radius, candidate_force: the relocating robot's; wrench: (3,) object frame about
-    the centroid (N, N, N·m). Nodes where its disc would overlap another robot are skipped.
+    the centroid (N, N, N·m). Nodes where its disc would overlap another robot are skipped, and
+    nodes within a robot diameter of a ``taken`` centre (object frame: where other relocating
+    robots are going).
     Returns (node, values) with values[k] the objective at ``candidates[k]`` (N; inf where the
     LP is infeasible or the node is taken). If no node is feasible, the node whose push points
     most along the needed force wins (its value stays inf).
@@ -374,6 +377,12 @@ def relocation_scan(
         centre = model.centre(int(node), candidate_radius)
         if len(centres) and np.any(
             np.linalg.norm(centres - centre, axis=1) < radii + candidate_radius - 1e-9
+        ):
+            continue
+        if (
+            taken is not None
+            and len(taken)
+            and np.any(np.linalg.norm(np.asarray(taken) - centre, axis=1) < 2 * candidate_radius)
         ):
             continue
         pts = np.vstack([others, model.nodes[node] - c])
@@ -509,7 +518,10 @@ class Rollout:
         self._memo: dict[tuple, tuple] = {}
         self._paths: list[list[list[float]]] = []
         self._path_index: dict[tuple, int] = {}
-        self.targets: dict[int, int] = {}
+        # relocation targets: the committed ones (robots already on their way) first
+        self.targets: dict[int, int] = {
+            i: m.snap(r.target[0], r.target[1]) for i, r in enumerate(robots) if r.target
+        }
         self._scans = {} if scans is None else scans
         self.lp_calls = 0
         self.steps = 0
@@ -599,7 +611,11 @@ class Rollout:
             w = np.array([1.0, 0.0, 0.0])  # nothing to push: the node pushing along +x
         nodes = np.array([st.nodes[j] for j in others], np.int64)
         unit = w / max(float(np.linalg.norm(w / [1.0, 1.0, m.mean_radius])), 1e-12)
-        key = (i, nodes.tobytes(), np.round(unit / 0.02).astype(int).tobytes())
+        # where the other relocating robots are going is taken too
+        taken = np.array(
+            [m.centre(n, self.radii[j]) for j, n in self.targets.items() if j != i]
+        ).reshape(-1, 2)
+        key = (i, nodes.tobytes(), np.round(unit / 0.02).astype(int).tobytes(), taken.tobytes())
         if key not in self._scans:
             self._scans[key] = relocation_scan(
                 m,
@@ -610,6 +626,7 @@ class Rollout:
                 self.fmax[i],
                 w,
                 self.lp,
+                taken=taken,
             )[0]
         self.targets[i] = self._scans[key]
         return self.targets[i]
@@ -857,22 +874,39 @@ def count_changes(effective: IntArray, previous: tuple[int, ...]) -> int:
 
 
 def hold_matrix(roll: Rollout, intervals: int) -> IntArray:
-    """The start of the search: a robot in the middle of a relocation or a slide keeps at it;
-    the robots in contact push if the contact-force LP with all of them as candidates gives them
-    a force for the twist the route asks for now (the least-force pushing set: a start that
-    already moves the object, where single changes from "everyone follows" would all be
-    uphill), else follow; if that LP has no answer, a robot pushes if its push has a component
-    along the needed force; a robot without contact idles."""
+    """Each robot repeats its last action; a robot without one pushes if its push has a
+    component along the force the object needs now (else it follows), or idles without
+    contact."""
     m, st = roll.model, roll.start
     twist = roll.carrot_twist(st)
     need = _rot(-st.pose[2]) @ twist[:2]
+    row = []
+    for i, r in enumerate(roll.state.robots):
+        if r.action is not None:
+            row.append(action_code(r.action))
+        elif st.nodes[i] < 0:
+            row.append(IDLE)
+        else:
+            row.append(PUSH if float(-m.normals[st.nodes[i]] @ need) > 1e-9 else FOLLOW)
+    return np.tile(np.array(row, np.int64), (intervals, 1))
+
+
+def lp_matrix(roll: Rollout, intervals: int) -> IntArray:
+    """The least-force pushing set as the start: a robot in the middle of a relocation or a
+    slide keeps at it; the robots in contact push if the contact-force LP with all of them as
+    candidates gives them a force for the twist the route asks for now, else follow (a start
+    that already moves the object, where every single change from "everyone follows" is
+    uphill); without an LP answer, :func:`hold_matrix`."""
+    st = roll.start
+    twist = roll.carrot_twist(st)
     contact = np.array([i for i in range(roll.k) if st.nodes[i] >= 0], np.int64)
-    lp_force = np.zeros(roll.k)
+    force = np.zeros(roll.k)
     if len(contact) and np.any(twist):
         res = roll.forces(st.pose[2], contact, np.asarray(st.nodes, np.int64), twist)
         if res.status == "optimal":
-            lp_force[contact] = res.normal
-    lp_ok = bool(np.any(lp_force > 1e-6))
+            force[contact] = res.normal
+    if not np.any(force > 1e-6):
+        return hold_matrix(roll, intervals)
     row = []
     for i, r in enumerate(roll.state.robots):
         last = None if r.action is None else action_code(r.action)
@@ -880,8 +914,6 @@ def hold_matrix(roll: Rollout, intervals: int) -> IntArray:
             row.append(last)
         elif st.nodes[i] < 0:
             row.append(IDLE)
-        elif lp_ok:
-            row.append(PUSH if lp_force[i] > 1e-6 else FOLLOW)
         else:
-            row.append(PUSH if float(-m.normals[st.nodes[i]] @ need) > 1e-9 else FOLLOW)
+            row.append(PUSH if force[i] > 1e-6 else FOLLOW)
     return np.tile(np.array(row, np.int64), (intervals, 1))

@@ -52,7 +52,9 @@ class RobotState:
     position: (2,) world centre (m); radius (m); max_force (N, the most it can push with);
     max_speed (m/s); contact: None, or (point, inward normal) in the object frame (the point on
     the boundary it touches, the unit direction it pushes in); action: the action it executed in
-    the last interval (for the action-change term), None if none; id: for messages only.
+    the last interval (for the action-change term), None if none; id: for messages only;
+    target: the contact (point, inward normal) a robot already on its way is relocating to
+    (the mission commits to a relocation until the robot arrives), None if none.
     """
 
     position: FloatArray
@@ -62,6 +64,7 @@ class RobotState:
     contact: tuple[FloatArray, FloatArray] | None = None
     action: str | None = None
     id: str = ""
+    target: tuple[FloatArray, FloatArray] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,7 +125,7 @@ class TransportParams:
     initial_temperature: float = 0.3
     cooling: float = 0.95
     schedule: str = "geometric"
-    initial_actions: str = "hold"
+    initial_actions: str = "lp"
     block_moves: float = 0.5
     speed: float = 0.15
     lookahead: float = 0.3

@@ -155,6 +155,92 @@ class ArrestScore:
         self.phase = out.phase
 
 
+class TransportScore:
+    """The transport scored from ground truth: time, path, deviation from the planned route,
+    true contact forces (the world's solver), clearance to obstacles, the error at the goal."""
+
+    PHASES = ("route", "rearrange", "transport")
+
+    def __init__(self, cfg: FleetConfig) -> None:
+        self.cfg = cfg
+        self.poly = geometry.ensure_ccw(cfg.object_polygon())
+        self.centroid = geometry.centroid(self.poly)
+        self.start_t: float | None = None
+        self.end_t: float | None = None
+        self.route: np.ndarray | None = None
+        self.route_length: float | None = None
+        self.path: list[np.ndarray] = []
+        self.lateral: list[float] = []
+        self.forces: list[float] = []
+        self.impulse = 0.0
+        self.clearance = math.inf
+        self.delivered = False
+
+    def tick(self, t: float, dt: float, out, world) -> None:
+        if out is None:
+            return
+        for kind, data in out.events:
+            if kind == "route" and self.route is None:
+                self.route = np.asarray(data["waypoints"], float)[:, :2]
+                self.route_length = float(data.get("length_m", 0.0))
+            if kind == "delivered":
+                self.delivered = True
+        active = out.phase in self.PHASES
+        if active and self.start_t is None:
+            self.start_t = t
+        if self.start_t is None or (self.end_t is not None):
+            return
+        if out.phase in ("done", "failed"):
+            self.end_t = t
+        pose = world.object_pose()
+        c = geometry.transform(self.centroid[None], pose)[0]
+        self.path.append(c)
+        if self.route is not None and len(self.route) > 1:
+            origin = pose[:2]
+            d, _ = geometry.point_segment_distance(origin[None], self.route[:-1], self.route[1:])
+            self.lateral.append(float(d.min()))
+        f = list(world.contact_forces().values())
+        self.forces += f
+        self.impulse += float(sum(f)) * dt
+        obstacles = self.cfg.obstacle_polygons()
+        bounds = self.cfg.bounds_array() if self.cfg.world.walls else None
+        self.clearance = min(
+            self.clearance,
+            geometry.polygon_clearance(geometry.transform(self.poly, pose), obstacles, bounds),
+        )
+
+    def figures(self, world) -> dict[str, Any]:
+        """The ``fleet run --json`` transport fields (None where nothing was carried)."""
+        goal = self.cfg.object.goal
+        if goal is None or self.start_t is None:
+            return {"transported": False if goal is not None else None}
+        pose = world.object_pose()
+        err = float(np.linalg.norm(pose[:2] - np.asarray(goal[:2])))
+        err_deg = float(np.degrees(abs(geometry.wrap_angle(pose[2] - goal[2]))))
+        t = self.cfg.transport
+        within = err <= t.tolerance and err_deg <= t.heading_tolerance_deg
+        path = np.asarray(self.path).reshape(-1, 2)
+        lat = np.asarray(self.lateral)
+        f = np.asarray(self.forces)
+        end = self.end_t if self.end_t is not None else None
+        return {
+            "transported": bool(self.delivered and within),
+            "goal_error_m": err,
+            "goal_error_deg": err_deg,
+            "transport_time_s": None if end is None else round(end - self.start_t, 3),
+            "route_length_m": self.route_length,
+            "object_path_length_m": float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))),
+            "lateral_deviation_rms_m": float(np.sqrt(np.mean(lat**2))) if len(lat) else None,
+            "max_lateral_deviation_m": float(lat.max()) if len(lat) else None,
+            "contact_force_mean_n": float(f.mean()) if len(f) else None,
+            "contact_force_max_n": float(f.max()) if len(f) else None,
+            "contact_impulse_ns": self.impulse,
+            "transport_object_min_clearance_m": None
+            if math.isinf(self.clearance)
+            else self.clearance,
+        }
+
+
 def _add(a: dict[str, int], b: dict[str, int]) -> dict[str, int]:
     return {k: a.get(k, 0) + b.get(k, 0) for k in a.keys() | b.keys()}
 
@@ -171,6 +257,12 @@ def failure_of(result: Mapping[str, Any], verdict: Verdict, mission_failure: dic
         reason = "estop" if result.get("estop") else "timeout"
         detail = f"sim time ran out ({result['sim_time_s']} s) in phase {result['mission_phase']}"
         return {"reason": reason, "t": result["sim_time_s"], "detail": detail}
+    if result.get("transported") is False:
+        detail = (
+            f"the object ended {result.get('goal_error_m', math.nan):.2f} m and "
+            f"{result.get('goal_error_deg', math.nan):.1f} deg from object.goal (truth)"
+        )
+        return {"reason": "not_delivered", "t": result["sim_time_s"], "detail": detail}
     return None
 
 
@@ -196,6 +288,7 @@ class DryRun:
         self.max_time = cfg.sim.max_time if max_time is None else max_time
         self.verdict = Verdict()
         self.score = ArrestScore(cfg)
+        self.carry = TransportScore(cfg)
         self.mission_failure: dict[str, Any] | None = None
         self._next_progress = 0.0
 
@@ -278,6 +371,7 @@ class DryRun:
                 raise RuntimeError("controller loop failed") from ctl.error
             out = node.last_output
             self.score.tick(coord.t, out, world)
+            self.carry.tick(coord.t, coord.dt, out, world)
             self._progress(coord.t, out, world)
             if out is not None and out.failed:
                 self.mission_failure = _mission_failure(out, coord.t)
@@ -322,6 +416,9 @@ class DryRun:
             "drops": _add(node.drops(), robot_bus.drops()),
             "estimator": estimator,
             "final_object_pose": [float(v) for v in world.object_pose()],
+            "rearrangements": mission.get("rearrangements"),
+            "relocations": mission.get("relocations"),
+            **self.carry.figures(world),
             "mission": mission,
         }
 
@@ -351,6 +448,7 @@ class DryRun:
         escaped = held is not None and held > RULES.max_hold_displacement_m
         result["arrested"] = bool(result.get("arrest_declared")) and not escaped
         result["failure"] = failure
+        result["reason"] = None if failure is None else failure["reason"]
         result["status"] = "ok" if failure is None else "failed"
         result["phase"] = "failed" if failure is not None else result.get("mission_phase")
         return result

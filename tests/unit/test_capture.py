@@ -152,7 +152,7 @@ def test_ga_hits_the_brute_force_optimum_on_19_of_20_polygons():
     assert 5 <= sum(concave) <= 15  # both kinds are in the suite
     hits = 0
     for i, (poly, params, bf) in enumerate(suite):
-        plan = plan_capture(poly, 0.05, params, np.random.default_rng(100 + i))
+        plan = plan_capture(poly, 0.05, params, np.random.default_rng(100 + i), max_robots=6)
         assert plan.objective <= bf + 1e-9  # the GA never beats the exact optimum
         assert plan.form_closure
         hits += plan.objective >= bf - 1e-9
@@ -191,8 +191,11 @@ def test_fleet_toml_plans_a_certified_capture(capsys):
     r = json.loads(capsys.readouterr().out)
     for key in ("candidates", "normals", "edges", "chosen", "points", "robots_needed", "objective",
                 "M_cw", "M_ccw", "N_cw", "N_ccw", "paper_feasible", "form_closure",
-                "evaluations", "seconds", "history"):  # fmt: skip
+                "evaluations", "seconds", "history", "feasible", "reason", "violated",
+                "max_robots"):  # fmt: skip
         assert key in r, key
+    assert r["feasible"] is True and r["reason"] == "" and r["violated"] == []
+    assert r["max_robots"] == 6 and r["robots_needed"] <= 6
     assert r["form_closure"] is True and r["paper_feasible"] is True
     assert r["robots_needed"] == len(r["points"]) == len(r["chosen"]) >= 4
     assert r["evaluations"] <= 60 * 600 and len(r["history"]) == 600

@@ -301,7 +301,11 @@ def test_sa_escapes_a_local_minimum_that_holds_downhill():
         out = {}
         for strategy in ("sa", "downhill"):
             p = TransportParams(
-                strategy=strategy, iterations=300, initial_temperature=1.0, cooling=0.985
+                strategy=strategy,
+                iterations=300,
+                initial_temperature=1.0,
+                cooling=0.985,
+                initial_actions="hold",  # repeat the last actions: the trap stays set
             )
             out[strategy] = plan_local(st, p, np.random.default_rng(seed))
         assert out["downhill"].energy.total == out["downhill"].start_energy.total
@@ -426,7 +430,7 @@ def test_relocation_scan_picks_the_force_minimising_node():
 
 def test_first_interval_commands_and_targets():
     st = push_case(8, max_force=10.0)
-    p = TransportParams(iterations=0)
+    p = TransportParams(iterations=0, initial_actions="hold")
     plan = plan_local(st, p, np.random.default_rng(0))
     assert plan.first_actions[:2] == ("push", "push")
     v_obj = plan.object_twists[0][:2]
@@ -483,3 +487,13 @@ def test_params_from_the_transport_section():
         make_config({"transport": {"strategy": "random-walk"}})
     with pytest.raises(ValueError, match="strategy"):
         TransportParams(strategy="nope")
+
+
+def test_the_lp_start_pushes_with_the_least_force_set_and_escapes_the_trap():
+    """From 'both follow', the start the mission uses (the contact-force LP over the robots in
+    contact) already has both rear robots pushing: the object moves from the first interval."""
+    st = with_actions(diamond_case(), ["follow", "follow"])
+    p = TransportParams(strategy="downhill", iterations=0, initial_actions="lp")
+    plan = plan_local(st, p, np.random.default_rng(0))
+    assert plan.first_actions == ("push", "push")
+    assert plan.lp_status[0] == "optimal" and plan.energy.progress > 0

@@ -1,0 +1,99 @@
+"""The transport, end to end over the bus, judged from ground truth (``sim/truth``).
+
+Each reachable scenario must deliver the object within ``transport.tolerance`` and
+``transport.heading_tolerance_deg`` of its goal with a clean verdict (no robot-robot collision,
+no robot in the object, no robot on an obstacle or a wall) and the object never touching an
+obstacle; the unreachable one must fail cleanly with ``no_route``, nothing pushed, nothing hit.
+Most scenarios start with the robots already holding the object (``--mission transport``);
+one captures a moving object first (the whole job). The pybullet ones test the physics of
+pushing (force limits, floor friction, differential drives); the ideal ones the logic.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from controller.mission.factory import build_mission
+from controller.runtime.dry_run import DryRun, judge
+from tests.support.transport_scenarios import CRATE, L_SHAPE, Scenario, scenario_config
+
+ROOM = ((0.0, 0.0), (8.0, 6.0))
+PILLAR = ((3.6, 1.2), (4.0, 1.2), (4.0, 1.6), (3.6, 1.6))
+WALL_WITH_DOOR = (  # a wall across the room at x = 4 with a door 1.8 m wide
+    ((3.9, 0.0), (4.1, 0.0), (4.1, 2.1), (3.9, 2.1)),
+    ((3.9, 3.9), (4.1, 3.9), (4.1, 6.0), (3.9, 6.0)),
+)
+ENCLOSURE = (  # a closed pen around the goal
+    ((5.5, 3.5), (7.5, 3.5), (7.5, 3.7), (5.5, 3.7)),
+    ((5.5, 5.3), (7.5, 5.3), (7.5, 5.5), (5.5, 5.5)),
+    ((5.5, 3.5), (5.7, 3.5), (5.7, 5.5), (5.5, 5.5)),
+    ((7.3, 3.5), (7.5, 3.5), (7.5, 5.5), (7.3, 5.5)),
+)
+
+SCENARIOS = [
+    Scenario("open-floor-ideal", CRATE, (1.5, 2.5, 0.0), (5.5, 3.0, 0.0)),
+    Scenario(
+        "obstacle-beside-route", L_SHAPE, (1.5, 1.0, 0.0), (5.5, 1.5, 0.0), obstacles=(PILLAR,)
+    ),
+    Scenario("doorway", L_SHAPE, (1.5, 2.5, 0.0), (5.5, 2.5, 0.0), obstacles=WALL_WITH_DOOR),
+    Scenario("turn-180-ideal", CRATE, (2.0, 2.5, 0.0), (4.0, 3.0, 3.14159)),
+    Scenario(
+        "moving-when-captured",
+        L_SHAPE,
+        (2.0, 2.5, 0.0),
+        (5.0, 3.0, 0.0),
+        whole_job=True,
+        motion={"kind": "sine", "speed": 0.06, "amplitude": 0.3, "wavelength": 4.0},
+    ),
+    Scenario("open-floor-pybullet", CRATE, (1.5, 2.5, 0.0), (5.0, 3.0, 0.0), backend="pybullet"),
+    Scenario("turn-180-pybullet", CRATE, (2.0, 2.5, 0.0), (3.5, 3.0, 3.14159), backend="pybullet"),
+    Scenario(
+        "heavy-pybullet",  # 29 N of floor friction for robots of 8 N: four pushers at their limit
+        CRATE,
+        (1.5, 2.5, 0.0),
+        (4.0, 2.5, 0.0),
+        backend="pybullet",
+        kinds="oooooooo",
+        mass=10.0,
+        floor_friction=0.3,
+        max_force=8.0,
+        patch={"capture": {"hold_force": 0.0}},
+    ),
+    Scenario(
+        "diff-pushers-pybullet",
+        CRATE,
+        (1.5, 2.5, 0.0),
+        (4.5, 2.5, 0.0),
+        backend="pybullet",
+        kinds="dddddd",
+    ),  # fmt: skip
+]
+UNREACHABLE = Scenario(
+    "unreachable-goal", CRATE, (1.5, 2.0, 0.0), (6.1, 4.2, 0.0), obstacles=ENCLOSURE
+)
+
+
+def run(sc: Scenario, tmp_path):
+    cfg = scenario_config(sc)
+    kind = "capture" if sc.whole_job else "transport"
+    return DryRun(cfg, build_mission(cfg, kind), tmp_path / f"{sc.name}.mcap").run()
+
+
+@pytest.mark.parametrize("sc", SCENARIOS, ids=[s.name for s in SCENARIOS])
+def test_the_object_is_delivered(sc, tmp_path):
+    res = run(sc, tmp_path)
+    brief = {k: res.get(k) for k in ("failure", "goal_error_m", "goal_error_deg", "phases")}
+    assert res["status"] == "ok" and res["transported"] is True, brief
+    assert judge(res) == [], res["verdict"]
+    assert res["goal_error_m"] <= 0.2 and res["goal_error_deg"] <= 10.0
+    assert res["transport_object_min_clearance_m"] > 0.0  # never touched an obstacle or a wall
+    assert res["route_length_m"] > 0 and res["object_path_length_m"] > 0
+
+
+def test_an_unreachable_goal_fails_cleanly_with_no_route(tmp_path):
+    res = run(UNREACHABLE, tmp_path)
+    assert res["status"] == "failed" and res["reason"] == "no_route", res["failure"]
+    assert res["failure"]["detail"]
+    assert judge(res) == []
+    moved = (res["final_object_pose"][0] - 1.5) ** 2 + (res["final_object_pose"][1] - 2.0) ** 2
+    assert moved**0.5 < 0.02  # the object was not pushed

@@ -1,0 +1,99 @@
+"""Seeded transport scenarios: configs where the robots already hold the object (``fleet run
+--mission transport``) or, for the whole job, start around the room. Shared by the transport
+suite (tests/scenarios/test_transport_scenarios.py) and bench/transport.py."""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from controller import geometry
+from controller.config import FleetConfig, parse_config
+from tests.support.config import base_config_dict, deep_update, free_port
+
+L_SHAPE = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.4], [0.4, 0.4], [0.4, 1.0], [0.0, 1.0]]
+CRATE = [[0.0, 0.0], [0.8, 0.0], [0.8, 0.5], [0.0, 0.5]]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A transport scenario: object, where it starts and goes, the room, the fleet."""
+
+    name: str
+    polygon: list
+    start: tuple[float, float, float]
+    goal: tuple[float, float, float]
+    backend: str = "ideal"
+    kinds: str = "oodood"  # one letter per robot: omni or diff
+    obstacles: tuple = ()
+    bounds: tuple = ((0.0, 0.0), (8.0, 6.0))
+    mass: float = 4.0
+    floor_friction: float = 0.2
+    max_force: float = 6.0
+    max_speed: float = 0.4
+    whole_job: bool = False  # capture a moving object first (else the robots hold it)
+    motion: dict = field(default_factory=lambda: {"kind": "static", "give_up_after": 0.05})
+    seed: int = 1
+    max_time: float = 200.0
+    patch: dict = field(default_factory=dict)
+
+
+def holding_starts(cfg_dict: dict[str, Any], n: int) -> list[list[float]]:
+    """Robot start poses touching the capture set the planner would pick for this object (the
+    GA's set reinforced to hold), placed at the object's start: a fleet that already holds it."""
+    from controller.mission.job import plan_capture_set
+
+    cfg = parse_config(cfg_dict, "scenario")
+    cap = plan_capture_set(cfg, np.random.default_rng(cfg.capture.seed))
+    r = cfg.max_robot_radius
+    centres = geometry.transform(cap.points + (r + 0.001) * cap.normals, cfg.object.start)
+    inward = -cap.normals @ geometry.rot(float(cfg.object.start[2])).T
+    heading = np.arctan2(inward[:, 1], inward[:, 0])  # a diff robot faces what it pushes
+    starts = [[float(x), float(y), float(h)] for (x, y), h in zip(centres, heading, strict=True)]
+    if len(starts) > n:
+        raise ValueError(f"the capture set needs {len(starts)} robots, the scenario has {n}")
+    (x0, y0), (x1, y1) = cfg.world.bounds
+    spare = [[x0 + 0.3 + 0.4 * k, y0 + 0.3, 0.0] for k in range(n - len(starts))]
+    return starts + spare
+
+
+def scenario_config(sc: Scenario, port: int | None = None) -> FleetConfig:
+    """The config of a scenario, on a free loopback port."""
+    d = copy.deepcopy(base_config_dict())
+    d["world"] = {"bounds": [list(b) for b in sc.bounds], "walls": True}
+    d["obstacles"] = [{"polygon": [list(p) for p in o]} for o in sc.obstacles]
+    d["object"].update(
+        {
+            "polygon": sc.polygon,
+            "start": list(sc.start),
+            "goal": list(sc.goal),
+            "mass": sc.mass,
+            "floor_friction": sc.floor_friction,
+            "motion": sc.motion,
+        }
+    )
+    d["robots"] = [
+        {
+            "id": f"r{k + 1}",
+            "kind": "omni" if c == "o" else "diff",
+            "radius": 0.1,
+            "max_speed": sc.max_speed,
+            "max_yaw_rate": 2.0,
+            "max_force": sc.max_force,
+            "driver": "sim",
+            "start": [0.3 + 0.4 * k, 0.3, 0.0],
+        }
+        for k, c in enumerate(sc.kinds)
+    ]
+    d["capture"] = {**d.get("capture", {}), "seed": sc.seed}
+    d["sim"] = {**d["sim"], "backend": sc.backend, "seed": sc.seed, "max_time": sc.max_time}
+    d = deep_update(d, sc.patch)
+    if not sc.whole_job:
+        for r, s in zip(d["robots"], holding_starts(d, len(d["robots"])), strict=True):
+            r["start"] = s
+    p = port or free_port()
+    d["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{p}"], "connect": []}
+    return parse_config(d, f"scenario:{sc.name}")
