@@ -173,7 +173,11 @@ def test_fleet_record_writes_the_config(tmp_path, port):
                     p.put(
                         wire.RobotState(t=1.7e9 + 0.05 * i, id=rid, x=1.0 + 0.3 * k, y=1.0, theta=0)
                     )
-            wait_for(lambda: len(list(read_log(out))) >= 40, 20.0, "the samples on disk")
+            wait_for(
+                lambda: sum(not r.topic.startswith("/") for r in read_log(out)) == 40,
+                20.0,
+                "the samples on disk",
+            )
             proc.send_signal(signal.SIGTERM)
             assert proc.wait(timeout=20) == 0
         finally:
