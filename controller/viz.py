@@ -258,7 +258,7 @@ def _title(run: RunLog, n: int, phases, figures: dict | None) -> str:
         words += f", last phase {phases[-1]['phase']} at {phases[-1]['t']:.1f} s"
     if figures is not None and figures.get("verdict") is not None:
         v = figures["verdict"]
-        words += ", verdict: " + (", ".join(f["reason"] for f in v) if v else "clean")
+        words += ", hardware contract: " + (", ".join(f["reason"] for f in v) if v else "clean")
     return words
 
 

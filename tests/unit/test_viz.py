@@ -88,7 +88,7 @@ def test_a_64_robot_run_reads_well(tmp_path, figures):
 
     discs = [p for p in traj.axes[0].patches if isinstance(p, Circle)]
     assert len(discs) == 2 * 64 and {p.radius for p in discs} == {0.1}
-    assert "verdict: clean" in traj._suptitle.get_text()
+    assert "hardware contract: clean" in traj._suptitle.get_text()
     # estimation error of 64 robots: the fleet's median and worst, not 64 lines
     est_labels = [t.get_text() for t in est.axes[0].get_legend().get_texts()]
     assert len(est_labels) == 3 and est_labels[1] == "median of 64 robots"
