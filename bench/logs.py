@@ -8,6 +8,7 @@ replay, the live view's offer. Prints one JSON object.
   log per sim second; ratio with/without;
 - regression replay of the golden capture log (tests/replay/data/capture.mcap): seconds, and
   sim seconds replayed per wall second;
+- dry run: wall time of a 6-robot ideal run with and without the scene, alternated;
 - live view: µs per ``offer`` (never blocks: a full queue drops).
 
 Usage: python bench/logs.py [--reps 3] [--seconds 10]
@@ -131,6 +132,33 @@ def bench_recorder(n: int, seconds: float, reps: int) -> dict:
     }
 
 
+def bench_dry_run(reps: int, seconds: float = 5.0) -> dict:
+    """Wall time of a 6-robot ideal dry run (robots driving to points) with and without the
+    scene channels, alternated in the same process: what the scene costs the run itself."""
+    from controller.mission.basic import GotoMission
+    from controller.mission.tracking import RobotLimits
+    from controller.runtime.dry_run import DryRun
+    from controller.runtime.sweep import on_free_port
+
+    walls: dict[float, list[float]] = {0.0: [], 10.0: []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(reps):
+            for hz in walls:
+                import tomllib
+
+                data = tomllib.loads((ROOT / "fleet.toml").read_text())
+                data["sim"]["backend"] = "ideal"
+                data["log"] = {"scene_hz": hz}
+                cfg = on_free_port(parse_config(data, "bench"))
+                goals = np.array([[r_.start[0] + 1.0, r_.start[1] + 1.0] for r_ in cfg.robots])
+                mission = GotoMission(goals, RobotLimits.from_config(cfg.robots))
+                res = DryRun(cfg, mission, Path(tmp) / f"{hz}-{r}.mcap", max_time=seconds).run()
+                walls[hz].append(res["wall_time_s"])
+    w, wo = float(np.median(walls[10.0])), float(np.median(walls[0.0]))
+    return {"robots": 6, "sim_s": seconds, "wall_s_with_scene": round(w, 3),
+            "wall_s_without": round(wo, 3), "ratio": round(w / wo, 3)}  # fmt: skip
+
+
 def bench_check() -> dict:
     from controller.replay.check import check_log
 
@@ -165,6 +193,7 @@ def main() -> None:
         "load_avg_1min": round(os.getloadavg()[0], 2),
         "builder": [bench_builder(n, args.seconds, args.reps) for n in (6, 64)],
         "recorder": [bench_recorder(n, args.seconds, args.reps) for n in (6, 64)],
+        "dry_run": bench_dry_run(args.reps),
         "check": bench_check(),
         "live_view": bench_offer(),
     }
