@@ -32,8 +32,15 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("plan", "route"), "plan_route", "plan the object's route (A*), offline"),
     (("replay",), "replay", "metrics, plots and playback of a run's MCAP log"),
     (("record",), "record", "record a running fleet's bus to MCAP"),
+    (("log", "recover"), "log_recover", "write a valid indexed copy of a log cut by a crash"),
+    (("log", "layout"), "log_layout", "the shipped Foxglove layout: its path, or a copy"),
+    (("sweep",), "sweep", "dry runs of several configs: a line each, a table at the end"),
     (("check",), "check", "validate a config"),
 )
+GROUPS = {
+    "plan": ("run a planner alone, offline", "what"),
+    "log": ("work on log files (MCAP)", "action"),
+}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -46,15 +53,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="fleet", description="Robot fleet controller: capture and transport.")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    plan_sub = None
+    groups: dict[str, Any] = {}
     for words, module, help_ in COMMANDS:
         if len(words) == 1:
             p = sub.add_parser(words[0], help=help_)
         else:
-            if plan_sub is None:
-                plan = sub.add_parser("plan", help="run a planner alone, offline")
-                plan_sub = plan.add_subparsers(dest="what", required=True, parser_class=_Parser)
-            p = plan_sub.add_parser(words[1], help=help_)
+            if words[0] not in groups:
+                ghelp, dest = GROUPS[words[0]]
+                g = sub.add_parser(words[0], help=ghelp)
+                groups[words[0]] = g.add_subparsers(dest=dest, required=True, parser_class=_Parser)
+            p = groups[words[0]].add_parser(words[1], help=help_)
         p.set_defaults(_module=module, _words=words)
         mod = importlib.import_module(f"controller.commands.{module}")
         mod.add_arguments(p, words[-1])

@@ -104,6 +104,17 @@ class ZenohSection:
 class LogSection:
     dir: str = _rule("runs")
     flush_interval: float = _rule(0.5, gt=0, max=10)
+    scene_hz: float = _rule(10.0, min=0, max=100)  # Foxglove scene channels per second (0: none)
+    split_s: float = _rule(0.0, min=0, max=86400)  # a new indexed segment every S s (0: one file)
+
+
+@dataclass(frozen=True, kw_only=True)
+class VizSection:
+    """The live view (``fleet run --viz``, ``fleet daemon --viz``): a Foxglove WebSocket server
+    on 127.0.0.1 (``port`` 0: any free port), with a bounded queue of ``queue`` messages."""
+
+    port: int = _rule(8765, min=0, max=65535)
+    queue: int = _rule(4096, min=16, max=1_000_000)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -312,6 +323,7 @@ class FleetConfig:
     robots: tuple[RobotConfig, ...]
     zenoh: ZenohSection = ZenohSection()
     log: LogSection = LogSection()
+    viz: VizSection = VizSection()
     world: WorldSection = WorldSection()
     obstacles: tuple[Obstacle, ...] = ()
     capture: CaptureSection = CaptureSection()

@@ -1,4 +1,4 @@
-"""``fleet daemon [--config F] [--out F.mcap] [--duration S] [--mission capture|hold]``.
+"""``fleet daemon [--config F] [--out F.mcap] [--duration S] [--mission capture|hold] [--viz]``.
 
 The controller on the lab network (``controller.runtime.daemon``). Stops on SIGINT/SIGTERM
 (robots then stop by their own watchdogs) or when the mission ends; exit 1 when it failed.
@@ -18,6 +18,11 @@ def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)
     parser.add_argument("--out", help="MCAP log (default: <log.dir>/<fleet>-daemon-<time>.mcap)")
     parser.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
+    parser.add_argument(
+        "--viz",
+        action="store_true",
+        help="serve the fleet live to Foxglove on ws://127.0.0.1:<viz.port>",
+    )
     parser.add_argument(
         "--mission",
         choices=MISSION_KINDS,
@@ -39,4 +44,4 @@ def run(args) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     mission = build_mission(cfg, args.mission)  # MissionError: exit 1 (cli.exit_code)
-    return run_daemon(cfg, mission, args.mission, out, stop, args.duration)
+    return run_daemon(cfg, mission, args.mission, out, stop, args.duration, viz=args.viz)

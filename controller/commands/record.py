@@ -2,6 +2,8 @@
 
 Attaches to a running fleet (connects to the config's zenoh endpoints), writes every sample
 under ``fleet/<name>/**`` until SIGINT/SIGTERM (or ``--duration``), then finishes the file.
+The config goes in as metadata (``fleet replay`` needs the robots' sizes and the room), and the
+Foxglove scene channels beside the bus's.
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ def run(args) -> int:
     from controller import wire
     from controller.config import load_config
     from controller.io.bus import Bus
-    from controller.io.recorder import McapRecorder, default_log_path
+    from controller.io.recorder import default_log_path
+    from controller.runtime.recording import open_recorder
 
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name, "record")
@@ -36,11 +39,15 @@ def run(args) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     connect = args.connect or list(cfg.zenoh.listen)
-    recorder = McapRecorder(out, cfg.fleet.name, cfg.log.flush_interval)
+    # the config goes in too: replay needs the robots' sizes and the room (clearance, verdict)
+    recorder = open_recorder(cfg, out, "record", who="fleet record")
     try:
         with Bus(cfg.zenoh, cfg.fleet.name, mode="peer", listen=[], connect=connect) as bus:
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
-            print(f"fleet record: recording fleet {cfg.fleet.name!r} to {out}", file=sys.stderr)
+            print(
+                f"fleet record: recording fleet {cfg.fleet.name!r} to {recorder.location}",
+                file=sys.stderr,
+            )
             deadline = time.monotonic() + args.duration if args.duration > 0 else None
             while not stop.is_set():
                 if deadline is not None and time.monotonic() >= deadline:
@@ -48,5 +55,5 @@ def run(args) -> int:
                 stop.wait(0.1)
     finally:
         recorder.close()
-    print(f"fleet record: {recorder.written} messages in {out}", file=sys.stderr)
+    print(f"fleet record: {recorder.written} messages in {recorder.location}", file=sys.stderr)
     return 0

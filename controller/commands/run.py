@@ -1,8 +1,10 @@
-"""``fleet run [--config F] [--out F.mcap] [--json] [--gui]``: the dry run of the whole job.
+"""``fleet run [--config F] [--out F.mcap] [--json] [--gui] [--viz]``: the dry run of the whole job.
 
 A stand-in world (pybullet by default, ``sim.backend``), the same agents, bus and controller
 loop as the lab, in lockstep with the sim clock. Prints a summary (``--json``: one object) and
-exits 0 when the job is done with a clean verdict, 1 when it failed, 2 on bad config.
+exits 0 when the job is done with a clean verdict, 1 when it failed, 2 on bad config (and on
+``--gui`` without a display or with a backend that has no window). ``--viz`` serves the run live
+to Foxglove (``[viz]`` port, 127.0.0.1 only).
 """
 
 from __future__ import annotations
@@ -20,6 +22,11 @@ def add_arguments(parser, word: str) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--gui", action="store_true", help="show the pybullet GUI")
     parser.add_argument(
+        "--viz",
+        action="store_true",
+        help="serve the run live to Foxglove on ws://127.0.0.1:<viz.port>",
+    )
+    parser.add_argument(
         "--max-time", type=float, default=None, help="sim seconds (default: sim.max_time)"
     )
     parser.add_argument("--backend", choices=SIM_BACKENDS, help="override sim.backend for this run")
@@ -36,7 +43,7 @@ def run(args) -> int:
     import dataclasses
 
     from controller.cli import emit_json
-    from controller.config import load_config
+    from controller.config import InputError, load_config
     from controller.io.recorder import default_log_path
     from controller.mission.factory import build_mission
     from controller.runtime.dry_run import DryRun
@@ -44,10 +51,16 @@ def run(args) -> int:
     cfg = load_config(args.config)
     if args.backend:
         cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, backend=args.backend))
+    if args.gui:
+        from controller.runtime.gui import gui_problem
+
+        problem = gui_problem(cfg.sim.backend)
+        if problem:
+            raise InputError(f"--gui: {problem}")
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name)
     mission = build_mission(cfg, args.mission)  # MissionError: exit 1 (cli.exit_code)
     print(f"fleet run: {cfg.source}, backend {cfg.sim.backend}, log {out}", file=sys.stderr)
-    summary = DryRun(cfg, mission, out, gui=args.gui, max_time=args.max_time).run()
+    summary = DryRun(cfg, mission, out, gui=args.gui, max_time=args.max_time, viz=args.viz).run()
     ok = summary["status"] == "ok"
     if args.json:
         emit_json(summary)

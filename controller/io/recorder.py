@@ -16,10 +16,11 @@ import queue
 import struct
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any, BinaryIO, Protocol
 
 from mcap.exceptions import McapError
 from mcap.records import Channel, Message, Metadata, Schema
@@ -33,6 +34,8 @@ log = logging.getLogger(__name__)
 
 PROFILE = "fleet"
 _META = object()  # queue tag of a metadata record
+SIM_EPOCH = 946_684_800.0  # 2000-01-01T00:00:00Z: a dry run's t = 0 (log and publish times)
+CLOCK_SKEW = 60.0  # s: a stamp further than this from the run's clock is from another clock
 
 
 @dataclass(frozen=True)
@@ -54,33 +57,102 @@ class LogRecord:
         return None if cls is None else wire.decode(cls, self.data)
 
 
+class Tap(Protocol):
+    """Something fed every message the recorder writes (the live view): ``offer`` must never
+    block (the recorder's thread calls it); ``close`` after the last one."""
+
+    def offer(
+        self, topic: str, schema: str, schema_data: bytes, payload: bytes, log_time_ns: int
+    ) -> None: ...
+
+    def close(self) -> None: ...
+
+    def drops(self) -> dict[str, int]: ...
+
+
 class McapRecorder:
     """Writes samples to an MCAP file from a dedicated thread.
 
     ``on_sample(key, payload, recv_time)`` may be called from any thread (zenoh callbacks).
+
+    Times: in the lab (``sim_epoch`` None) log time is the receive time (wall clock) and publish
+    time the message's ``t`` (the sender's wall clock). In a dry run (``sim_epoch`` given) both
+    are the message's ``t`` (sim seconds) on that epoch, so a player's timeline is sim time.
+
+    ``scene`` (a ``controller.scene.builder.SceneBuilder``) adds the Foxglove scene channels;
+    ``taps`` get every message written (the live view). ``split_s`` > 0 writes a folder of
+    segments (``<path without suffix>/<stem>_000.mcap``, ...), each closed and indexed once it
+    spans ``split_s`` seconds of log time, each starting with the metadata records: a crash loses
+    only the open segment's index (``fleet log recover`` rebuilds it).
     """
 
-    def __init__(self, path: str | Path, fleet: str, flush_interval: float = 0.5) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        fleet: str,
+        flush_interval: float = 0.5,
+        *,
+        sim_epoch: float | None = None,
+        split_s: float = 0.0,
+        scene: Any = None,
+        taps: Sequence[Tap] = (),
+    ) -> None:
         self.path = Path(path)
         self.fleet = fleet
         self.flush_interval = flush_interval
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._stream: BinaryIO = open(self.path, "wb")  # noqa: SIM115 - owned by the thread
-        self._writer = Writer(self._stream, compression=CompressionType.ZSTD)
-        self._writer.start(profile=PROFILE, library="fleet-controller")
-        self._writer.flush()
+        self.sim_epoch = sim_epoch
+        self.split_s = split_s
+        self.scene = scene
+        self.taps = list(taps)
+        self.location = self.path.with_suffix("") if split_s > 0 else self.path
+        self.segments: list[Path] = []
+        self._meta: list[tuple[str, dict[str, str]]] = []
+        self._logged: dict[str, bool] = {}  # key: whether the registry logs it
+        self._segment_start: int | None = None
+        self._open_segment()
         self._q: queue.Queue[tuple[Any, ...] | None] = queue.Queue()
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
-        self.written = 0
+        self._sim_t = 0.0  # the latest plausible sim time seen (dry run)
+        self._last_log_ns = 0
+        self.written = 0  # bus messages
+        self.scene_written = 0
         self.dropped = 0
         self._thread = threading.Thread(target=self._run, name="mcap-writer", daemon=True)
         self._thread.start()
         self._closed = False
+        if sim_epoch is not None:
+            self.metadata("fleet.time", {"base": "sim", "epoch_s": repr(float(sim_epoch))})
+
+    def _open_segment(self) -> None:
+        if self.split_s > 0:
+            self.location.mkdir(parents=True, exist_ok=True)
+            seg = self.location / f"{self.location.name}_{len(self.segments):03d}.mcap"
+        else:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            seg = self.path
+        self.segments.append(seg)
+        self._stream: BinaryIO = open(seg, "wb")  # noqa: SIM115 - owned by the thread
+        self._writer = Writer(self._stream, compression=CompressionType.ZSTD)
+        self._writer.start(profile=PROFILE, library="fleet-controller")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, tuple[int, str, bytes]] = {}  # key: (id, schema, its data)
+        for name, data in self._meta:
+            self._writer.add_metadata(name, data)
+        self._writer.flush()
+        self._segment_start = None
+        if self.scene is not None:
+            self.scene.resend()
+
+    def _next_segment(self) -> None:
+        self._writer.finish()
+        self._stream.close()
+        self._open_segment()
 
     def on_sample(self, key: str, payload: bytes, recv_time: float) -> None:
-        topic = wire.topic_for_key(self.fleet, key)
-        if topic is not None and not topic.logged:
+        logged = self._logged.get(key)
+        if logged is None:
+            topic = wire.topic_for_key(self.fleet, key)
+            logged = self._logged[key] = topic is None or topic.logged
+        if not logged:
             return  # the registry says so (status replies, liveliness)
         self._q.put((key, payload, recv_time))
 
@@ -90,42 +162,104 @@ class McapRecorder:
 
     def metadata(self, name: str, data: dict[str, str]) -> None:
         """An MCAP metadata record (e.g. the run's config), written in order with the messages,
-        so a file cut by a crash still carries it."""
+        so a file cut by a crash still carries it (and every later segment starts with it)."""
         self._q.put((_META, name, {str(k): str(v) for k, v in data.items()}))
 
-    def _channel(self, key: str) -> int:
-        ch = self._channels.get(key)
-        if ch is not None:
-            return ch
+    def _channel(self, key: str) -> tuple[int, str, bytes]:
+        """The channel of a bus key: (id, schema name, schema data)."""
+        found = self._channels.get(key)
+        if found is not None:
+            return found
         topic = wire.topic_for_key(self.fleet, key)
-        schema_id = 0
+        name, data = "", b""
         if topic is not None and topic.msg is not wire.Message:
             name = topic.msg.TYPE
-            schema_id = self._schemas.get(name, 0)
-            if not schema_id:
-                data = json.dumps(wire.json_schema(topic.msg)).encode()
-                schema_id = self._writer.register_schema(name, "jsonschema", data)
-                self._schemas[name] = schema_id
-        ch = self._writer.register_channel(key, "json", schema_id)
-        self._channels[key] = ch
-        return ch
+            data = _schema_data(topic.msg)
+        ch = self._writer.register_channel(key, "json", self._schema_id(name, data))
+        self._channels[key] = (ch, name, data)
+        return self._channels[key]
+
+    def _schema_id(self, name: str, data: bytes) -> int:
+        if not name:
+            return 0
+        sid = self._schemas.get(name)
+        if sid is None:
+            sid = self._writer.register_schema(name, "jsonschema", data)
+            self._schemas[name] = sid
+        return sid
+
+    def _times(self, t: Any, recv_time: float) -> tuple[int, int]:
+        """(log, publish) times in ns of a message stamped ``t`` received at ``recv_time``."""
+        t = float(t)
+        if self.sim_epoch is None:
+            return int(recv_time * 1e9), max(0, int(t * 1e9))
+        if abs(t - self._sim_t) > CLOCK_SKEW and self.written:
+            t = self._sim_t  # stamped by another clock (an operator's e-stop): now, in sim time
+        self._sim_t = max(self._sim_t, t)
+        ns = max(0, int(round((self.sim_epoch + t) * 1e9)))
+        return ns, ns
+
+    def _add(self, ch: int, log_ns: int, pub_ns: int, data: bytes) -> None:
+        if self._segment_start is None:
+            self._segment_start = log_ns
+        elif self.split_s > 0 and log_ns - self._segment_start >= self.split_s * 1e9:
+            self._next_segment()
+            self._segment_start = log_ns
+            raise _Rolled
+        self._writer.add_message(
+            ch, log_time=log_ns, publish_time=pub_ns, data=data, sequence=self.written & 0xFFFFFFFF
+        )
 
     def _write(self, key: str, payload: bytes, recv_time: float) -> None:
         try:
             obj = json.loads(payload)
             t = obj.get("t", recv_time) if isinstance(obj, dict) else recv_time
-            pub_ns = int(float(t) * 1e9)
+            log_ns, pub_ns = self._times(t, recv_time)
         except (ValueError, TypeError, OverflowError):
             self.dropped += 1
             return
-        self._writer.add_message(
-            self._channel(key),
-            log_time=int(recv_time * 1e9),
-            publish_time=max(0, pub_ns),
-            data=payload,
-            sequence=self.written & 0xFFFFFFFF,
-        )
+        self._put(key, None, payload, log_ns, pub_ns)
         self.written += 1
+        self._last_log_ns = log_ns
+        if self.scene is not None:
+            for m in self.scene.ingest(key, obj):
+                self._write_scene(m, log_ns)
+
+    def _put(self, key: str, scene_schema: str | None, data: bytes, log_ns: int, pub_ns: int):
+        """Add one message on its channel (the channel is looked up again after a new segment
+        began) and hand it to the taps."""
+        for _ in range(2):
+            if scene_schema is None:
+                ch, name, sdata = self._channel(key)
+            else:
+                ch, name, sdata = self._scene_channel(key, scene_schema)
+            try:
+                self._add(ch, log_ns, pub_ns, data)
+                break
+            except _Rolled:
+                continue
+        for tap in self.taps:
+            tap.offer(key, name, sdata, data, log_ns)
+
+    def _scene_channel(self, topic: str, name: str) -> tuple[int, str, bytes]:
+        from controller.scene.builder import schema_bytes
+
+        found = self._channels.get(topic)
+        if found is not None:
+            return found
+        data = schema_bytes(name)
+        ch = self._writer.register_channel(topic, "json", self._schema_id(name, data))
+        self._channels[topic] = (ch, name, data)
+        return self._channels[topic]
+
+    def _write_scene(self, m: Any, log_ns: int) -> None:
+        """A scene message: stamped with the run's clock (its header times too); in the lab
+        logged at the receive time of the bus message that completed it, like that message."""
+        stamp = max(0, int(round(m.stamp * 1e9)))
+        self._put(
+            m.topic, m.schema, m.payload(), stamp if self.sim_epoch is not None else log_ns, stamp
+        )
+        self.scene_written += 1
 
     def _run(self) -> None:
         last_flush = time.monotonic()
@@ -137,31 +271,51 @@ class McapRecorder:
                 item = ()  # type: ignore[assignment]
             if item is None:
                 break
-            if item and item[0] is _META:
-                self._writer.add_metadata(item[1], item[2])
-            elif item:
-                try:
-                    self._write(*item)
-                except Exception:  # noqa: BLE001 - never lose the thread
-                    self.dropped += 1
-                    log.exception("could not record a sample on %s", item[0])
+            self._handle(item)
             if time.monotonic() - last_flush >= self.flush_interval:
                 self._writer.flush()
                 last_flush = time.monotonic()
+        self._finish()
+
+    def _handle(self, item: tuple[Any, ...]) -> None:
+        if item and item[0] is _META:
+            self._meta.append((item[1], item[2]))
+            self._writer.add_metadata(item[1], item[2])
+        elif item:
+            try:
+                self._write(*item)
+            except Exception:  # noqa: BLE001 - never lose the thread
+                self.dropped += 1
+                log.exception("could not record a sample on %s", item[0])
+
+    def _finish(self) -> None:
+        if self.scene is not None:
+            try:
+                for m in self.scene.flush():
+                    self._write_scene(m, self._last_log_ns)
+            except Exception:  # noqa: BLE001 - the log matters more than its last frame
+                log.exception("could not write the last scene frame")
         self._writer.finish()
         self._stream.close()
 
     def drops(self) -> dict[str, int]:
-        """Samples the recorder could not write (e.g. a payload that is not JSON)."""
-        return {"recorder_dropped": self.dropped}
+        """Samples the recorder could not write (e.g. a payload that is not JSON), and what its
+        taps dropped (the live view's full queue)."""
+        out = {"recorder_dropped": self.dropped}
+        for tap in self.taps:
+            out.update(tap.drops())
+        return out
 
     def close(self) -> None:
-        """Write everything queued, finish the file (summary, index) and close it."""
+        """Write everything queued, finish the file (summary, index) and close it; then the
+        taps."""
         if self._closed:
             return
         self._closed = True
         self._q.put(None)
         self._thread.join()
+        for tap in self.taps:
+            tap.close()
 
     def __enter__(self) -> McapRecorder:
         return self
@@ -170,9 +324,32 @@ class McapRecorder:
         self.close()
 
 
+class _Rolled(Exception):
+    """A new segment began: register the channel again and add the message there."""
+
+
+@cache
+def _schema_data(cls: type[wire.Message]) -> bytes:
+    return json.dumps(wire.json_schema(cls)).encode()
+
+
+def segments(path: str | Path) -> list[Path]:
+    """The MCAP files of a log: the file itself, or a folder's segments in order."""
+    path = Path(path)
+    if path.is_dir():
+        return sorted(path.glob("*.mcap"))
+    return [path]
+
+
 def read_log(path: str | Path, topics: list[str] | None = None) -> Iterator[LogRecord]:
-    """Every message of an MCAP file in file order; a file cut short by a crash is read up to
-    the last complete record (chunks are flushed at least once per flush interval)."""
+    """Every message of an MCAP file (or a folder of segments) in file order; a file cut short
+    by a crash is read up to the last complete record (chunks are flushed at least once per
+    flush interval)."""
+    for seg in segments(path):
+        yield from _read_file(seg, topics)
+
+
+def _read_file(path: Path, topics: list[str] | None) -> Iterator[LogRecord]:
     wanted = set(topics) if topics is not None else None
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, int]] = {}
@@ -203,15 +380,29 @@ def config_metadata(cfg: Any, mode: str) -> dict[str, str]:
     """The ``fleet.config`` metadata record of a run: the config as JSON, its file, the mode."""
     from controller.config import config_to_dict
 
-    data = config_to_dict(cfg)
+    data = drop_none(config_to_dict(cfg))
     data.pop("source", None)
     return {"source": cfg.source, "mode": mode, "config": json.dumps(data)}
 
 
+def drop_none(data: Any) -> Any:
+    """The data without its None values (a config key left out, like ``object.goal`` of a
+    capture-only job: TOML has no null, and the loader reads an absent key as None)."""
+    if isinstance(data, dict):
+        return {k: drop_none(v) for k, v in data.items() if v is not None}
+    if isinstance(data, list):
+        return [drop_none(v) for v in data]
+    return data
+
+
 def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
-    """The metadata records of an MCAP file by name (a crash-cut file: those before the cut)."""
+    """The metadata records of an MCAP file by name (a crash-cut file: those before the cut; a
+    folder of segments: its first segment's)."""
     out: dict[str, dict[str, str]] = {}
-    with open(path, "rb") as f:
+    files = segments(path)
+    if not files:
+        return out
+    with open(files[0], "rb") as f:
         try:
             for rec in StreamReader(f).records:
                 if isinstance(rec, Metadata):
@@ -222,7 +413,13 @@ def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
 
 
 def log_is_complete(path: str | Path) -> bool:
-    """Whether the file was finished (footer and closing magic present): False after a crash."""
+    """Whether the file (every segment of a folder) was finished (footer and closing magic
+    present): False after a crash."""
+    files = segments(path)
+    return bool(files) and all(_file_complete(f) for f in files)
+
+
+def _file_complete(path: Path) -> bool:
     with open(path, "rb") as f:
         f.seek(0, 2)
         if f.tell() < 8 + 37:

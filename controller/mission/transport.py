@@ -614,7 +614,10 @@ class TransportMission:
             view.ids[i]: float(np.sum(np.linalg.norm(np.diff(np.asarray(p), axis=0), axis=1)))
             for i, p in self.moves.items()
         }
-        events.append(("transport", {"t": view.t, **plan.to_dict(), "relocating": moving}))
+        ids = [view.ids[int(i)] for i in self.robots]  # the plan's rows (the scene's pushers)
+        events.append(
+            ("transport", {"t": view.t, "robots": ids, **plan.to_dict(), "relocating": moving})
+        )
 
     def _commit_relocation(self, i: int, target: Contact, view: FleetView, pose: np.ndarray):
         """A robot the plan relocates goes to that contact along the lane around the object,

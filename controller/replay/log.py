@@ -1,15 +1,18 @@
 """Replay of a run's MCAP log: metrics, plots and re-publication on the bus (the I/O edge).
 
-``load_run`` reads a log (a crash-cut one up to the cut) into tracks and events; ``metrics``
-turns them into the ``fleet replay --json`` object with the pure functions of
-``controller.metrics``; ``plot_run`` draws PNGs; ``republish`` plays the messages back on a
-zenoh bus with their original spacing (scaled by ``speed``).
+``load_run`` reads a log (a crash-cut one up to the cut; a folder of segments as one run) into
+tracks and events; ``metrics_of`` turns them into the ``fleet replay --json`` object with the
+pure functions of ``controller.replay.metrics`` and judges them with the run's own verdict code;
+``controller.viz.plot_run`` draws PNGs; ``controller.replay.republish`` plays the messages back
+on a zenoh bus paced on the log's own time; ``controller.replay.check`` is the regression
+replay.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import math
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,7 +22,14 @@ import numpy as np
 
 from controller import geometry, wire
 from controller.config import ConfigError, FleetConfig, InputError, parse_config
-from controller.io.recorder import log_is_complete, read_log, read_metadata
+from controller.io.recorder import (
+    LogRecord,
+    drop_none,
+    log_is_complete,
+    read_log,
+    read_metadata,
+    segments,
+)
 from controller.replay import metrics
 
 log = logging.getLogger(__name__)
@@ -48,13 +58,19 @@ class RunLog:
     events: list[dict[str, Any]] = field(default_factory=list)
     robot_events: list[dict[str, Any]] = field(default_factory=list)
     estops: list[dict[str, Any]] = field(default_factory=list)
+    scene: Counter = field(default_factory=Counter)  # Foxglove scene channels: messages
+    segments: list[dict[str, Any]] = field(default_factory=list)  # file, complete, messages, s
+    time_base: str = "wall"  # "sim": log times are sim time on ``epoch_s`` (dry runs)
+    epoch_s: float = 0.0
 
 
 def load_run(path: str | Path) -> RunLog:
-    """Read a log into a :class:`RunLog`. Messages that do not decode are counted, not fatal."""
+    """Read a log (a file, or a folder of segments) into a :class:`RunLog`. Messages that do
+    not decode are counted, not fatal."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+    if not path.is_file() and not (path.is_dir() and segments(path)):
+        what = "no MCAP segments in this folder" if path.is_dir() else "no such file"
+        raise InputError(f"{path}: {what}")
     try:
         run = _read_run(path)
     except OSError as exc:
@@ -66,31 +82,52 @@ def load_run(path: str | Path) -> RunLog:
 
 def _read_run(path: Path) -> RunLog:
     run = RunLog(path=path, complete=log_is_complete(path))
-    meta = read_metadata(path).get("fleet.config")
+    records = read_metadata(path)
+    clock = records.get("fleet.time", {})
+    if clock.get("base") == "sim":
+        run.time_base, run.epoch_s = "sim", float(clock.get("epoch_s", 0.0))
+    meta = records.get("fleet.config")
     if meta:
         run.mode = meta.get("mode", "")
         try:
-            run.config = parse_config(json.loads(meta["config"]), meta.get("source", ""))
+            data = drop_none(json.loads(meta["config"]))  # logs before the fix wrote nulls
+            run.config = parse_config(data, meta.get("source", ""))
         except (ConfigError, ValueError, KeyError) as exc:
             log.warning("%s: the recorded config does not load: %s", path, exc)
         else:
             run.fleet = run.config.fleet.name
-    for rec in read_log(path):
-        parsed = wire.parse_key(rec.topic, run.fleet)
-        if run.fleet is None and parsed is not None:
-            run.fleet = parsed.fleet
-        run.topics[rec.topic] += 1
-        try:
-            msg = rec.message()
-        except wire.WireError:
-            run.undecodable += 1
-            continue
-        if msg is None:
-            continue
-        run.stamps[rec.topic].append(msg.t)
-        if parsed is not None:
-            _sort(run, parsed, msg)
+    for seg in segments(path):
+        part = {"file": str(seg), "complete": log_is_complete(seg), "messages": 0}
+        first = last = None
+        for rec in read_log(seg):
+            part["messages"] += 1
+            first = rec.log_time_ns if first is None else min(first, rec.log_time_ns)
+            last = rec.log_time_ns if last is None else max(last, rec.log_time_ns)
+            _take(run, rec)
+        part["seconds"] = 0.0 if first is None else (last - first) / 1e9
+        run.segments.append(part)
     return run
+
+
+def _take(run: RunLog, rec: LogRecord) -> None:
+    """One record of the log into the run."""
+    if rec.topic.startswith("/"):  # the Foxglove scene (never a bus key)
+        run.scene[rec.topic] += 1
+        return
+    parsed = wire.parse_key(rec.topic, run.fleet)
+    if run.fleet is None and parsed is not None:
+        run.fleet = parsed.fleet
+    run.topics[rec.topic] += 1
+    try:
+        msg = rec.message()
+    except wire.WireError:
+        run.undecodable += 1
+        return
+    if msg is None:
+        return
+    run.stamps[rec.topic].append(msg.t)
+    if parsed is not None:
+        _sort(run, parsed, msg)
 
 
 def _sort(run: RunLog, key: wire.KeyParts, msg: Any) -> None:
@@ -119,6 +156,25 @@ def _sort(run: RunLog, key: wire.KeyParts, msg: Any) -> None:
             run.events.append({"t": msg.t, "kind": key.what, "phase": msg.phase, "data": msg.data})
         case "estop":
             run.estops.append({"t": msg.t, "engaged": msg.engaged, "source": msg.source})
+
+
+def phases_of(run: RunLog) -> list[dict[str, Any]]:
+    """The phases the run went through, each with the time it began (from the plan events)."""
+    phases: list[dict[str, Any]] = []
+    for e in sorted(run.events, key=lambda e: e["t"]):
+        if e["phase"] and (not phases or phases[-1]["phase"] != e["phase"]):
+            phases.append({"phase": e["phase"], "t": e["t"]})
+    return phases
+
+
+def events_of(run: RunLog, kind: str) -> list[dict[str, Any]]:
+    """The run's plan events of one kind (capture, route, transport, ...), in time order."""
+    return sorted((e for e in run.events if e["kind"] == kind), key=lambda e: e["t"])
+
+
+def track(rows: list) -> metrics.Track:
+    """A track from logged rows (t, x, y, theta)."""
+    return metrics.Track.from_rows(rows)
 
 
 def _topic_figures(run: RunLog, key: str, count: int) -> dict[str, Any]:
@@ -162,10 +218,7 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
     omeas = _track(run.object_measured)
     obest = otruth if len(otruth) else (oest if len(oest) else omeas)
     arrests = [e for e in run.events if e["kind"] == "arrest"]
-    phases: list[dict[str, Any]] = []
-    for e in sorted(run.events, key=lambda e: e["t"]):
-        if not phases or phases[-1]["phase"] != e["phase"]:
-            phases.append({"phase": e["phase"], "t": e["t"]})
+    phases = phases_of(run)
     out: dict[str, Any] = {
         "log": str(run.path),
         "complete": run.complete,
@@ -177,6 +230,10 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         "start_s": min(all_t) if all_t else None,
         "duration_s": (max(all_t) - min(all_t)) if all_t else 0.0,
         "topics": {k: _topic_figures(run, k, n) for k, n in sorted(run.topics.items())},
+        "scene": dict(sorted(run.scene.items())),
+        "segments": run.segments,
+        "recovered": _recovered(run.segments),
+        "time_base": run.time_base,
         "robots": robots,
         "object": {
             "poses": len(omeas),
@@ -196,6 +253,9 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         "min_clearance_t": None,
         "max_object_penetration_m": None,
         "obstacle_contacts": None,
+        "hold_displacement_m": None,
+        "object_min_clearance_m": None,
+        "object_min_clearance_t": None,
         "verdict": None,
     }
     if cfg is not None:
@@ -215,15 +275,57 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
             out["max_object_penetration_m"] = depth
         hits = metrics.obstacle_contacts(tr_h, r_h, cfg.obstacle_polygons(), cfg.bounds_array())
         out["obstacle_contacts"] = sorted(ids[have[i]] for i in hits)
+        out.update(_object_figures(cfg, obj, phases))
         from controller.runtime.dry_run import judge  # the run's own verdict code
 
         out["verdict"] = judge(out)
     return out
 
 
+CARRIED = ("route", "rearrange", "transport")  # the phases after which the object is carried
+
+
+def _object_figures(cfg: FleetConfig, obj: metrics.Track, phases: list[dict]) -> dict:
+    """The object's figures of the verdict, as the run scores them: how far the arrested object
+    moved from the start of the (last) hold until it was carried (``hold_displacement_m``), and
+    its smallest clearance to obstacles and walls (``object_min_clearance_m``)."""
+    poly = geometry.ensure_ccw(cfg.object_polygon())
+    carried = next((p["t"] for p in phases if p["phase"] in CARRIED), math.inf)
+    holds = [p["t"] for p in phases if p["phase"] == "hold" and p["t"] < carried]
+    end = min(carried, float(obj.t[-1])) if len(obj) else carried
+    moved = metrics.hold_displacement(obj, poly, holds[-1], end) if holds else None
+    bounds = cfg.bounds_array() if cfg.world.walls else None
+    clear = metrics.object_clearance(obj, poly, cfg.obstacle_polygons(), bounds)
+    return {
+        "hold_displacement_m": moved,
+        "object_min_clearance_m": None if clear is None else clear[0],
+        "object_min_clearance_t": None if clear is None else clear[1],
+    }
+
+
+def _recovered(parts: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """What was read from files cut short by a crash (None: every file was finished)."""
+    cut = [p for p in parts if not p["complete"]]
+    if not cut:
+        return None
+    return {
+        "files": [p["file"] for p in cut],
+        "messages": sum(p["messages"] for p in cut),
+        "seconds": round(sum(p["seconds"] for p in cut), 3),
+    }
+
+
 def print_summary(r: dict) -> None:
     """The ``fleet replay`` summary as text on stdout."""
     print(f"{r['log']}: {'complete' if r['complete'] else 'cut short (crash?)'}, {r['mode']}")
+    if len(r.get("segments", [])) > 1:
+        print(f"  {len(r['segments'])} segments")
+    if r.get("recovered"):
+        rec = r["recovered"]
+        print(
+            f"  recovered from cut files: {rec['messages']} messages, {rec['seconds']:.2f} s "
+            f"({', '.join(rec['files'])})"
+        )
     print(
         f"  {r['messages']} messages over {r['duration_s']:.1f} s, {r['undecodable']} undecodable"
     )

@@ -152,3 +152,54 @@ def arrival_spread(contact_times: ArrayLike) -> float | None:
     """Time between the first and the last robot reaching contact (s)."""
     t = np.asarray(contact_times, dtype=float)
     return float(t.max() - t.min()) if len(t) else None
+
+
+def hold_displacement(obj: Track, polygon: ArrayLike, t0: float, t1: float) -> float | None:
+    """How far the object moved (m, its farthest vertex) between ``t0`` and ``t1`` from where it
+    was at ``t0``; None when the track has no sample in that span."""
+    if len(obj) == 0:
+        return None
+    inside = (obj.t >= t0) & (obj.t <= t1)
+    if not np.any(inside):
+        return None
+    poly = np.asarray(polygon, dtype=float)
+    start = geometry.transform(poly, obj.at(t0))
+    moved = [
+        float(np.max(np.linalg.norm(geometry.transform(poly, p) - start, axis=1)))
+        for p in obj.pose[inside]
+    ]
+    return max(moved)
+
+
+def object_clearance(
+    obj: Track, polygon: ArrayLike, obstacles: list[ArrayLike], bounds: ArrayLike | None
+) -> tuple[float, float] | None:
+    """The object's smallest distance (m) to static obstacles and walls over the track
+    (negative: it overlapped one), and when; None for an empty track or an empty room."""
+    if len(obj) == 0 or (not obstacles and bounds is None):
+        return None
+    poly = np.asarray(polygon, dtype=float)
+    d = [
+        geometry.polygon_clearance(geometry.transform(poly, p), obstacles, bounds) for p in obj.pose
+    ]
+    k = int(np.argmin(d))
+    return float(d[k]), float(obj.t[k])
+
+
+def phase_index(times: ArrayLike, starts: ArrayLike) -> NDArray[np.int_]:
+    """For each time, the index of the phase it falls in (phases begin at ``starts``, sorted;
+    -1 before the first)."""
+    return np.searchsorted(np.asarray(starts, float), np.asarray(times, float), side="right") - 1
+
+
+def lateral_deviation(points: ArrayLike, path: ArrayLike) -> FloatArray:
+    """Distance (m) of each point (T, 2) from a polyline (M, 2): how far the object is off its
+    route."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    p = np.asarray(path, dtype=float).reshape(-1, 2)
+    if len(p) == 0:
+        return np.full(len(pts), np.nan)
+    if len(p) == 1:
+        return np.linalg.norm(pts - p[0], axis=1)
+    d, _ = geometry.point_segment_distance(pts, p[:-1], p[1:])
+    return d.min(axis=1)

@@ -19,9 +19,9 @@ from controller import wire
 from controller.config import FleetConfig
 from controller.io.bus import Bus
 from controller.io.ratekeeper import Ratekeeper
-from controller.io.recorder import McapRecorder, config_metadata
 from controller.mission.types import Mission
 from controller.runtime.node import ControllerNode
+from controller.runtime.recording import open_recorder
 from controller.runtime.wiring import make_estimator
 
 log = logging.getLogger(__name__)
@@ -34,10 +34,11 @@ def run_daemon(
     out: Path,
     stop: threading.Event,
     duration: float = 0.0,
+    viz: bool = False,
 ) -> int:
-    """The lab loop. Exit status: 0 stopped or done, 1 the mission failed."""
-    recorder = McapRecorder(out, cfg.fleet.name, cfg.log.flush_interval)
-    recorder.metadata("fleet.config", config_metadata(cfg, f"daemon/{mission_kind}"))
+    """The lab loop. Exit status: 0 stopped or done, 1 the mission failed. ``viz``: serve the
+    recorded messages live to Foxglove on 127.0.0.1."""
+    recorder = open_recorder(cfg, out, f"daemon/{mission_kind}", viz=viz, who="fleet daemon")
     status = 0
     try:
         with Bus(cfg.zenoh, cfg.fleet.name) as bus:
@@ -53,7 +54,7 @@ def run_daemon(
             rk = Ratekeeper(cfg.fleet.rate_hz)
             print(
                 f"fleet daemon: fleet {cfg.fleet.name!r} on {list(cfg.zenoh.listen)}, "
-                f"{cfg.fleet.rate_hz} Hz, log {out}",
+                f"{cfg.fleet.rate_hz} Hz, log {recorder.location}",
                 file=sys.stderr,
             )
             t0 = time.time()
@@ -80,5 +81,8 @@ def run_daemon(
             node.hold(time.time())
     finally:
         recorder.close()
-    print(f"fleet daemon: stopped; {recorder.written} messages in {out}", file=sys.stderr)
+    print(
+        f"fleet daemon: stopped; {recorder.written} messages in {recorder.location}",
+        file=sys.stderr,
+    )
     return status

@@ -19,10 +19,10 @@ import numpy as np
 from controller import geometry, wire
 from controller.config import FleetConfig
 from controller.io.bus import Bus
-from controller.io.recorder import McapRecorder, config_metadata
 from controller.mission.types import Mission
 from controller.runtime.lockstep import ControllerLockstep, LockstepCoordinator
 from controller.runtime.node import ControllerNode
+from controller.runtime.recording import open_recorder
 from controller.runtime.wiring import make_estimator, make_hub, make_sim_drivers
 from drivers.agent import Agent, AgentParams
 
@@ -278,8 +278,10 @@ class DryRun:
         out: Path,
         gui: bool = False,
         max_time: float | None = None,
+        viz: bool = False,
     ) -> None:
         self.cfg = cfg
+        self.viz = viz
         self.mission = mission
         self.out = out
         self.gui = gui
@@ -294,8 +296,10 @@ class DryRun:
         cfg = self.cfg
         wall0 = time.monotonic()
         hub = make_hub(cfg, self.gui)
-        recorder = McapRecorder(self.out, cfg.fleet.name, cfg.log.flush_interval)
-        recorder.metadata("fleet.config", config_metadata(cfg, f"run/{cfg.sim.backend}"))
+        # sim-time stamps, the Foxglove scene, segments, the live view (--viz)
+        recorder = open_recorder(
+            cfg, self.out, f"run/{cfg.sim.backend}", sim_time=True, viz=self.viz, who="fleet run"
+        )
         result: dict[str, Any] = {}
         try:
             with (
@@ -434,7 +438,7 @@ class DryRun:
                 "clamped_commands": v.clamped_commands,
                 "vy_dropped": v.vy_dropped,
                 "wall_time_s": round(time.monotonic() - wall0, 3),
-                "log": str(self.out),
+                "log": str(recorder.location),
                 "messages_logged": recorder.written,
             }
         )

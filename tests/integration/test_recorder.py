@@ -113,8 +113,13 @@ def test_recorder_sigterm_finishes_file(tmp_path, port):
             wait_for(lambda: pub._pub.matching_status.matching, 20.0, "the recorder to subscribe")
             for i in range(20):
                 pub.put(wire.Twist2D(t=float(i), seq=i))
-            # handshake: the recorder has flushed all of them to disk
-            wait_for(lambda: len(list(read_log(out))) == 20, 20.0, "the samples on disk")
+            # handshake: the recorder has flushed all of them to disk (beside them: the scene)
+            key = "fleet/lab/robot/r2/cmd"
+            wait_for(
+                lambda: sum(r.topic == key for r in read_log(out)) == 20,
+                20.0,
+                "the samples on disk",
+            )
             proc.send_signal(signal.SIGTERM)
             assert proc.wait(timeout=20) == 0
         finally:
@@ -126,4 +131,5 @@ def test_recorder_sigterm_finishes_file(tmp_path, port):
     with open(out, "rb") as f:
         summary = make_reader(f).get_summary()  # present only if the file was finished
     assert summary is not None
-    assert summary.statistics.message_count == 20
+    ch = next(c.id for c in summary.channels.values() if c.topic == key)
+    assert summary.statistics.channel_message_counts[ch] == 20

@@ -16,7 +16,7 @@ from controller.mission.basic import GotoMission
 from controller.mission.tracking import RobotLimits
 from controller.replay.log import load_run, metrics_of
 from controller.replay.metrics import Track, min_clearance, object_penetration, tracking_error
-from controller.replay.republish import republish
+from controller.replay.republish import pacing, republish
 from controller.runtime.dry_run import DryRun
 from controller.viz import plot_run
 from tests.support.config import make_config
@@ -100,34 +100,52 @@ def test_plots_are_written(dry_run_log, tmp_path):
     assert all(f.stat().st_size > 10_000 and f.read_bytes()[:4] == b"\x89PNG" for f in files)
 
 
-def test_republish_plays_the_log_back_on_the_bus(dry_run_log, port):
+def test_republish_waits_for_subscribers_and_loses_nothing(dry_run_log, port):
     cfg, path, _ = dry_run_log
     run = load_run(path)
     keys = sorted(k for k in run.topics if "/robot/r1/" in k)
+    expected = sum(run.topics[k] for k in keys)
     got: list[str] = []
     lock = threading.Lock()
+    arrived = threading.Condition(lock)
 
     def on_sample(key: str, payload: bytes, t: float) -> None:
-        with lock:
+        with arrived:
             got.append(key)
+            arrived.notify_all()
 
+    stats: dict = {}
+    result: dict = {}
     with (
         Bus(cfg.zenoh, cfg.fleet.name, listen=[f"tcp/127.0.0.1:{port}"], connect=[]) as viewer,
         Bus(cfg.zenoh, cfg.fleet.name, listen=[], connect=[f"tcp/127.0.0.1:{port}"]) as player,
     ):
-        done = threading.Event()
-        expected = sum(run.topics[k] for k in keys)
+        # the player starts first; it waits for the subscriber declared after it
+        th = threading.Thread(
+            target=lambda: result.update(
+                sent=republish(path, player, 0.0, keys, wait_matching=20.0, stats=stats)
+            )
+        )
+        th.start()
         viewer.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), on_sample)
-        sent = republish(path, player, speed=0.0, topics=keys, wait_matching=10.0)
-        assert sent == expected
-        # reliable, blocking delivery: wait until the last one is in (bounded)
-        for _ in range(200):
-            with lock:
-                if len(got) >= expected:
-                    done.set()
-                    break
-            done.wait(0.05)
+        th.join(timeout=60)
+        with arrived:  # reliable, blocking delivery: every one arrives (bounded wait)
+            arrived.wait_for(lambda: len(got) >= expected, timeout=20)
+    assert result["sent"] == expected and stats["matched"] is True
     assert sorted(set(got)) == keys and len(got) == expected
+    # paced on the log's own (sim) time: the span is the run's, not the writer's wall clock
+    assert stats["log_span_s"] == pytest.approx(run_span(run), abs=0.06)
+
+
+def run_span(run) -> float:
+    ts = [t for k, v in run.stamps.items() if "/robot/r1/" in k for t in v]
+    return max(ts) - min(ts)
+
+
+def test_pacing_follows_the_log_time_at_speed():
+    # stamps going back (a measurement stamped before the tick that carried it) are due at once
+    assert pacing([0, 1_000_000_000, 500_000_000, 2_000_000_000], 2.0) == [0.0, 0.5, 0.5, 1.0]
+    assert pacing([5, 9], 0.0) == [0.0, 0.0]
 
 
 def test_missing_log_exits_2(tmp_path, capsys):

@@ -1,69 +1,9 @@
-"""An in-memory stand-in for ``controller.io.bus.Bus``: the node's I/O without zenoh.
-
-It hands out real ``Inbox`` objects (so the node's draining is the real code) and records every
-publication, so a unit test can feed a tick's inputs and read its outputs synchronously.
-"""
+"""The in-memory bus of the unit tests: ``controller.replay.membus.MemoryBus`` (the regression
+replay drives the node with the same one)."""
 
 from __future__ import annotations
 
-import time
-from collections import defaultdict
-from typing import Any
+from controller.replay.membus import MemoryBus as FakeBus
+from controller.replay.membus import MemoryPublisher as FakePublisher
 
-from controller import wire
-from controller.io.bus import Inbox, Received
-
-
-class FakePublisher:
-    def __init__(self, bus: FakeBus, key: str) -> None:
-        self.bus, self.key = bus, key
-
-    def put(self, msg: wire.Message) -> None:
-        self.bus.sent[self.key].append(msg)
-
-    def matching(self) -> bool:
-        return True
-
-
-class FakeBus:
-    def __init__(self, fleet: str) -> None:
-        self.fleet = fleet
-        self.sent: dict[str, list[wire.Message]] = defaultdict(list)
-        self.inboxes: dict[str, Inbox] = {}
-        self.alive_cb: dict[str, Any] = {}
-        self.served: dict[str, Any] = {}
-        self.bad = 0
-
-    def key(self, topic: str, **parts: str) -> str:
-        return wire.key(topic, self.fleet, **parts)
-
-    def subscribe_topic(self, topic: str, inbox=None, waker=None, **parts: str) -> Inbox:
-        box = inbox if inbox is not None else Inbox(waker=waker)
-        self.inboxes[topic] = box
-        return box
-
-    def publisher(self, topic: str, *, command: bool = False, lossless: bool = False, **parts):
-        return FakePublisher(self, self.key(topic, **parts))
-
-    def put(self, topic: str, msg: wire.Message, **parts: str) -> None:
-        self.sent[self.key(topic, **parts)].append(msg)
-
-    def watch_alive(self, role: str, callback) -> None:
-        self.alive_cb[role] = callback
-
-    def serve(self, topic: str, responder) -> None:
-        self.served[topic] = responder
-
-    def declare_alive(self, role: str, ident: str) -> None:
-        pass
-
-    def drops(self) -> dict[str, int]:
-        return {"bad_payloads": self.bad, "inbox_overflow": 0}
-
-    # -- test side
-    def deliver(self, topic: str, msg: wire.Message, **parts: str) -> None:
-        """A message arrives on ``topic`` (as a zenoh callback would enqueue it)."""
-        self.inboxes[topic].put(Received(time.time(), self.key(topic, **parts), msg))
-
-    def last(self, topic: str, **parts: str) -> wire.Message:
-        return self.sent[self.key(topic, **parts)][-1]
+__all__ = ["FakeBus", "FakePublisher"]

@@ -4,8 +4,8 @@
   standard library (no clock, threads, sockets, processes or global randomness) they import only
   numpy, scipy, osqp, filterpy, shapely, each other, and ``controller.config``,
   ``controller.geometry`` and ``controller.wire``;
-- ``controller/io`` is the only importer of zenoh and mcap; ``controller/viz.py`` the only
-  importer of matplotlib;
+- ``controller/io`` is the only importer of zenoh, mcap and foxglove (the live view's SDK);
+  ``controller/viz.py`` the only importer of matplotlib;
 - ``controller/runtime`` is the only part of ``controller/`` that imports ``drivers`` or
   ``sim_backend``;
 - ``drivers/`` imports nothing of ``controller/`` but the wire contract (``controller.wire``);
@@ -120,7 +120,7 @@ def test_pure_core_imports_only_the_allowed(path):
 def test_only_io_imports_zenoh_and_mcap(path):
     if rel(path).startswith("controller/io/"):
         return
-    bad = top(imports_of(path)) & {"zenoh", "mcap"}
+    bad = top(imports_of(path)) & {"zenoh", "mcap", "foxglove"}
     assert not bad, f"{rel(path)} imports {sorted(bad)}: only controller/io/ may"
 
 
