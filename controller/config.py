@@ -30,7 +30,7 @@ from controller import geometry
 ROBOT_KINDS = ("omni", "diff")
 DRIVERS = ("sim", "mavlink")
 MAVLINK_PROFILES = ("ardurover", "px4")
-MOTION_KINDS = ("line", "sine", "evade", "static")
+MOTION_KINDS = ("line", "sine", "evade", "static", "inert")  # inert: no drive, limp from t = 0
 CLOSURE_MODES = ("exact", "paper")
 HEURISTICS = ("euclid", "wavefront", "skeleton", "cost_to_go")
 #: Grid budgets: object route states (cells x heading bins) and robot route cells. Above them a

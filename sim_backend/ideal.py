@@ -38,7 +38,7 @@ class IdealWorld:
         self._cmd = np.zeros((len(self._ids), 3))
         self._index = {rid: i for i, rid in enumerate(self._ids)}
         self._script = ObjectScript(cfg.object.motion, cfg.object.start)
-        self._give_up = GiveUp(cfg.object.motion.give_up_after)
+        self._give_up = GiveUp.for_motion(cfg.object.motion)
         self._obj = np.array(cfg.object.start, dtype=float)
         self._obj_vel = np.zeros(3)
         self._poly = geometry.ensure_ccw(cfg.object_polygon())

@@ -1,4 +1,5 @@
-"""Scripted motion of the live object: ``line``, ``sine``, ``evade`` and ``static``.
+"""Scripted motion of the live object: ``line``, ``sine``, ``evade`` and ``static`` (a drive
+that holds its start pose); ``inert`` has no drive at all (a plain crate: limp from the start).
 
 Pure functions of time and state. ``reference(t)`` is the pose the script wants at time t;
 ``target_velocity`` is the world-frame velocity a tracker should follow now: the path's own
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -28,6 +30,14 @@ class GiveUp:
     slack: float = 0.02  # m/s
     thwarted_for: float = 0.0
     gave_up_at: float | None = None
+
+    @classmethod
+    def for_motion(cls, motion: Any) -> GiveUp:
+        """The rule for ``object.motion``: an ``inert`` object has no drive to give up."""
+        g = cls(motion.give_up_after)
+        if motion.kind == "inert":
+            g.gave_up_at = 0.0
+        return g
 
     @property
     def alive(self) -> bool:
@@ -73,7 +83,7 @@ class ObjectScript:
         m = self.motion
         p0 = np.array(self.start[:2], dtype=float)
         u, n = self._axes()
-        if m.kind == "static":
+        if m.kind in ("static", "inert"):
             return np.array([*p0, self.start[2]]), np.zeros(3)
         s = m.speed * t
         if m.kind == "sine":

@@ -196,7 +196,10 @@ class PybulletWorld:
         self._build_robots()
         self._drive_target: tuple[float, float, float] | None = None
         self._script = ObjectScript(cfg.object.motion, cfg.object.start)
-        self._give_up = GiveUp(cfg.object.motion.give_up_after)
+        self._give_up = GiveUp.for_motion(cfg.object.motion)
+        if not self._give_up.alive:  # inert: floor friction from the start
+            mu = cfg.object.floor_friction * cfg.sim.object_friction_scale
+            self._set_floor_friction(mu)
         self._read_state()
 
     # ------------------------------------------------------------------ construction

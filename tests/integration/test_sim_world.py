@@ -22,6 +22,7 @@ from sim_backend.sensors import PoseSensor, make_sensors
 G = 9.81
 L_SHAPE = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.4], [0.4, 0.4], [0.4, 1.0], [0.0, 1.0]]
 BOX = [[0.0, 0.0], [0.9, 0.0], [0.9, 0.4], [0.0, 0.4]]
+INERT = {"kind": "inert"}  # no drive: limp from the start (a plain crate)
 BACKENDS = ["ideal", "pybullet"]
 
 
@@ -117,9 +118,8 @@ def test_convex_pieces_tile_star_polygons(radii, jitter):
 
 def test_robot_sits_in_the_notch_of_an_l(worlds):
     """The compound covers the L but not its notch: a robot reaches the inner corner."""
-    cfg = config([robot("r0", "omni", 6.3, 6.3, max_force=2.0)], polygon=L_SHAPE)
+    cfg = config([robot("r0", "omni", 6.3, 6.3, max_force=2.0)], polygon=L_SHAPE, motion=INERT)
     w = worlds(cfg)
-    w.arrest()
     w.set_command("r0", -0.15, -0.15, 0.0)
     w.step(6.0)
     xy = w.robot_pose("r0")[:2]
@@ -146,7 +146,7 @@ def test_start_poses_as_written(worlds, backend):
     assert np.allclose(w.object_pose(), [4.0, 3.0, 0.7], atol=1e-9)
     assert np.allclose(w.robot_pose("a"), [1.0, 2.0, 0.5], atol=1e-9)
     assert np.allclose(w.robot_pose("b"), [3.0, 1.0, -2.0], atol=1e-9)
-    assert w.t == 0.0 and not w.arrested
+    assert w.t == 0.0 and w.object_alive and w.object_gave_up_at is None
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -213,18 +213,33 @@ def test_live_object_follows_its_sine_script(worlds, backend):
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-def test_arrested_object_stays_put(worlds, backend):
-    motion = {"kind": "line", "speed": 0.1, "max_force": 4.0}
-    w = worlds(config(start=(3.0, 3.0, 0.0), motion=motion, backend=backend))
+def test_held_object_gives_up_by_its_own_physics_then_stays_put(worlds, backend):
+    """A driven object that cannot follow its script (a 20 N robot in its way) goes limp after
+    ``give_up_after`` s of being thwarted: the world decides, nobody tells it. Limp, it stays
+    where it is. The same object running free keeps its drive."""
+    motion = {"kind": "line", "speed": 0.1, "max_force": 4.0, "give_up_after": 1.0}
+    blocker = [robot("r", "omni", 6.12, 5.2, 0.0, max_force=20.0)]  # 0.12 m ahead of it
+    w = worlds(config(blocker, polygon=BOX, start=(5.0, 5.0, 0.0), motion=motion, backend=backend))
     w.step(1.0)
-    assert w.object_pose()[0] > 3.05
-    w.arrest()
-    assert w.arrested
-    w.step(0.1)
+    assert w.object_alive  # still running toward the robot
+    w.step(2.5)  # in contact from about 1.2 s, thwarted for a second after that
+    assert not w.object_alive
+    assert 1.8 < w.object_gave_up_at < 3.0
     here = w.object_pose()
     w.step(2.0)
-    assert np.allclose(w.object_pose(), here, atol=1e-4)
-    assert np.allclose(w.object_velocity(), 0.0, atol=1e-4)
+    assert np.allclose(w.object_pose(), here, atol=1e-3)
+    assert np.allclose(w.object_velocity(), 0.0, atol=1e-3)
+    free = worlds(config(polygon=BOX, start=(5.0, 5.0, 0.0), motion=motion, backend=backend))
+    free.step(4.0)
+    assert free.object_alive and free.object_pose()[0] > 5.35
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_inert_object_is_limp_from_the_start(worlds, backend):
+    w = worlds(config(start=(3.0, 3.0, 0.0), motion=INERT, backend=backend))
+    assert not w.object_alive and w.object_gave_up_at == 0.0
+    w.step(1.0)
+    assert np.allclose(w.object_pose(), [3.0, 3.0, 0.0], atol=1e-4)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -288,9 +303,8 @@ def test_factory_chooses_backend():
     ("mu", "mass", "direction"), [(0.2, 4.0, 0.0), (0.2, 4.0, 0.8), (0.5, 1.5, 2.0)]
 )
 def test_floor_friction_calibrated(worlds, mu, mass, direction):
-    """The force to slide the arrested object is mu * m * g within 10 %."""
-    w = worlds(config(polygon=L_SHAPE, mass=mass, mu=mu))
-    w.arrest()
+    """The force to slide the limp object is mu * m * g within 10 %."""
+    w = worlds(config(polygon=L_SHAPE, mass=mass, mu=mu, motion=INERT))
     w.step(0.2)
     u = np.array([math.cos(direction), math.sin(direction)])
     limit = mu * mass * G
@@ -319,8 +333,7 @@ def test_one_weak_robot_stalls_four_push(worlds):
     def run(n: int) -> float:
         ys = [5.25] if n == 1 else [4.89, 5.1, 5.31, 5.52]
         robots = [robot(f"r{k}", "omni", 4.89, y, 0.0, max_force=2.0) for k, y in enumerate(ys)]
-        w = worlds(config(robots, polygon=tall_box, start=(5.0, 4.8, 0.0)))
-        w.arrest()
+        w = worlds(config(robots, polygon=tall_box, start=(5.0, 4.8, 0.0), motion=INERT))
         for rid in w.robot_ids:
             w.set_command(rid, 0.1, 0.0, 0.0)
         x0 = w.object_pose()[0]
@@ -390,9 +403,9 @@ def test_contact_friction_setting(worlds, contact_friction, drags):
         polygon=tall_box,
         start=(5.0, 4.8, 0.0),
         contact_friction=contact_friction,
+        motion=INERT,
     )
     w = worlds(cfg)
-    w.arrest()
     w.set_command("r", 0.02, 0.2, 0.0)  # press +x into the face, slide +y along it
     w.step(2.0)
     centre = geometry.transform([[0.2, 0.45]], w.object_pose())[0]

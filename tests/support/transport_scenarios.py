@@ -35,7 +35,7 @@ class Scenario:
     max_force: float = 6.0
     max_speed: float = 0.4
     whole_job: bool = False  # capture a moving object first (else the robots hold it)
-    motion: dict = field(default_factory=lambda: {"kind": "static", "give_up_after": 0.05})
+    motion: dict = field(default_factory=lambda: {"kind": "inert"})  # a plain crate
     seed: int = 1
     max_time: float = 200.0
     patch: dict = field(default_factory=dict)
