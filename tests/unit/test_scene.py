@@ -86,7 +86,7 @@ TRANSPORT_PLAN = {
 @pytest.fixture
 def job():
     """Capture, route, re-arrangement and transport events over 3 s of 20 Hz ticks."""
-    cfg = make_config()
+    cfg = make_config(transport=True)  # with its goal
     s = Stream(cfg)
     s.event(
         0.05,
