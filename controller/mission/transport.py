@@ -413,7 +413,12 @@ class TransportMission:
 
     def _rearrange(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         """Movers follow their path around the object; the others hold still. (The stall clock
-        waits: re-arranging makes no progress by design; it has its own timeout.)"""
+        waits: re-arranging makes no progress by design; it has its own timeout.) An object
+        nudged inside the goal tolerance meanwhile is delivered."""
+        goal = np.asarray(self.cfg.object.goal, float)
+        k = self.s.accept_margin
+        if self._at(pose, goal, k * self.s.tolerance, k * self.s.heading_tolerance):
+            return self._deliver(view, pose, events)
         self.progress_t = view.t
         vel = np.zeros((self.n, 2))
         hold = np.ones(self.n, bool)
