@@ -74,7 +74,7 @@ class TransportSettings:
     progress_step: float = 0.02
     contact_tolerance: float = 0.15
     back_off: float = 0.25
-    rearrange_timeout: float = 60.0
+    rearrange_timeout: float = 25.0  # s: then a new arrangement (and failed when futile)
     waypoint_reached: float = 0.08
     contact_gain: float = 1.5  # 1/s, pull back onto the contact point
     arrival_tolerance: float = 0.03  # m: a relocating robot this close to its contact arrived
@@ -440,7 +440,10 @@ class TransportMission:
                 Reason.STALLED, "the re-arranged contacts cannot push the object", view, events
             )
         if view.t - self.rearrange_t > self.s.rearrange_timeout:
-            return self._fail(Reason.STALLED, "re-arrangement timed out", view, events)
+            if self.futile >= self.s.max_rearrangements:
+                return self._fail(Reason.STALLED, "re-arrangement timed out", view, events)
+            # a robot that cannot get to its contact (blocked by the others, a wall): a new set
+            self._start_rearrangement(view, pose, events)
         return self._intent(vel, events, pose, touch, hold)
 
     def _park(self, view: FleetView, pose: np.ndarray, vel: np.ndarray, hold: np.ndarray) -> None:
