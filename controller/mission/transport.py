@@ -79,6 +79,7 @@ class TransportSettings:
     contact_gain: float = 1.5  # 1/s, pull back onto the contact point
     arrival_tolerance: float = 0.03  # m: a relocating robot this close to its contact arrived
     max_route_replans: int = 5
+    progress_window: float = 0.6  # m of route ahead that the progress measure looks at
     settle_margin: float = 0.6  # the estimate must be this share of the tolerances from the goal
     accept_margin: float = 0.85  # ... or this share when the object stalls there
     stuck_plans: int = 3
@@ -148,6 +149,7 @@ class TransportMission:
         self.plan_t: float | None = None
         self.last_plan: LocalPlan | None = None
         self.best_remaining = math.inf
+        self.route_j = 0  # the route segment the object was last matched to
         self.progress_t = 0.0
         self.route_replans = 0
         self.rearrangements = 0
@@ -162,6 +164,7 @@ class TransportMission:
         self.stuck = 0
         self.plan_energy: list[float] = []
         self.forces: list[float] = []
+        self.lost: set[int] = set()  # robots gone during the job
 
     # --- the plan stage -----------------------------------------------------------------------
     def plan(self, view: FleetView) -> Intent:
@@ -172,6 +175,8 @@ class TransportMission:
         events: list[Event] = []
         if self.t0 is None:
             self.t0 = self.progress_t = view.t
+        if self.phase not in (Phase.DONE, Phase.FAILED):
+            self._drop_lost(view, events)
         handler = {
             Phase.ROUTE: self._route,
             Phase.REARRANGE: self._rearrange,
@@ -181,11 +186,32 @@ class TransportMission:
         }[self.phase]
         return handler(view, pose, events)
 
+    def _drop_lost(self, view: FleetView, events: list[Event]) -> None:
+        """A robot that is gone (its liveliness or its link lost) leaves the job: no contact, no
+        path, no part in the next arrangement. The rest carry on; when they cannot push, the
+        job fails with ``robot_lost`` instead of ``stalled``."""
+        for i in self.robots:
+            i = int(i)
+            if view.present[i] or i in self.lost:
+                continue
+            self.lost.add(i)
+            self.contacts[i] = None
+            self.moves.pop(i, None)
+            self.targets.pop(i, None)
+            self.actions[i] = None
+            events.append(("robot_lost", {"t": view.t, "robot": view.ids[i], "phase": self.phase}))
+
+    def _active(self) -> list[int]:
+        return [int(i) for i in self.robots if int(i) not in self.lost]
+
     def _go(self, phase: str, t: float, events: list[Event]) -> None:
         self.phase = phase
         events.append(("phase", {"phase": str(phase), "t": t}))
 
     def _fail(self, reason: str, detail: str, view: FleetView, events: list[Event]) -> Intent:
+        if reason == Reason.STALLED and self.lost:
+            lost = ", ".join(view.ids[i] for i in sorted(self.lost))
+            reason, detail = Reason.ROBOT_LOST, f"{detail} (lost: {lost})"
         self._go(Phase.FAILED, view.t, events)
         self.failure = {"reason": str(reason), "t": view.t, "detail": detail}
         events.append(("failure", dict(self.failure)))
@@ -208,6 +234,7 @@ class TransportMission:
         self.route = res
         self.subgoal = 0
         self.best_remaining = math.inf
+        self.route_j = 0  # the route segment the object was last matched to
         self.progress_t = view.t
         events.append(
             (
@@ -301,7 +328,7 @@ class TransportMission:
         r = cfg.max_robot_radius
         # a segment that turns the object more than a little: Eq. 5 knows no torque
         new_pts, new_nrm, value, n_push, basis = self._new_set(twist, d)
-        ids = list(self.contacts)
+        ids = self._active()
         here = geometry.inverse_transform(view.poses[ids, :2], pose)
         cost = np.linalg.norm(here[:, None] - (new_pts + r * new_nrm)[None], axis=-1)
         rows, cols = linear_sum_assignment(cost)
@@ -350,12 +377,13 @@ class TransportMission:
         candidate nodes (:meth:`_wrench_set`). Returns (points, outward normals, value,
         pushers, basis)."""
         cfg, m = self.cfg, self.model
-        weakest = min(cfg.robots[i].max_force for i in self.robots)
+        weakest = min(cfg.robots[i].max_force for i in self._active())
         twist_v = twist * self.params.speed
         if abs(twist[2]) * m.mean_radius <= 0.3:  # the turn's share of the unit twist
             friction = m.floor_friction * m.mass * 9.81
-            first = int(min(len(self.robots), math.ceil(friction / weakest) + 1))
-            for n in range(first, min(first + 1, len(self.robots)) + 1):
+            fleet = len(self._active())
+            first = int(min(fleet, math.ceil(friction / weakest) + 1))
+            for n in range(first, min(first + 1, fleet) + 1):
                 pts, nrm, value = self._pushing_set(d, n)
                 if self._pushes(twist_v, pts, -nrm, np.full(len(pts), weakest)):
                     return pts, nrm, value, n, "eq5"
@@ -395,19 +423,19 @@ class TransportMission:
         conflict = gap < 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)
         np.fill_diagonal(conflict, False)
         need = required_wrench(twist * self.params.speed, m.mass, m.floor_friction, m.mean_radius)
-        weakest = min(cfg.robots[i].max_force for i in self.robots)
+        weakest = min(cfg.robots[i].max_force for i in self._active())
         load = self.s.turn_margin * need
         start = least_force_set(cand.points, cand.normals, m.centroid, load, weakest, conflict)
         res = reinforce(
             cand.points,
             cand.normals,
             m.centroid,
-            start[: len(self.robots)],
+            start[: len(self._active())],
             np.ones(len(cand.points), bool),
             conflict,
             weakest,
             -load[None],
-            len(self.robots),
+            len(self._active()),
         )
         return cand.points[res.chosen], cand.normals[res.chosen], res.capacity, len(res.chosen)
 
@@ -457,7 +485,7 @@ class TransportMission:
         hull = geometry.convex_hull(m.polygon)
         for i in self.robots:
             i = int(i)
-            if i in self.moves or self.contacts[i] is not None:
+            if i in self.moves or self.contacts[i] is not None or i in self.lost:
                 continue
             local = geometry.inverse_transform(view.poses[i, None, :2], pose)
             d, closest = geometry.point_segment_distance(local, hull, np.roll(hull, -1, axis=0))
@@ -526,10 +554,12 @@ class TransportMission:
         g = self.route.subgoals[self.subgoal]
         return self._at(pose, g, self.s.subgoal_tolerance, self.s.subgoal_heading)
 
-    def _remaining(self, pose: np.ndarray) -> float:
-        """What is left of the route (m): the way to the nearest route segment, the rest of
-        that segment and every later one, turns counted as arc at the mean radius. (A straight
-        line to the goal would call a detour around an obstacle no progress.)"""
+    def _remaining(self, pose: np.ndarray, commit: bool = False) -> float:
+        """What is left of the route (m): the way to a route segment, the rest of that segment
+        and every later one, turns counted as arc at the mean radius, at the best segment of a
+        window from the last one matched (``commit`` moves the window on). (A straight line to
+        the goal would call a detour around an obstacle no progress; a window over the whole
+        route would cut through the obstacle to its far side.)"""
         wp = self.route.waypoints
         r = self.model.mean_radius
         goal = np.asarray(self.cfg.object.goal, float)
@@ -543,11 +573,20 @@ class TransportMission:
         dist, closest = geometry.point_segment_distance(pose[None, :2], wp[:-1, :2], wp[1:, :2])
         rest = np.linalg.norm(wp[1:, :2] - closest[0], axis=1)
         turn = r * np.abs(geometry.wrap_angle(pose[2] - wp[1:, 2]))
-        # the best way on from any segment (turns in place share one spot: the heading decides)
-        return float(np.min(dist[0] + rest + turn + tail))
+        # the best way on from a segment of the window (turns in place share one spot: the
+        # heading decides among them)
+        lo = min(self.route_j, len(step) - 1)
+        arc = np.concatenate([[0.0], np.cumsum(step)])
+        hi = int(np.searchsorted(arc, arc[lo] + self.s.progress_window, side="right"))
+        hi = min(len(step), max(hi, lo + 1))
+        left = (dist[0] + rest + turn + tail)[lo:hi]
+        k = int(np.argmin(left))
+        if commit:
+            self.route_j = lo + k
+        return float(left[k])
 
     def _stalled(self, view: FleetView, pose: np.ndarray) -> str:
-        rem = self._remaining(pose)
+        rem = self._remaining(pose, commit=True)
         if rem < self.best_remaining - self.s.progress_step:
             self.best_remaining = rem
             self.progress_t = view.t
@@ -581,7 +620,9 @@ class TransportMission:
                     max_force=r.max_force,
                     max_speed=r.max_speed,
                     contact=None if c is None else (c.point, c.inward),
-                    action="relocate" if int(i) in self.moves else self.actions[int(i)],
+                    action="relocate"
+                    if int(i) in self.moves
+                    else ("idle" if int(i) in self.lost else self.actions[int(i)]),
                     id=r.id,
                     target=self._target_of(int(i)),
                 )
@@ -615,6 +656,8 @@ class TransportMission:
         relocate_ok = not self._can_push(pose)
         for k, i in enumerate(self.robots):
             i = int(i)
+            if i in self.lost:
+                continue
             action = plan.first_actions[k]
             self.actions[i] = action
             p, nv = plan.contact_points[k], plan.contact_normals[k]
@@ -688,8 +731,8 @@ class TransportMission:
         for k, i in enumerate(self.robots):
             code = action_code(plan.first_actions[k])
             c = self.contacts[int(i)]
-            if int(i) in self.moves:
-                continue  # on its committed path (below)
+            if int(i) in self.moves or int(i) in self.lost:
+                continue  # on its committed path (below); a lost robot is told nothing
             if code not in ATTACHED or c is None or code in (SLIDE_LEFT, SLIDE_RIGHT):
                 vel[i] = plan.velocities[k]
                 touch[i] = code in ATTACHED
@@ -714,7 +757,7 @@ class TransportMission:
         vel = np.zeros((self.n, 2))
         c = geometry.transform(self.model.centroid[None], pose)[0]
         if view.t - self.done_t < self.s.back_off / 0.1:
-            for i in self.robots:
+            for i in self._active():
                 away = view.poses[i, :2] - c
                 vel[i] = 0.1 * away / max(float(np.linalg.norm(away)), 1e-9)
         intent = self._intent(vel, events, pose, np.zeros(self.n, bool), None)

@@ -1,0 +1,185 @@
+"""The transport mission's decisions, tick by tick on hand-made views (no bus, no world): the
+route at the start, failing cleanly without one, delivery, progress measured along the route,
+the contact sets of a re-arrangement, a robot lost on the way."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from controller import geometry
+from controller.mission.guard import SafetyStage
+from controller.mission.transport import TransportMission
+from controller.mission.types import FleetView, Phase
+from controller.planning.contact_lp import ContactForceLP, required_wrench
+from controller.planning.hold import contact_wrenches
+from tests.support.transport_scenarios import CRATE, Scenario, scenario_config
+
+ROBOT_R = 0.1
+
+
+def view(cfg, t, poses, obj, present=None):
+    n = len(cfg.robots)
+    return FleetView(
+        t, cfg.robot_ids, np.asarray(poses, float), np.zeros((n, 3)), np.zeros(n, bool),
+        np.ones(n, bool) if present is None else np.asarray(present, bool),
+        np.asarray(obj, float), np.zeros(3), None, False,
+    )  # fmt: skip
+
+
+def holders(cfg):
+    """The robots the scenario places on the crate: indices, contact points, outward normals."""
+    poly = geometry.ensure_ccw(cfg.object_polygon())
+    poses = np.array([r.start for r in cfg.robots])
+    local = geometry.inverse_transform(poses[:, :2], cfg.object.start)
+    d, closest = geometry.point_segment_distance(local, poly, np.roll(poly, -1, axis=0))
+    j = np.argmin(d, axis=1)
+    held = np.flatnonzero(d[np.arange(len(local)), j] - ROBOT_R < 0.03)
+    return held, closest[np.arange(len(local)), j][held], geometry.outward_normals(poly)[j][held]
+
+
+def mission(sc: Scenario, seed: int = 0) -> tuple[TransportMission, object, np.ndarray]:
+    cfg = scenario_config(sc)
+    held, pts, nrm = holders(cfg)
+    m = TransportMission(cfg, np.random.default_rng(seed), SafetyStage(cfg), held, pts, nrm)
+    return m, cfg, np.array([r.start for r in cfg.robots])
+
+
+OPEN = Scenario("open", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0))
+
+
+def test_first_tick_plans_the_route_and_publishes_it():
+    m, cfg, poses = mission(OPEN)
+    out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
+    kinds = [k for k, _ in out.events]
+    assert "route" in kinds
+    route = dict(out.events)["route"]
+    wp = np.asarray(route["waypoints"])
+    assert np.allclose(wp[0], cfg.object.start, atol=1e-6)
+    assert np.allclose(wp[-1], cfg.object.goal, atol=1e-6)
+    assert route["length_m"] >= 3.0 - 1e-6
+    assert m.phase in (Phase.TRANSPORT, Phase.REARRANGE)
+
+
+def test_no_route_fails_cleanly_and_stops_every_robot():
+    pen = (
+        ((3.5, 1.5), (5.5, 1.5), (5.5, 1.7), (3.5, 1.7)),
+        ((3.5, 3.3), (5.5, 3.3), (5.5, 3.5), (3.5, 3.5)),
+        ((3.5, 1.5), (3.7, 1.5), (3.7, 3.5), (3.5, 3.5)),
+        ((5.3, 1.5), (5.5, 1.5), (5.5, 3.5), (5.3, 3.5)),
+    )
+    m, cfg, poses = mission(Scenario("pen", CRATE, (1.5, 2.0, 0.0), (4.1, 2.2, 0.0), obstacles=pen))
+    out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
+    assert out.failed and out.reason == "no_route" and out.stop
+    assert np.all(out.velocities == 0.0)
+    assert dict(out.events)["failure"]["detail"]
+
+
+def test_delivered_inside_the_settle_margin_then_backs_off_and_is_done():
+    m, cfg, poses = mission(OPEN)
+    m.plan(view(cfg, 0.0, poses, cfg.object.start))
+    goal = np.asarray(cfg.object.goal)
+    shift = goal - np.asarray(cfg.object.start)
+    at_goal = poses + shift  # the fleet carried it there
+    near = goal + [0.05, 0.0, 0.0]  # 5 cm off: inside 0.6 x 0.2 m
+    out = m.plan(view(cfg, 10.0, at_goal, near))
+    assert m.phase == Phase.DONE and "delivered" in dict(out.events)
+    assert not out.done  # backing off first
+    c = geometry.transform(m.model.centroid[None], near)[0]
+    for i in range(len(cfg.robots)):
+        away = at_goal[i, :2] - c
+        assert np.dot(out.velocities[i], away) > 0  # every robot moves away from the object
+    out = m.plan(view(cfg, 20.0, at_goal, near))
+    assert out.done
+
+
+def test_progress_is_measured_along_the_route_not_as_the_crow_flies():
+    pillar = (((2.8, 2.0), (3.2, 2.0), (3.2, 3.2), (2.8, 3.2)),)
+    sc = Scenario("detour", CRATE, (1.0, 2.2, 0.0), (4.0, 2.2, 0.0), obstacles=pillar)
+    m, cfg, poses = mission(sc)
+    m.plan(view(cfg, 0.0, poses, cfg.object.start))
+    wp = m.route.waypoints
+    m.route_j = 0
+    left = np.array([m._remaining(w, commit=True) for w in wp])
+    assert np.all(np.diff(left) <= 1e-9)  # every step along the route is progress
+    # from the start, the whole route is left (give or take a corner cut inside the window),
+    # never the straight line through the pillar (3 m)
+    assert left[-1] < 1e-6 and left[0] >= m.route.length_m - 0.05 > 3.5
+    # around the pillar the straight line to the goal grows while the route's measure falls
+    crow = np.linalg.norm(wp[:, :2] - np.asarray(cfg.object.goal[:2]), axis=1)
+    grows = np.flatnonzero(np.diff(crow) > 1e-6)
+    assert len(grows) > 0 and np.all(np.diff(left)[grows] < 0)
+
+
+def _lp_ok(m, pts, nrm, twist, fmax):
+    w = required_wrench(twist, m.model.mass, m.model.floor_friction, m.model.mean_radius)
+    lp = ContactForceLP(len(pts))
+    res = lp.solve(
+        pts - m.model.centroid, -nrm, np.full(len(pts), fmax), np.ones(len(pts), bool), w,
+        0.0, m.model.mean_radius,
+    )  # fmt: skip
+    return res.status == "optimal"
+
+
+def test_a_pushing_set_is_confirmed_by_the_lp_and_a_turning_set_turns():
+    m, cfg, _ = mission(OPEN)
+    fmax = min(r.max_force for r in cfg.robots)
+    push = np.array([1.0, 0.0, 0.0])
+    pts, nrm, value, n, basis = m._new_set(push, push[:2])
+    assert basis == "eq5" and n == len(pts) >= 2
+    assert _lp_ok(m, pts, nrm, push * m.params.speed, fmax)
+    assert np.all(nrm @ [-1.0, 0.0] > -1e-9)  # nobody pulls: the pushers face +x
+    turn = np.array([0.0, 0.0, 1.0 / m.model.mean_radius])
+    pts, nrm, value, n, basis = m._new_set(turn, np.zeros(2))
+    assert basis == "lp_capacity" and value >= 1.0
+    assert _lp_ok(m, pts, nrm, turn * m.params.speed, fmax)
+    assert contact_wrenches(pts, nrm, m.model.centroid)[2].max() > 0  # a push turns it CCW
+
+
+def test_a_heavy_object_recruits_free_robots():
+    """Five robots' force is needed; two hold it at the start, the rest are free: the new set
+    takes in free robots, and every robot of the set is confirmed by the LP."""
+    long_crate = [[0.0, 0.0], [0.6, 0.0], [0.6, 1.2], [0.0, 1.2]]
+    sc = Scenario(
+        "heavy", long_crate, (1.5, 2.5, 0.0), (4.0, 2.5, 0.0), kinds="oooooooo", mass=10.0,
+        floor_friction=0.3, max_force=8.0, patch={"capture": {"hold_force": 0.0}},
+    )  # fmt: skip
+    m, cfg, _ = mission(sc)
+    push = np.array([1.0, 0.0, 0.0])
+    pts, nrm, value, n, basis = m._new_set(push, push[:2])
+    held = sum(c is not None for c in m.contacts.values())
+    assert n >= 4 and len(pts) >= 4 and n > 0
+    assert len(m.robots) == len(cfg.robots) > held  # the free ones take part
+    assert _lp_ok(m, pts, nrm, push * m.params.speed, 8.0)
+
+
+def test_a_lost_robot_leaves_the_job_and_is_told_nothing():
+    m, cfg, poses = mission(OPEN)
+    m.plan(view(cfg, 0.0, poses, cfg.object.start))
+    holder = next(i for i, c in m.contacts.items() if c is not None)
+    present = np.ones(len(cfg.robots), bool)
+    present[holder] = False
+    out = m.plan(view(cfg, 0.05, poses, cfg.object.start, present))
+    lost = [d for k, d in out.events if k == "robot_lost"]
+    assert [d["robot"] for d in lost] == [cfg.robots[holder].id]
+    assert m.contacts[holder] is None and holder not in m.moves
+    assert np.all(out.velocities[holder] == 0.0)
+    out = m.plan(view(cfg, 0.1, poses, cfg.object.start, present))
+    assert not [d for k, d in out.events if k == "robot_lost"]  # reported once
+
+
+def test_a_stall_with_a_robot_lost_fails_with_robot_lost():
+    m, cfg, poses = mission(OPEN)
+    m.plan(view(cfg, 0.0, poses, cfg.object.start))
+    present = np.ones(len(cfg.robots), bool)
+    present[0] = False
+    m.plan(view(cfg, 0.05, poses, cfg.object.start, present))
+    m.futile = m.s.max_rearrangements  # nothing more to try
+    t, out = 0.05, None
+    while t < 3 * m.s.stall_timeout and not (out is not None and out.failed):
+        t += 0.5
+        out = m.plan(view(cfg, t, poses, cfg.object.start, present))  # the object never moves
+    assert out is not None and out.failed
+    assert out.reason == "robot_lost" and cfg.robots[0].id in m.failure["detail"]
+    assert math.isclose(m.failure["t"], t)
