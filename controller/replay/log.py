@@ -276,6 +276,7 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         hits = metrics.obstacle_contacts(tr_h, r_h, cfg.obstacle_polygons(), cfg.bounds_array())
         out["obstacle_contacts"] = sorted(ids[have[i]] for i in hits)
         out.update(_object_figures(cfg, obj, phases))
+        out.update(transport_figures(run, cfg, obj, phases))
         from controller.runtime.dry_run import judge  # the run's own verdict code
 
         out["verdict"] = judge(out)
@@ -301,6 +302,70 @@ def _object_figures(cfg: FleetConfig, obj: metrics.Track, phases: list[dict]) ->
         "object_min_clearance_m": None if clear is None else clear[0],
         "object_min_clearance_t": None if clear is None else clear[1],
     }
+
+
+def transport_figures(
+    run: RunLog, cfg: FleetConfig, obj: metrics.Track, phases: list[dict]
+) -> dict[str, Any]:
+    """The transport as ``fleet run --json`` reports it, from the log: delivery and the error
+    at the goal (from the object's truth when logged, else its estimate), transport time, the
+    route's length and the object's path, its lateral deviation from the route, re-arrangements
+    and relocations. The true contact forces are the world's and are not logged: the planned
+    ones (``planned_force_mean_n``, from ``plan/transport``) stand in. Empty without a goal."""
+    goal = cfg.object.goal
+    start = next((p["t"] for p in phases if p["phase"] in CARRIED), None)
+    if goal is None:
+        return {}
+    if start is None or not len(obj):
+        return {"transported": False}
+    ends = [p["t"] for p in phases if p["t"] > start and p["phase"] in ("done", "failed")]
+    end = ends[0] if ends else None
+    routes = events_of(run, "route")
+    keep = obj.t >= start
+    if end is not None:
+        keep &= obj.t <= end
+    pose = obj.pose[-1]
+    err = float(np.linalg.norm(pose[:2] - np.asarray(goal[:2])))
+    err_deg = float(np.degrees(abs(geometry.wrap_angle(pose[2] - goal[2]))))
+    t = cfg.transport
+    delivered = bool(events_of(run, "delivered"))
+    within = err <= t.tolerance and err_deg <= t.heading_tolerance_deg
+    poly = geometry.ensure_ccw(cfg.object_polygon())
+    centre = geometry.centroid(poly)
+    path = np.array([geometry.transform(centre[None], p)[0] for p in obj.pose[keep]])
+    lat = np.zeros(0)
+    if routes and keep.any():
+        wp = np.asarray(routes[0]["data"]["waypoints"], float)[:, :2]
+        if len(wp) > 1:
+            lat = metrics.lateral_deviation(obj.pose[keep, :2], wp)
+    planned = [
+        f for e in events_of(run, "transport") for f in (e["data"].get("forces") or [[]])[0] if f
+    ]
+    return {
+        "transported": delivered and within,
+        "goal_error_m": err,
+        "goal_error_deg": err_deg,
+        "transport_time_s": None if end is None else round(end - start, 3),
+        "route_length_m": routes[0]["data"].get("length_m") if routes else None,
+        "object_path_length_m": metrics.path_length(path) if len(path) else 0.0,
+        "lateral_deviation_rms_m": float(np.sqrt(np.mean(lat**2))) if len(lat) else None,
+        "max_lateral_deviation_m": float(lat.max()) if len(lat) else None,
+        "rearrangements": len(events_of(run, "rearrange")),
+        "relocations": _relocations(run),
+        "planned_force_mean_n": float(np.mean(planned)) if planned else None,
+    }
+
+
+def _relocations(run: RunLog) -> int:
+    """Robots sent to a new contact: the movers of every re-arrangement, and each robot that
+    starts relocating during the transport (it appears in a local plan's ``relocating``)."""
+    n = sum(len(e["data"].get("moving", [])) for e in events_of(run, "rearrange"))
+    before: set[str] = set()
+    for e in events_of(run, "transport"):
+        now = set(e["data"].get("relocating") or {})
+        n += len(now - before)
+        before = now
+    return n
 
 
 def _recovered(parts: list[dict[str, Any]]) -> dict[str, Any] | None:

@@ -14,8 +14,11 @@ so the turn is tested in pybullet only.)
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
+from controller.cli import main
 from controller.mission.factory import build_mission
 from controller.runtime.dry_run import DryRun, judge
 from tests.support.transport_scenarios import CRATE, L_SHAPE, Scenario, scenario_config
@@ -83,9 +86,22 @@ def run(sc: Scenario, tmp_path):
     return DryRun(cfg, build_mission(cfg, kind), tmp_path / f"{sc.name}.mcap").run()
 
 
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Each scenario run once per module, on demand (the replay test reads a delivered log)."""
+    done: dict[str, dict] = {}
+
+    def get(sc: Scenario) -> dict:
+        if sc.name not in done:
+            done[sc.name] = run(sc, tmp_path_factory.mktemp(sc.name))
+        return done[sc.name]
+
+    return get
+
+
 @pytest.mark.parametrize("sc", SCENARIOS, ids=[s.name for s in SCENARIOS])
-def test_the_object_is_delivered(sc, tmp_path):
-    res = run(sc, tmp_path)
+def test_the_object_is_delivered(sc, runs):
+    res = runs(sc)
     brief = {k: res.get(k) for k in ("failure", "goal_error_m", "goal_error_deg", "phases")}
     assert res["status"] == "ok" and res["transported"] is True, brief
     assert judge(res) == [], res["verdict"]
@@ -101,3 +117,22 @@ def test_an_unreachable_goal_fails_cleanly_with_no_route(tmp_path):
     assert judge(res) == []
     moved = (res["final_object_pose"][0] - 1.5) ** 2 + (res["final_object_pose"][1] - 2.0) ** 2
     assert moved**0.5 < 0.02  # the object was not pushed
+
+
+def test_replay_reports_the_transport_as_the_run_did(runs, capsys):
+    """``fleet replay`` of a delivered run's log gives the run's transport figures (from the
+    logged truth and plan events)."""
+    sc = next(s for s in SCENARIOS if s.name == "open-floor-pybullet")
+    res = runs(sc)
+    assert main(["replay", res["log"], "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["transported"] is True
+    assert rep["goal_error_m"] == pytest.approx(res["goal_error_m"], abs=0.01)
+    assert rep["goal_error_deg"] == pytest.approx(res["goal_error_deg"], abs=0.5)
+    assert rep["route_length_m"] == pytest.approx(res["route_length_m"], rel=1e-6)
+    assert rep["transport_time_s"] == pytest.approx(res["transport_time_s"], abs=0.2)
+    assert rep["object_path_length_m"] == pytest.approx(res["object_path_length_m"], rel=0.05)
+    assert rep["max_lateral_deviation_m"] == pytest.approx(res["max_lateral_deviation_m"], abs=0.02)
+    assert rep["rearrangements"] == res["rearrangements"]
+    assert rep["relocations"] <= res["relocations"] + 1
+    assert rep["planned_force_mean_n"] > 0
