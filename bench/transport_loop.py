@@ -4,7 +4,7 @@ Each run is a whole ``fleet run --mission transport`` in lockstep (robots alread
 object, judged from ground truth) on a seeded suite drawn here, never used by the tests
 (``SUITE_SEED``): per local planner (``transport.strategy`` = sa, serpentine, downhill) the
 success rate, transport time, lateral deviation (RMS, max), contact-force impulse Σ|f|·dt from
-the pybullet contact points, re-arrangements, the controller's per-tick plan time and missed
+the pybullet contact points, re-arrangements, each local plan's wall time (median, p95) and missed
 ticks (the aggregation is ``bench/transport.py:closed_loop``).
 
 ``--sweep N`` adds the robustness sweep (Yamashita et al., Table 1): N seeded runs per strategy
@@ -110,13 +110,40 @@ def sweep_suite(n: int, seed: int = SWEEP_SEED) -> list[Scenario]:
     return out
 
 
+class PlanTimer:
+    """Times every local plan of a run (wraps ``TransportPlanner.plan`` for the run's length:
+    the controller runs in this process, on its own thread)."""
+
+    def __init__(self) -> None:
+        self.times: list[float] = []
+
+    def __enter__(self) -> PlanTimer:
+        from controller.planning import transport as tp
+
+        self._cls, self._orig = tp.TransportPlanner, tp.TransportPlanner.plan
+        orig, times = self._orig, self.times
+
+        def timed(planner, *a, **kw):
+            t0 = time.perf_counter()
+            try:
+                return orig(planner, *a, **kw)
+            finally:
+                times.append(time.perf_counter() - t0)
+
+        self._cls.plan = timed
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._cls.plan = self._orig
+
+
 def run_one(sc: Scenario, strategy: str) -> dict:
     sc = dataclasses.replace(
         sc, patch={**sc.patch, "transport": {**sc.patch.get("transport", {}), "strategy": strategy}}
     )
     cfg = scenario_config(sc)
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, PlanTimer() as timer:
         res = DryRun(cfg, build_mission(cfg, "transport"), Path(tmp) / "run.mcap").run()
     wall = time.perf_counter() - t0
     clean = judge(res) == []
@@ -142,6 +169,8 @@ def run_one(sc: Scenario, strategy: str) -> dict:
         "plan_tick_ms_max": plan.get("max"),
         "missed_ticks": res.get("missed_ticks"),
         "wall_s": round(wall, 1),
+        "plan_times_s": timer.times,
+        "local_plans": len(timer.times),
     }
 
 
@@ -157,6 +186,8 @@ def summarise(strategies, cases, runner) -> dict:
     for s in strategies:
         agg[s]["missed_ticks_max"] = max((r["missed_ticks"] or 0) for r in rows[s])
         agg[s]["plan_tick_ms_p90_median"] = _median([r["plan_tick_ms_p90"] for r in rows[s]])
+        for r in rows[s]:
+            r.pop("plan_times_s", None)  # aggregated in plan_time
         agg[s]["runs_detail"] = rows[s]
     return agg
 
