@@ -28,6 +28,7 @@ def _open_until(stop: threading.Event, cfg: FleetConfig, who: str) -> Bus | None
             return Bus(
                 cfg.zenoh,
                 cfg.fleet.name,
+                mode="client",  # through the hub only: no peer links around its ACL
                 listen=[],
                 connect=list(cfg.zenoh.listen),
                 lease_s=cfg.fleet.liveliness_lease,
