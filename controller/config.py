@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import json
 import math
 import re
 import tomllib
@@ -43,6 +44,8 @@ TRANSPORT_INITIAL = ("lp", "hold", "random")
 SIM_BACKENDS = ("pybullet", "ideal")
 FILTERS = ("ekf", "ukf")
 ZENOH_MODES = ("peer", "client", "router")
+# access-control profiles generated from the config (controller/acl.py); else zenoh.acl is a file
+ACL_PROFILES = ("lab",)
 # what fleet daemon --mission and build_mission run ("transport": carry an object the robots
 # already hold, from where they stand; "capture": the whole job)
 MISSION_KINDS = ("capture", "transport", "stage", "hold")
@@ -92,12 +95,55 @@ class FleetSection:
 
 
 @dataclass(frozen=True, kw_only=True)
+class TlsSection:
+    """``[zenoh] tls``: PEM files. The listening hub presents ``certificate``/``private_key`` and
+    checks peers against ``root_ca``; the others check the hub against ``root_ca`` and, with
+    ``mtls``, present ``certificate``/``private_key`` themselves (a robot may have its own:
+    ``robots[i].zenoh_certificate``)."""
+
+    certificate: str = _rule("")
+    private_key: str = _rule("")
+    root_ca: str = _rule("")
+    mtls: bool = _rule(False)
+
+
+@dataclass(frozen=True, kw_only=True)
 class ZenohSection:
     mode: str = _rule("peer", choices=ZENOH_MODES)
     listen: tuple[str, ...] = _rule(("tcp/127.0.0.1:7447",))
     connect: tuple[str, ...] = _rule(())
     multicast_scouting: bool = _rule(False)
     gossip_scouting: bool = _rule(False)
+    # Security (README "In the lab: secure profile"). Files are checked when a session that
+    # needs them is built (a robot's computer holds only its own), relative to the config file.
+    config_file: str = _rule("")  # a zenoh JSON5 config, our settings applied over it
+    user: str = _rule("")  # this process's identity (controller, recorder, CLI by default)
+    password: str = _rule("")
+    password_file: str = _rule("")
+    auth_dictionary: str = _rule("")  # the listening hub's usrpwd dictionary (user:password)
+    tls: TlsSection | None = _rule(None)
+    acl: str = _rule("")  # a JSON5 access_control block file, or a profile (ACL_PROFILES)
+    operators: tuple[str, ...] = _rule(())  # usernames that may put estop/resume (acl profile)
+    # filled by the loader for an acl profile: the generated access_control block (JSON)
+    acl_block: str = _rule("", internal=True)
+
+    @property
+    def secured(self) -> bool:
+        """Whether a listening hub refuses strangers (a password dictionary or mutual TLS)."""
+        return bool(self.auth_dictionary) or bool(self.tls and self.tls.mtls)
+
+
+@dataclass(frozen=True)
+class ZenohIdentity:
+    """Who a session authenticates as: a usrpwd user and its password (given or in a file), and
+    for mutual TLS its own certificate. ``path`` is the config key path it came from."""
+
+    path: str = "zenoh"
+    user: str = ""
+    password: str = ""
+    password_file: str = ""
+    certificate: str = ""
+    private_key: str = ""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -314,6 +360,13 @@ class RobotConfig:
     arm: bool = _rule(True)
     gcs_system_id: int = _rule(255, min=1, max=255)  # our MAVLink system id (the GCS failsafe's)
     telemetry_hz: float = _rule(50.0, min=30, max=1000)  # LOCAL_POSITION_NED/ATTITUDE rate asked
+    # the robot agent's own zenoh identity (else the [zenoh] one): the lab ACL profile lets it
+    # put only this robot's pose/event and receive only this robot's commands
+    zenoh_user: str = _rule("")
+    zenoh_password: str = _rule("")
+    zenoh_password_file: str = _rule("")
+    zenoh_certificate: str = _rule("")  # mutual TLS: this robot's own certificate and key
+    zenoh_private_key: str = _rule("")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -341,6 +394,28 @@ class FleetConfig:
                 return r
         raise KeyError(f"no robot {robot_id!r} in {self.source or 'config'}; ids: {self.robot_ids}")
 
+    def zenoh_identity(self, robot_id: str | None = None) -> ZenohIdentity:
+        """The zenoh identity of a role: a robot's agent (its ``zenoh_*`` keys when it has a
+        ``zenoh_user`` or a ``zenoh_certificate``), else the ``[zenoh]`` one (controller,
+        recorder, tools)."""
+        z = self.zenoh
+        if robot_id is not None:
+            i = self.robot_ids.index(robot_id)
+            r = self.robots[i]
+            if r.zenoh_user or r.zenoh_certificate:
+                return ZenohIdentity(
+                    f"robots[{i}]",
+                    r.zenoh_user,
+                    r.zenoh_password,
+                    r.zenoh_password_file,
+                    r.zenoh_certificate,
+                    r.zenoh_private_key,
+                )
+        tls = z.tls or TlsSection()
+        return ZenohIdentity(
+            "zenoh", z.user, z.password, z.password_file, tls.certificate, tls.private_key
+        )
+
     @property
     def robot_ids(self) -> tuple[str, ...]:
         return tuple(r.id for r in self.robots)
@@ -358,6 +433,26 @@ class FleetConfig:
 
     def bounds_array(self) -> np.ndarray:
         return np.asarray(self.world.bounds, dtype=float)
+
+
+def operator_identity(
+    cfg: FleetConfig, user: str | None, password_file: str | None
+) -> ZenohIdentity | None:
+    """The identity given on a tool's command line (``--user``, ``--password-file``: an
+    operator), or None for the config's own; InputError when incomplete or the file is missing."""
+    if not (user or password_file):
+        return None
+    if not (user and password_file):
+        raise InputError("--user and --password-file go together")
+    if not Path(password_file).is_file():
+        raise InputError(f"--password-file: no such file: {password_file}")
+    return dataclasses.replace(
+        cfg.zenoh_identity(),
+        path="--user",
+        user=user,
+        password="",
+        password_file=str(Path(password_file).resolve()),
+    )
 
 
 # --------------------------------------------------------------------------- the walker
@@ -459,7 +554,11 @@ _NOT_KEYS = ("source", "notes")  # FleetConfig fields the loader fills, never TO
 
 def _build(cls: type, table: dict[str, Any], path: str, src: str) -> Any:
     hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.name not in _NOT_KEYS}
+    fields = {
+        f.name: f
+        for f in dataclasses.fields(cls)
+        if f.name not in _NOT_KEYS and not f.metadata.get("internal")
+    }
     for key in table:
         if key not in fields:
             where = f"{path}.{key}" if path else key
@@ -649,7 +748,141 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
     _validate_robots(cfg, obstacles, src)
     _check_object_poses(obj, obstacles, cfg.world.bounds, src)
     check_route_grid(cfg.world.bounds, cfg.route, src)
+    cfg = _validate_zenoh(cfg, src)
     return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src, notes=notes)
+
+
+# --------------------------------------------------------------------------- zenoh security
+
+
+def _abspath(value: str, src: str) -> str:
+    """A file named in the config: relative to the config file's folder (else the cwd)."""
+    if not value:
+        return value
+    p = Path(value).expanduser()
+    if not p.is_absolute():
+        base = Path(src).parent if src and Path(src).is_file() else Path.cwd()
+        p = base / p
+    return str(p)
+
+
+def _check_identity(src: str, path: str, user: str, password: str, password_file: str) -> None:
+    """A user comes with exactly one of a password or a password file, and vice versa."""
+    u, pw, pf = (f"{path}{k}" for k in ("user", "password", "password_file"))
+    if password and password_file:
+        raise ConfigError(src, pf, f"give {pw} or {pf}, not both")
+    if (password or password_file) and not user:
+        raise ConfigError(src, u, f"missing: {pw if password else pf} is set without a user")
+    if user and not (password or password_file):
+        raise ConfigError(src, pw, f"{u} = {user!r} needs a password or a password_file")
+    if ":" in user:
+        raise ConfigError(src, u, f"a zenoh user name cannot contain ':', got {user!r}")
+
+
+def _zenoh_robots(cfg: FleetConfig, src: str) -> tuple[RobotConfig, ...]:
+    robots = []
+    for i, r in enumerate(cfg.robots):
+        p = f"robots[{i}]."
+        _check_identity(src, p + "zenoh_", r.zenoh_user, r.zenoh_password, r.zenoh_password_file)
+        if bool(r.zenoh_certificate) != bool(r.zenoh_private_key):
+            raise ConfigError(
+                src, p + "zenoh_private_key", "zenoh_certificate and zenoh_private_key go together"
+            )
+        robots.append(
+            dataclasses.replace(
+                r,
+                zenoh_password_file=_abspath(r.zenoh_password_file, src),
+                zenoh_certificate=_abspath(r.zenoh_certificate, src),
+                zenoh_private_key=_abspath(r.zenoh_private_key, src),
+            )
+        )
+    return tuple(robots)
+
+
+def _zenoh_tls(z: ZenohSection, src: str) -> TlsSection | None:
+    tls = z.tls
+    if tls is None:
+        return None
+    if not tls.root_ca:
+        raise ConfigError(src, "zenoh.tls.root_ca", "missing: the CA that signs the certificates")
+    if bool(tls.certificate) != bool(tls.private_key):
+        raise ConfigError(src, "zenoh.tls.private_key", "certificate and private_key go together")
+    if z.listen and not tls.certificate:
+        raise ConfigError(src, "zenoh.tls.certificate", "missing: the listening hub's certificate")
+    for key in ("listen", "connect"):
+        for j, ep in enumerate(getattr(z, key)):
+            if not ep.startswith("tls/"):
+                raise ConfigError(
+                    src,
+                    f"zenoh.{key}[{j}]",
+                    f"with zenoh.tls only tls/ endpoints are accepted, got {ep!r} "
+                    f"(write 'tls/{ep.split('/', 1)[-1]}')",
+                )
+    return TlsSection(
+        certificate=_abspath(tls.certificate, src),
+        private_key=_abspath(tls.private_key, src),
+        root_ca=_abspath(tls.root_ca, src),
+        mtls=tls.mtls,
+    )
+
+
+def _zenoh_acl(cfg: FleetConfig, src: str) -> tuple[str, str]:
+    """(zenoh.acl with a file made absolute, the generated block of a profile or "")."""
+    z, acl = cfg.zenoh, cfg.zenoh.acl
+    if acl in ACL_PROFILES:
+        if not z.user:
+            raise ConfigError(
+                src, "zenoh.user", f"the {acl!r} ACL profile needs the controller's identity"
+            )
+        if not z.secured:
+            raise ConfigError(
+                src,
+                "zenoh.acl",
+                f"the {acl!r} ACL profile names users: set zenoh.auth_dictionary so the hub "
+                "knows who connects",
+            )
+        for i, r in enumerate(cfg.robots):
+            if not r.zenoh_user:
+                raise ConfigError(
+                    src,
+                    f"robots[{i}].zenoh_user",
+                    f"the {acl!r} ACL profile needs robot {r.id!r}'s own identity",
+                )
+        from controller.acl import acl_for
+
+        return acl, json.dumps(acl_for(cfg))
+    if acl and not acl.endswith((".json5", ".json")):
+        close = difflib.get_close_matches(acl, ACL_PROFILES, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise ConfigError(
+            src,
+            "zenoh.acl",
+            f"expected a profile ({', '.join(ACL_PROFILES)}) or a .json5 file, got {acl!r}{hint}",
+        )
+    return _abspath(acl, src), ""
+
+
+def _validate_zenoh(cfg: FleetConfig, src: str) -> FleetConfig:
+    """The security keys of ``[zenoh]`` and ``[[robots]]``: identities are complete, TLS runs
+    on tls/ endpoints only, an ACL profile has every identity it names; file paths made
+    absolute (their existence is checked when a session needs them: controller/io/bus.py)."""
+    z = cfg.zenoh
+    _check_identity(src, "zenoh.", z.user, z.password, z.password_file)
+    for j, op in enumerate(z.operators):
+        if not op or ":" in op:
+            raise ConfigError(src, f"zenoh.operators[{j}]", f"expected a user name, got {op!r}")
+    cfg = dataclasses.replace(cfg, robots=_zenoh_robots(cfg, src))
+    acl, block = _zenoh_acl(cfg, src)
+    zenoh = dataclasses.replace(
+        z,
+        config_file=_abspath(z.config_file, src),
+        password_file=_abspath(z.password_file, src),
+        auth_dictionary=_abspath(z.auth_dictionary, src),
+        tls=_zenoh_tls(z, src),
+        acl=acl,
+        acl_block=block,
+    )
+    return dataclasses.replace(cfg, zenoh=zenoh)
 
 
 def _polygons_overlap(a: np.ndarray, b: np.ndarray) -> bool:
@@ -766,17 +999,27 @@ def load_config(path: str | Path) -> FleetConfig:
     return parse_config(data, str(p))
 
 
+# never written to logs or --json: passwords (a password_file is named, not read)
+_SECRETS = ("password", "zenoh_password")
+REDACTED = "<redacted>"
+
+
 def config_to_dict(cfg: FleetConfig) -> dict[str, Any]:
     """The config as plain data (for logs and --json); tuples become lists. The loader's notes
     and unset optional keys (``object.goal`` None: TOML has no null) are left out: the data
-    must load again."""
+    must load again. Passwords are written as ``<redacted>`` (a log or --json output is no
+    place for them): such a config loads again but authenticates only with the original."""
 
     def conv(v: Any) -> Any:
         if dataclasses.is_dataclass(v):
             return {
-                f.name: conv(getattr(v, f.name))
+                f.name: REDACTED
+                if f.name in _SECRETS and getattr(v, f.name)
+                else conv(getattr(v, f.name))
                 for f in dataclasses.fields(v)
-                if f.name != "notes" and getattr(v, f.name) is not None
+                if f.name != "notes"
+                and not f.metadata.get("internal")
+                and getattr(v, f.name) is not None
             }
         if isinstance(v, tuple | list):
             return [conv(x) for x in v]

@@ -22,6 +22,10 @@ def add_arguments(parser, word: str) -> None:
     parser.add_argument(
         "--connect", action="append", help="zenoh endpoint (default: the config's listen)"
     )
+    parser.add_argument(
+        "--user", help="zenoh user to authenticate as (an operator; default: the config's)"
+    )
+    parser.add_argument("--password-file", help="file holding --user's password")
     if word == "estop":
         parser.add_argument("--reason", default="", help="why (logged)")
 
@@ -29,15 +33,23 @@ def add_arguments(parser, word: str) -> None:
 def run(args) -> int:
     from controller import wire
     from controller.cli import emit_json
-    from controller.config import load_config
+    from controller.config import load_config, operator_identity
     from controller.io.bus import Bus, BusError
 
     cfg = load_config(args.config)
+    identity = operator_identity(cfg, args.user, args.password_file)
     word = args._words[-1]
     connect = args.connect or list(cfg.zenoh.listen)
     source = f"{getpass.getuser()}@{socket.gethostname()}"
     try:
-        bus = Bus(cfg.zenoh, cfg.fleet.name, mode="client", listen=[], connect=connect)
+        bus = Bus(
+            cfg.zenoh,
+            cfg.fleet.name,
+            mode="client",
+            listen=[],
+            connect=connect,
+            identity=identity,
+        )
     except BusError as exc:
         if args.json:
             emit_json({"ok": False, "error": f"no daemon answered: {exc}"})

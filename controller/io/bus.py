@@ -12,6 +12,7 @@ reference to is silently undeclared, so the bus keeps every handle it creates.
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import logging
 import queue
@@ -19,14 +20,106 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import zenoh
 
 from controller import wire
-from controller.config import ZenohSection
+from controller.config import ConfigError, ZenohIdentity, ZenohSection
 
 log = logging.getLogger(__name__)
+
+
+def _file(path: str, key: str) -> str:
+    """A file the session needs, or a ConfigError naming its config key (exit 2)."""
+    if not Path(path).is_file():
+        raise ConfigError("", key, f"no such file: {path}")
+    return path
+
+
+def _insert(conf: zenoh.Config, key: str, value: Any, cfg_key: str, json5: bool = False) -> None:
+    """``value`` as JSON (or, ``json5``, already JSON5 text) at ``key``; ConfigError if refused."""
+    try:
+        conf.insert_json5(key, value if json5 else json.dumps(value))
+    except zenoh.ZError as exc:
+        raise ConfigError("", cfg_key, f"zenoh refused {key}: {exc}") from exc
+
+
+def section_identity(section: ZenohSection) -> ZenohIdentity:
+    """The ``[zenoh]`` identity (controller, recorder, tools) from the section alone."""
+    tls = section.tls
+    return ZenohIdentity(
+        "zenoh",
+        section.user,
+        section.password,
+        section.password_file,
+        tls.certificate if tls else "",
+        tls.private_key if tls else "",
+    )
+
+
+def _password(ident: ZenohIdentity) -> str:
+    prefix = "zenoh_" if ident.path != "zenoh" else ""
+    if ident.password:
+        return ident.password
+    path = _file(ident.password_file, f"{ident.path}.{prefix}password_file")
+    return Path(path).read_text(encoding="utf-8").strip()
+
+
+def _is_loopback(endpoint: str) -> bool:
+    """Whether a zenoh endpoint (``proto/host:port``) listens on loopback only."""
+    addr = endpoint.split("/", 1)[-1].split("#", 1)[0]
+    host = addr.rsplit(":", 1)[0].strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _apply_security(
+    conf: zenoh.Config, section: ZenohSection, ident: ZenohIdentity, listening: bool
+) -> None:
+    """Authentication, TLS and access control (README "In the lab: secure profile")."""
+    prefix = "zenoh_" if ident.path != "zenoh" else ""
+    if ident.user:
+        _insert(conf, "transport/auth/usrpwd/user", ident.user, f"{ident.path}.{prefix}user")
+        _insert(
+            conf,
+            "transport/auth/usrpwd/password",
+            _password(ident),
+            f"{ident.path}.{prefix}password",
+        )
+    if listening and section.auth_dictionary:
+        path = _file(section.auth_dictionary, "zenoh.auth_dictionary")
+        _insert(conf, "transport/auth/usrpwd/dictionary_file", path, "zenoh.auth_dictionary")
+    tls = section.tls
+    if tls is not None:
+        tk = "transport/link/tls/"
+        _insert(conf, "transport/link/protocols", ["tls"], "zenoh.tls")
+        ca = _file(tls.root_ca, "zenoh.tls.root_ca")
+        _insert(conf, tk + "root_ca_certificate", ca, "zenoh.tls.root_ca")
+        if listening:
+            cert = _file(tls.certificate, "zenoh.tls.certificate")
+            key = _file(tls.private_key, "zenoh.tls.private_key")
+            _insert(conf, tk + "listen_certificate", cert, "zenoh.tls.certificate")
+            _insert(conf, tk + "listen_private_key", key, "zenoh.tls.private_key")
+        if tls.mtls:
+            _insert(conf, tk + "enable_mtls", True, "zenoh.tls.mtls")
+            ck = "zenoh.tls." if ident.path == "zenoh" else f"{ident.path}.zenoh_"
+            if not ident.certificate:
+                raise ConfigError("", ck + "certificate", "mutual TLS needs this party's own")
+            cert = _file(ident.certificate, ck + "certificate")
+            key = _file(ident.private_key, ck + "private_key")
+            _insert(conf, tk + "connect_certificate", cert, ck + "certificate")
+            _insert(conf, tk + "connect_private_key", key, ck + "private_key")
+    if listening and (section.acl_block or section.acl):
+        block = section.acl_block
+        if not block:
+            block = Path(_file(section.acl, "zenoh.acl")).read_text(encoding="utf-8")
+        _insert(conf, "access_control", block, "zenoh.acl", json5=True)
 
 
 def zenoh_config(
@@ -36,16 +129,30 @@ def zenoh_config(
     listen: Sequence[str] | None = None,
     connect: Sequence[str] | None = None,
     lease_s: float | None = None,
+    identity: ZenohIdentity | None = None,
 ) -> zenoh.Config:
-    """A zenoh Config from the ``[zenoh]`` section, with per-role overrides.
+    """A zenoh Config from the ``[zenoh]`` section, with per-role overrides: every session of
+    every role is built here.
 
-    Multicast and gossip scouting follow the section (off by default): endpoints are explicit.
+    ``zenoh.config_file`` (JSON5) is the base, our settings go over it. Multicast and gossip
+    scouting follow the section (off by default): endpoints are explicit. ``identity`` is who
+    the session authenticates as (default: the ``[zenoh]`` user; a robot agent passes its own,
+    ``FleetConfig.zenoh_identity``). A session that listens also gets the hub's side: the
+    password dictionary, its TLS certificate and the access-control block. A file that is
+    missing raises ConfigError naming its key. A non-loopback listen endpoint on a hub that
+    checks nobody (no dictionary, no mutual TLS) logs one loud warning.
     """
-    conf = zenoh.Config()
+    if section.config_file:
+        path = _file(section.config_file, "zenoh.config_file")
+        try:
+            conf = zenoh.Config.from_file(path)
+        except zenoh.ZError as exc:
+            raise ConfigError("", "zenoh.config_file", f"zenoh refused {path}: {exc}") from exc
+    else:
+        conf = zenoh.Config()
+    here = list(section.listen if listen is None else listen)
     conf.insert_json5("mode", json.dumps(mode or section.mode))
-    conf.insert_json5(
-        "listen/endpoints", json.dumps(list(section.listen if listen is None else listen))
-    )
+    conf.insert_json5("listen/endpoints", json.dumps(here))
     conf.insert_json5(
         "connect/endpoints", json.dumps(list(section.connect if connect is None else connect))
     )
@@ -54,6 +161,16 @@ def zenoh_config(
     if lease_s is not None:
         conf.insert_json5("transport/link/tx/lease", json.dumps(int(lease_s * 1000)))
         conf.insert_json5("transport/link/tx/keep_alive", json.dumps(4))
+    ident = identity if identity is not None else section_identity(section)
+    _apply_security(conf, section, ident, listening=bool(here))
+    exposed = [ep for ep in here if not _is_loopback(ep)]
+    if exposed and not section.secured:
+        log.warning(
+            "INSECURE: zenoh listens on %s without authentication: anyone who reaches it can "
+            "command every robot and release the e-stop (set zenoh.auth_dictionary and "
+            "zenoh.acl, README 'In the lab: secure profile')",
+            ", ".join(exposed),
+        )
     return conf
 
 
@@ -169,12 +286,15 @@ class Bus:
         listen: Sequence[str] | None = None,
         connect: Sequence[str] | None = None,
         lease_s: float | None = None,
+        identity: ZenohIdentity | None = None,
     ) -> None:
         self.fleet = fleet
         self.stats = DecodeStats()
         self._inboxes: list[Inbox] = []
         self._handles: list[Any] = []
-        conf = zenoh_config(section, mode=mode, listen=listen, connect=connect, lease_s=lease_s)
+        conf = zenoh_config(
+            section, mode=mode, listen=listen, connect=connect, lease_s=lease_s, identity=identity
+        )
         try:
             self.session = zenoh.open(conf)
         except zenoh.ZError as exc:

@@ -18,7 +18,8 @@ log = logging.getLogger(__name__)
 
 
 def _open_until(stop: threading.Event, cfg: FleetConfig, who: str) -> Bus | None:
-    """A robot-side session to the daemon's endpoints, retried until it opens or ``stop``."""
+    """A robot-side session to the daemon's endpoints as robot ``who``'s own zenoh identity,
+    retried until it opens or ``stop`` (a wrong password is refused like an absent hub)."""
     from controller.io.bus import BusError
 
     logged = False
@@ -27,9 +28,11 @@ def _open_until(stop: threading.Event, cfg: FleetConfig, who: str) -> Bus | None
             return Bus(
                 cfg.zenoh,
                 cfg.fleet.name,
+                mode="client",  # through the hub only: no peer links around its ACL
                 listen=[],
                 connect=list(cfg.zenoh.listen),
                 lease_s=cfg.fleet.liveliness_lease,
+                identity=cfg.zenoh_identity(who),
             )
         except BusError as exc:
             if not logged:
