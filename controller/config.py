@@ -310,8 +310,14 @@ class RobotConfig:
     url: str = _rule("")
     system_id: int = _rule(1, min=1, max=255)
     profile: str = _rule("", choices=("",) + MAVLINK_PROFILES)
-    link_timeout: float = _rule(1.0, gt=0, max=60)
+    # s without a vehicle HEARTBEAT before the link is lost; 2.5 periods of a vehicle's default
+    # 1 Hz heartbeat (the driver widens it to 2.5 periods of what the vehicle really sends)
+    link_timeout: float = _rule(2.5, gt=0, max=60)
     arm: bool = _rule(True)
+    hold_on_close: bool = _rule(True)  # the driver switches the vehicle to HOLD when it closes
+    # s: the longest the vehicle may keep its last setpoint once our stream stops (PX4
+    # COM_OF_LOSS_T, read on connect: a warning above it, `fleet driver --strict` refuses)
+    max_vehicle_timeout: float = _rule(1.0, gt=0, max=60)
     gcs_system_id: int = _rule(255, min=1, max=255)  # our MAVLink system id (the GCS failsafe's)
     telemetry_hz: float = _rule(50.0, min=30, max=1000)  # LOCAL_POSITION_NED/ATTITUDE rate asked
 
