@@ -13,9 +13,12 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import ipaddress
 import json
 import math
+import os
 import re
+import tempfile
 import tomllib
 import types
 import typing
@@ -46,6 +49,10 @@ FILTERS = ("ekf", "ukf")
 ZENOH_MODES = ("peer", "client", "router")
 # access-control profiles generated from the config (controller/acl.py); else zenoh.acl is a file
 ACL_PROFILES = ("lab",)
+# zenoh locators: ``proto/host:port`` (checked: host and port) for these, ``proto/address`` for
+# the others zenoh knows
+ZENOH_IP_PROTOCOLS = ("tcp", "udp", "tls", "quic")
+ZENOH_OTHER_PROTOCOLS = ("ws", "unixsock-stream", "unixpipe", "serial", "vsock")
 # what fleet daemon --mission and build_mission run ("transport": carry an object the robots
 # already hold, from where they stand; "capture": the whole job)
 MISSION_KINDS = ("capture", "transport", "stage", "hold")
@@ -356,8 +363,14 @@ class RobotConfig:
     url: str = _rule("")
     system_id: int = _rule(1, min=1, max=255)
     profile: str = _rule("", choices=("",) + MAVLINK_PROFILES)
-    link_timeout: float = _rule(1.0, gt=0, max=60)
+    # s without a vehicle HEARTBEAT before the link is lost; 2.5 periods of a vehicle's default
+    # 1 Hz heartbeat (the driver widens it to 2.5 periods of what the vehicle really sends)
+    link_timeout: float = _rule(2.5, gt=0, max=60)
     arm: bool = _rule(True)
+    hold_on_close: bool = _rule(True)  # the driver switches the vehicle to HOLD when it closes
+    # s: the longest the vehicle may keep its last setpoint once our stream stops (PX4
+    # COM_OF_LOSS_T, read on connect: a warning above it, `fleet driver --strict` refuses)
+    max_vehicle_timeout: float = _rule(1.0, gt=0, max=60)
     gcs_system_id: int = _rule(255, min=1, max=255)  # our MAVLink system id (the GCS failsafe's)
     telemetry_hz: float = _rule(50.0, min=30, max=1000)  # LOCAL_POSITION_NED/ATTITUDE rate asked
     # the robot agent's own zenoh identity (else the [zenoh] one): the lab ACL profile lets it
@@ -661,6 +674,110 @@ def _validate_robots(cfg: FleetConfig, obstacles: tuple[Obstacle, ...], src: str
             )
         seen[r.id] = i
         _validate_robot(cfg, i, obstacles, src)
+    _check_start_discs(cfg.robots, src)
+
+
+def _check_start_discs(robots: tuple[RobotConfig, ...], src: str) -> None:
+    """No two robots' start discs overlap (touching is fine)."""
+    xy = np.array([r.start[:2] for r in robots], dtype=float)
+    radii = np.array([r.radius for r in robots], dtype=float)
+    gaps = geometry.disc_gaps(xy, radii)
+    for j in range(len(robots)):
+        for i in range(j):
+            if gaps[i, j] < -1e-9:
+                a, b = robots[i], robots[j]
+                d = float(np.hypot(*(xy[j] - xy[i])))
+                raise ConfigError(
+                    src,
+                    f"robots[{j}].start",
+                    f"robot {b.id!r} at {list(b.start[:2])} overlaps robot {a.id!r} "
+                    f"(robots[{i}]) at {list(a.start[:2])}: centres {d:.3g} m apart, radii "
+                    f"sum {a.radius + b.radius:.3g} m",
+                )
+
+
+_HOSTNAME = re.compile(
+    r"^(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9\-]{0,61}[A-Za-z0-9])?"
+    r"(\.[A-Za-z0-9]([A-Za-z0-9\-]{0,61}[A-Za-z0-9])?)*$"
+)
+
+
+def endpoint_error(endpoint: Any, listen: bool) -> str | None:
+    """Why a zenoh endpoint string is malformed, or None. ``proto/host:port`` for tcp, udp,
+    tls and quic (host: IPv4, ``[IPv6]`` or a DNS name; port 1-65535, 0 too where we listen:
+    any free port), optionally followed by ``?metadata`` or ``#config``."""
+    if not isinstance(endpoint, str) or not endpoint:
+        return f"expected a zenoh endpoint string, got {endpoint!r}"
+    locator = re.split(r"[?#]", endpoint, maxsplit=1)[0]
+    proto, slash, address = locator.partition("/")
+    known = ZENOH_IP_PROTOCOLS + ZENOH_OTHER_PROTOCOLS
+    if not slash or proto not in known:
+        return (
+            f"{endpoint!r} is not a zenoh endpoint: expected PROTOCOL/ADDRESS with PROTOCOL one "
+            f"of {', '.join(known)} (e.g. 'tcp/127.0.0.1:7447')"
+        )
+    if not address:
+        return f"{endpoint!r}: no address after {proto}/"
+    if proto not in ZENOH_IP_PROTOCOLS:
+        return None
+    host, colon, port = address.rpartition(":")
+    if not colon or not host:
+        return f"{endpoint!r}: expected {proto}/HOST:PORT (e.g. '{proto}/127.0.0.1:7447')"
+    if not port.isdigit() or not (0 if listen else 1) <= int(port) <= 65535:
+        least = 0 if listen else 1
+        return f"{endpoint!r}: port {port!r} is not a number in {least}..65535"
+    problem = _host_error(host)
+    return f"{endpoint!r}: {problem}" if problem else None
+
+
+def _host_error(host: str) -> str | None:
+    """Why an endpoint's host is not an IPv4 address, a bracketed IPv6 one or a DNS name."""
+    if host.startswith("["):
+        try:
+            if not host.endswith("]"):
+                raise ValueError(host)
+            ipaddress.IPv6Address(host[1:-1].split("%")[0])
+        except ValueError:
+            return f"{host!r} is not a bracketed IPv6 address"
+        return None
+    if re.fullmatch(r"[0-9.]+", host):
+        try:
+            ipaddress.IPv4Address(host)
+        except ValueError:
+            return f"{host!r} is not an IPv4 address"
+        return None
+    if not _HOSTNAME.match(host):
+        return f"{host!r} is not a host name or IP address (IPv6 goes in [])"
+    return None
+
+
+def _check_zenoh(section: ZenohSection, src: str) -> None:
+    for key in ("listen", "connect"):
+        for i, endpoint in enumerate(getattr(section, key)):
+            problem = endpoint_error(endpoint, listen=key == "listen")
+            if problem:
+                raise ConfigError(src, f"zenoh.{key}[{i}]", problem)
+
+
+def log_dir_problem(directory: str | Path) -> str | None:
+    """Why logs cannot be written in ``directory`` (created if missing), or None. Probes with a
+    temporary file; creates nothing that stays."""
+    d = Path(directory)
+    probe = d
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        return f"{str(probe)!r} is not a directory (log files go in {str(d)!r})"
+    if not os.access(probe, os.W_OK | os.X_OK):
+        return f"{str(probe)!r} is not writable (log files go in {str(d)!r})"
+    try:
+        with tempfile.TemporaryFile(dir=probe):
+            pass
+    except OSError as exc:
+        return f"cannot write in {str(probe)!r}: {exc.strerror or exc}"
+    return None
 
 
 def edge_node_counts(polygon: Any, spacing: float) -> np.ndarray:
@@ -745,6 +862,7 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
         for i, o in enumerate(cfg.obstacles)
     )
     obj, notes = _object(cfg, src)
+    _check_zenoh(cfg.zenoh, src)
     _validate_robots(cfg, obstacles, src)
     _check_object_poses(obj, obstacles, cfg.world.bounds, src)
     check_route_grid(cfg.world.bounds, cfg.route, src)
@@ -992,6 +1110,10 @@ def load_config(path: str | Path) -> FleetConfig:
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(str(p), "", f"cannot read: {exc.strerror or exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            str(p), "", f"not a text file (not UTF-8 at byte {exc.start}): expected TOML"
+        ) from exc
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

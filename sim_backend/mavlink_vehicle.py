@@ -7,7 +7,10 @@ run the whole MAVLink path in the dry run:
   current custom mode and the armed flag; LOCAL_POSITION_NED and ATTITUDE (NED, from the world's
   true pose) at the rates asked by MAV_CMD_SET_MESSAGE_INTERVAL (4 Hz until asked).
 - COMMAND_ACK for MAV_CMD_SET_MESSAGE_INTERVAL, MAV_CMD_DO_SET_MODE and
-  MAV_CMD_COMPONENT_ARM_DISARM (UNSUPPORTED for anything else).
+  MAV_CMD_COMPONENT_ARM_DISARM (UNSUPPORTED for anything else). ``heartbeat_rate_fixed``: a
+  HEARTBEAT interval is refused (UNSUPPORTED) and heartbeats stay at 1 Hz, like many vehicles.
+- PARAM_REQUEST_READ by name: a PX4 answers ``COM_OF_LOSS_T`` (= ``offboard_loss_timeout``)
+  with PARAM_VALUE; unknown names get no answer (as PX4 does).
 - ``ardurover``: GUIDED takes SET_POSITION_TARGET_LOCAL_NED with the velocity + yaw-rate mask as
   signed forward speed + turn rate (the lateral component is ignored), or velocity only as speed +
   heading; a mask with any velocity bit set ignores the velocity. A target older than
@@ -129,6 +132,7 @@ class VehicleEmulator:
         offboard_loss_timeout: float = 1.0,
         world_lock: threading.Lock | None = None,
         listener: Callable[[Any], None] | None = None,
+        heartbeat_rate_fixed: bool = False,
     ):
         """``bind``: a pymavlink url for the vehicle side, or ``HOST:PORT`` of the driver's
         listening port (-> ``udpout``); default derived from ``robot_cfg.url``."""
@@ -154,6 +158,7 @@ class VehicleEmulator:
         self.gcs_timeout = gcs_timeout
         self.target_timeout = target_timeout
         self.offboard_loss_timeout = offboard_loss_timeout
+        self.heartbeat_rate_fixed = heartbeat_rate_fixed
         self.listener = listener
         self._world_lock = world_lock or threading.Lock()
         self._lock = threading.Lock()
@@ -189,6 +194,7 @@ class VehicleEmulator:
             "foreign": 0,  # messages addressed to another system
             "gcs_heartbeats": 0,
             "acks": 0,
+            "param_reads": 0,
             "sent": 0,
         }
         self._thread: threading.Thread | None = None
@@ -284,6 +290,8 @@ class VehicleEmulator:
         elif kind == "COMMAND_LONG":
             result = self._on_command(m, now)
             self._ack(m, result)
+        elif kind == "PARAM_REQUEST_READ":
+            self._on_param_read(m)
 
     def _yaw_ned(self) -> float:
         with self._world_lock:
@@ -366,9 +374,31 @@ class VehicleEmulator:
             return self._set_px4_mode(int(m.param2), int(m.param3), now)
         return mc.RESULT_UNSUPPORTED
 
+    def params(self) -> dict[str, float]:
+        """The vehicle parameters it answers by name."""
+        if self.profile == "px4":
+            return {mc.PX4_OFFBOARD_LOSS_PARAM: float(self.offboard_loss_timeout)}
+        return {}
+
+    def _on_param_read(self, m: Any) -> None:
+        self.counters["param_reads"] += 1
+        name = m.param_id.decode() if isinstance(m.param_id, bytes) else str(m.param_id)
+        name = name.rstrip("\x00")
+        table = self.params()
+        if name not in table:
+            return
+        index = sorted(table).index(name)
+        self._send(
+            self.conn.mav.param_value_encode(
+                name.encode(), table[name], mc.PARAM_TYPE_REAL32, len(table), index
+            )
+        )
+
     def _set_interval(self, m: Any) -> int:
         msg_id = int(m.param1)
         if msg_id not in self.intervals:
+            return mc.RESULT_UNSUPPORTED
+        if msg_id == mc.MSG_HEARTBEAT and self.heartbeat_rate_fixed:
             return mc.RESULT_UNSUPPORTED
         if m.param2 < 0:
             self.intervals[msg_id] = None

@@ -1,11 +1,16 @@
-"""``fleet check [--config F] [--json]``: validate a config; exit 2 naming the key path."""
+"""``fleet check [--config F] [--json]``: validate a config; exit 2 naming the key path.
+
+Everything ``fleet run`` would fail on before it starts: an unreadable or binary file, bad TOML,
+unknown keys and values out of range, malformed zenoh endpoints, polygons, robots starting
+outside the room, on an obstacle or on each other, and a ``log.dir`` that cannot be written
+(the only check that touches the file system beyond the config: a temporary file, removed)."""
 
 from __future__ import annotations
 
 import sys
 
 from controller.commands import add_config_argument
-from controller.config import ConfigError, load_config
+from controller.config import ConfigError, load_config, log_dir_problem
 
 
 def add_arguments(parser, word: str) -> None:
@@ -18,6 +23,9 @@ def run(args) -> int:
 
     try:
         cfg = load_config(args.config)
+        problem = log_dir_problem(cfg.log.dir)  # what `fleet run` would fail on at its start
+        if problem:
+            raise ConfigError(cfg.source, "log.dir", problem)
     except ConfigError as exc:
         if args.json:
             emit_json({"ok": False, "file": exc.source, "path": exc.path, "error": exc.message})

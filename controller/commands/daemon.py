@@ -10,7 +10,7 @@ import signal
 import threading
 from pathlib import Path
 
-from controller.commands import add_config_argument
+from controller.commands import add_config_argument, require_log_target
 from controller.config import MISSION_KINDS
 
 
@@ -40,6 +40,7 @@ def run(args) -> int:
 
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name, "daemon")
+    require_log_target(cfg, out, bool(args.out))  # exit 2 before anything starts
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())

@@ -4,7 +4,9 @@ Binds the robot's driver (``robots[].driver``) to the bus: commands in, poses ou
 watchdog, e-stop. Runs on the robot's computer or beside the daemon, on the wall clock at
 ``fleet.rate_hz`` (at least 20 Hz). A ``mavlink`` robot is the real vehicle at its url; a ``sim``
 robot runs alone in a real-time stand-in world of its own (bench-top bring-up without hardware).
-Exit 1 when the robot does not answer or its link is lost, 2 on bad config.
+Exit 1 when the robot does not answer or its link is lost, 2 on bad config. ``--strict``: also
+refuse (exit 1) a MAVLink vehicle whose own setpoint timeout (PX4 ``COM_OF_LOSS_T``) is longer
+than the robot's ``max_vehicle_timeout`` or cannot be read (otherwise a warning).
 """
 
 from __future__ import annotations
@@ -21,6 +23,12 @@ def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)
     parser.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
     parser.add_argument("--connect-timeout", type=float, default=10.0, help="seconds")
+    parser.add_argument(
+        "--strict",
+        action="store_true",
+        help="refuse a MAVLink vehicle whose own setpoint timeout (PX4 COM_OF_LOSS_T) is longer "
+        "than the robot's max_vehicle_timeout or unreadable (default: warn)",
+    )
 
 
 def run(args) -> int:
@@ -33,7 +41,9 @@ def run(args) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    code, message = run_agent(cfg, args.robot_id, stop, args.duration, args.connect_timeout)
+    code, message = run_agent(
+        cfg, args.robot_id, stop, args.duration, args.connect_timeout, strict=args.strict
+    )
     if message:
         print(f"fleet driver {args.robot_id}: {message}", file=sys.stderr)
     return code

@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from controller.commands import add_config_argument
+from controller.commands import add_config_argument, require_log_target
 from controller.config import MISSION_KINDS, SIM_BACKENDS
 
 
@@ -58,6 +58,7 @@ def run(args) -> int:
         if problem:
             raise InputError(f"--gui: {problem}")
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name)
+    require_log_target(cfg, out, bool(args.out))  # exit 2 before anything starts
     mission = build_mission(cfg, args.mission)  # MissionError: exit 1 (cli.exit_code)
     print(f"fleet run: {cfg.source}, backend {cfg.sim.backend}, log {out}", file=sys.stderr)
     summary = DryRun(cfg, mission, out, gui=args.gui, max_time=args.max_time, viz=args.viz).run()

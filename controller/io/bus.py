@@ -30,6 +30,9 @@ from controller.config import ConfigError, ZenohIdentity, ZenohSection
 
 log = logging.getLogger(__name__)
 
+#: bytes: a payload larger than this is dropped unread (counted): no message of ours comes close
+MAX_PAYLOAD_BYTES = 4 * 1024 * 1024
+
 
 def _file(path: str, key: str) -> str:
     """A file the session needs, or a ConfigError naming its config key (exit 2)."""
@@ -212,6 +215,31 @@ class DecodeStats:
             return sum(self.counts.values())
 
 
+def decode_payload(
+    fleet: str,
+    key: str,
+    payload: bytes,
+    msg_type: type[wire.Message] | None,
+    stats: DecodeStats,
+) -> wire.Message | None:
+    """A subscriber's decode step: the message, or None after counting a bad payload (too
+    large, not JSON, wrong fields or types, NaN/inf, out-of-range magnitudes, no registered
+    type for ``key``). Never raises."""
+    try:
+        if len(payload) > MAX_PAYLOAD_BYTES:
+            raise wire.WireError(f"payload of {len(payload)} bytes > {MAX_PAYLOAD_BYTES}")
+        tp = msg_type
+        if tp is None:
+            topic = wire.topic_for_key(fleet, key)
+            if topic is None or topic.msg is wire.Message:
+                raise wire.WireError(f"no message type registered for {key}")
+            tp = topic.msg
+        return wire.decode(tp, payload)
+    except Exception as exc:  # noqa: BLE001 - a callback must never raise
+        stats.bad(key, exc)
+        return None
+
+
 class Inbox:
     """A thread-safe queue of ``Received`` samples, filled by zenoh callbacks.
 
@@ -386,15 +414,12 @@ class Bus:
         def callback(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
             try:
-                tp = msg_type
-                if tp is None:
-                    topic = wire.topic_for_key(fleet, k)
-                    if topic is None or topic.msg is wire.Message:
-                        raise wire.WireError(f"no message type registered for {k}")
-                    tp = topic.msg
-                msg = wire.decode(tp, sample.payload.to_bytes())
+                payload = sample.payload.to_bytes()
             except Exception as exc:  # noqa: BLE001 - a callback must never raise
                 stats.bad(k, exc)
+                return
+            msg = decode_payload(fleet, k, payload, msg_type, stats)
+            if msg is None:
                 return
             item = Received(time.time(), k, msg)
             box.put(item)

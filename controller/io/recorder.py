@@ -34,6 +34,7 @@ log = logging.getLogger(__name__)
 
 PROFILE = "fleet"
 _META = object()  # queue tag of a metadata record
+MAX_PAYLOAD_BYTES = 4 * 1024 * 1024  # a bigger sample is dropped unread (as the bus does)
 SIM_EPOCH = 946_684_800.0  # 2000-01-01T00:00:00Z: a dry run's t = 0 (log and publish times)
 CLOCK_SKEW = 60.0  # s: a stamp further than this from the run's clock is from another clock
 
@@ -107,6 +108,7 @@ class McapRecorder:
         self.location = self.path.with_suffix("") if split_s > 0 else self.path
         self.segments: list[Path] = []
         self._meta: list[tuple[str, dict[str, str]]] = []
+        self._bad_keys: set[str] = set()
         self._logged: dict[str, bool] = {}  # key: whether the registry logs it
         self._segment_start: int | None = None
         self._open_segment()
@@ -115,7 +117,8 @@ class McapRecorder:
         self._last_log_ns = 0
         self.written = 0  # bus messages
         self.scene_written = 0
-        self.dropped = 0
+        self.dropped = 0  # samples not written: bad payloads and anything else that failed
+        self.bad_payloads = 0  # of those: payloads that do not decode as their key's type
         self._thread = threading.Thread(target=self._run, name="mcap-writer", daemon=True)
         self._thread.start()
         self._closed = False
@@ -210,13 +213,35 @@ class McapRecorder:
             ch, log_time=log_ns, publish_time=pub_ns, data=data, sequence=self.written & 0xFFFFFFFF
         )
 
+    def _bad(self, key: str, why: Any) -> None:
+        """A payload that does not decode: counted and dropped, one quiet line per key (no
+        traceback: a bad payload is the sender's fault, not the recorder's)."""
+        self.dropped += 1
+        self.bad_payloads += 1
+        if key not in self._bad_keys:
+            self._bad_keys.add(key)
+            log.warning("recorder: dropped a bad payload on %s (more are counted): %s", key, why)
+
+    def _decode(self, key: str, payload: bytes) -> Any:
+        """The payload as JSON data, validated against its key's registered type (a key
+        without one: any JSON object); raises ValueError when it is bad."""
+        if len(payload) > MAX_PAYLOAD_BYTES:
+            raise ValueError(f"payload of {len(payload)} bytes > {MAX_PAYLOAD_BYTES}")
+        topic = wire.topic_for_key(self.fleet, key)
+        if topic is not None and topic.msg is not wire.Message:
+            return wire.to_dict(wire.decode(topic.msg, payload))
+        try:
+            return json.loads(payload)
+        except RecursionError as exc:
+            raise ValueError("nested too deep") from exc
+
     def _write(self, key: str, payload: bytes, recv_time: float) -> None:
         try:
-            obj = json.loads(payload)
+            obj = self._decode(key, payload)
             t = obj.get("t", recv_time) if isinstance(obj, dict) else recv_time
             log_ns, pub_ns = self._times(t, recv_time)
-        except (ValueError, TypeError, OverflowError):
-            self.dropped += 1
+        except (ValueError, TypeError, OverflowError) as exc:
+            self._bad(key, exc)
             return
         self._put(key, None, payload, log_ns, pub_ns)
         self.written += 1

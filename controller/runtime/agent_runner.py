@@ -48,12 +48,15 @@ def run_agent(
     stop: threading.Event,
     duration: float = 0.0,
     connect_timeout: float = 10.0,
+    *,
+    strict: bool = False,
 ) -> tuple[int, str]:
     """``fleet driver``: one robot's agent on the wall clock. Returns (exit status, message).
 
     A ``mavlink`` robot connects to its vehicle at its url; a ``sim`` robot runs alone in a
     real-time stand-in world of its own. Exit 1 when the robot does not answer or its link is
-    lost (the robot is stopped first).
+    lost (the robot is stopped first). ``strict``: a MAVLink vehicle whose own setpoint timeout
+    is longer than ``max_vehicle_timeout`` (or unreadable) is refused (exit 1).
     """
     import dataclasses
 
@@ -67,7 +70,7 @@ def run_agent(
     # NTP keeps lab machines within milliseconds; monotonic clocks are not comparable across them.
     wall0 = time.time()
     if robot.driver == "mavlink":
-        driver = MavlinkDriver(robot, clock=time.time)
+        driver = MavlinkDriver(robot, clock=time.time, strict=strict)
     else:
         solo = dataclasses.replace(cfg, robots=(robot,))
         hub = make_hub(solo)

@@ -25,8 +25,21 @@ that advances the sim. Nothing ever blocks without a timeout; ``poll``, ``send``
 Keepalive: our HEARTBEAT goes to the robot at 1 Hz and the current setpoint is re-sent at
 ``SETPOINT_HZ`` from ``poll``/``send``/``health``, so the agent must call ``poll`` regularly (it
 does, every tick). A command is held for its ``ttl``; after that the re-sent setpoint is zero.
-When no vehicle HEARTBEAT arrived for ``link_timeout``, the link is lost: ``health().ok`` is
-false, ``send`` raises ``LinkLost`` and no setpoint goes out.
+When no vehicle HEARTBEAT arrived for the link timeout, the link is lost: ``health().ok`` is
+false, ``send`` raises ``LinkLost`` and the keepalive sends no setpoint. The link timeout is
+``link_timeout``, widened to ``HEARTBEAT_PERIODS`` heartbeat periods of what the vehicle really
+sends (a vehicle that refuses a faster HEARTBEAT rate keeps 1 Hz: a 1 s timeout would flap), with
+a warning when it widens (``link_timeout`` attribute).
+
+Stopping: ``stop()`` and ``close()`` read the link first and always send the zero setpoint, lost
+or not (a vehicle that went quiet may still hear us, and a caller idle for longer than the link
+timeout must not leave the vehicle on its last setpoint); ``close()`` then switches the vehicle
+to HOLD when ``hold_on_close`` is set (fire and forget: close never waits).
+
+The vehicle's own timeout: on connect a PX4 is asked for ``COM_OF_LOSS_T`` (how long it keeps
+the last setpoint once our stream stops, i.e. how far a rover drives on after this process
+dies); above ``max_vehicle_timeout`` connect warns, or refuses with ``strict`` (``fleet driver
+--strict``). ArduRover's GUIDED velocity timeout is a fixed 3 s (no parameter).
 """
 
 from __future__ import annotations
@@ -65,6 +78,9 @@ PX4_STREAM_BEFORE_OFFBOARD = 1.2  # s of setpoints before asking for OFFBOARD (P
 COMMAND_RETRY = 0.5  # s before a COMMAND_LONG without an ACK is sent again
 POSE_QUEUE = 1024
 PAIR_WINDOW = 0.1  # s: LOCAL_POSITION_NED and ATTITUDE closer than this make one pose
+HEARTBEAT_PERIODS = 2.5  # the link timeout is at least this many vehicle heartbeat periods
+DEFAULT_VEHICLE_HEARTBEAT = 1.0  # s, MAVLink's heartbeat period when the rate is not ours to set
+PARAM_READ_TIMEOUT = 2.0  # s at most for reading one vehicle parameter on connect
 
 
 DEFAULT_POOL = LinkPool()
@@ -99,7 +115,10 @@ class MavlinkDriver:
         clock: Callable[[], float] = time.monotonic,
         idle: Callable[[float], None] | None = None,
         pool: LinkPool | None = None,
+        strict: bool = False,
     ):
+        """``strict``: refuse to connect when the vehicle's own setpoint timeout cannot be read or
+        is longer than ``max_vehicle_timeout`` (otherwise a warning)."""
         if cfg.profile not in ("ardurover", "px4"):
             raise DriverError(f"robot {cfg.id!r}: unknown MAVLink profile {cfg.profile!r}")
         if not cfg.url:
@@ -135,6 +154,12 @@ class MavlinkDriver:
         self._last_hb_sent = -math.inf
         self._streaming = False
         self._lost_logged = False
+        self.strict = strict
+        self._hb_assumed: float | None = None  # s, the heartbeat period we asked for / assume
+        self._hb_gaps: deque[float] = deque(maxlen=5)  # s between the last vehicle heartbeats
+        self._widened_logged = False
+        self._params: dict[str, float] = {}
+        self.vehicle_timeout: float | None = None  # s, e.g. PX4 COM_OF_LOSS_T as read
         self.counters = {"setpoints": 0, "poses": 0, "unrouted": 0}
 
     # ------------------------------------------------------------------ contract
@@ -153,6 +178,9 @@ class MavlinkDriver:
         self._last_heard = self._mode = self._autopilot = None
         self._armed = self._streaming = False
         self._acks.clear()
+        self._params.clear()
+        self._hb_gaps.clear()
+        self._hb_assumed = None
         # a frozen injected clock must not hang us: a generous wall-clock bound as well
         self._wall_deadline = time.monotonic() + 4.0 * timeout + PX4_STREAM_BEFORE_OFFBOARD + 5.0
         link = self._pool.acquire(self.cfg.url, self.gcs_id)
@@ -191,14 +219,18 @@ class MavlinkDriver:
 
     @_locked
     def stop(self) -> None:
-        """Zero setpoint now (and for the keepalive). Never raises."""
+        """Zero setpoint now (and for the keepalive). Never raises, never blocks.
+
+        The link is read first (the caller may have been idle for longer than the link
+        timeout while the vehicle kept talking), and the zero goes out even when the link looks
+        lost: a vehicle that went quiet may still hear us."""
         self._setpoint = _Setpoint()
         if self._link is None or not self._connected:
             return
         try:
-            now = self._clock()
-            if not self._lost(now):
-                self._send_setpoint(now)
+            now = self._service()
+            self._lost(now)  # log the link's state; the zero goes out either way
+            self._send_setpoint(now)
         except Exception:  # noqa: BLE001 - stop must never raise
             log.exception("%s: stop failed", self.robot_id)
 
@@ -231,6 +263,11 @@ class MavlinkDriver:
         if self._closed:
             return
         self.stop()
+        if self.cfg.hold_on_close and self._link is not None and self._connected:
+            try:
+                self._send_hold()
+            except Exception:  # noqa: BLE001 - close must never raise
+                log.exception("%s: HOLD on close failed", self.robot_id)
         self._closed = True
         self._connected = False
         self._release()
@@ -251,8 +288,38 @@ class MavlinkDriver:
     def _wanted_mode(self) -> int:
         return mc.ROVER_GUIDED if self.profile == "ardurover" else mc.PX4_OFFBOARD
 
+    @property
+    def link_timeout(self) -> float:
+        """s of vehicle silence before the link is lost: ``link_timeout``, at least
+        ``HEARTBEAT_PERIODS`` periods of the heartbeats the vehicle really sends."""
+        period = self._heartbeat_period()
+        if period is None:
+            return self.cfg.link_timeout
+        wide = HEARTBEAT_PERIODS * period
+        if wide > self.cfg.link_timeout and not self._widened_logged:
+            self._widened_logged = True
+            log.warning(
+                "%s: system %d sends HEARTBEAT every %.2f s: link_timeout %.2f s widened to "
+                "%.2f s (%.1f heartbeat periods)",
+                self.robot_id,
+                self.system_id,
+                period,
+                self.cfg.link_timeout,
+                wide,
+                HEARTBEAT_PERIODS,
+            )
+        return max(self.cfg.link_timeout, wide)
+
+    def _heartbeat_period(self) -> float | None:
+        """The vehicle's heartbeat period: the median of the last gaps seen (3 or more), else
+        what we asked for (or MAVLink's 1 s when the vehicle refused), else unknown."""
+        if len(self._hb_gaps) >= 3:
+            gaps = sorted(self._hb_gaps)
+            return gaps[len(gaps) // 2]
+        return self._hb_assumed
+
     def _lost(self, now: float) -> bool:
-        lost = self._last_heard is None or now - self._last_heard > self.cfg.link_timeout
+        lost = self._last_heard is None or now - self._last_heard > self.link_timeout
         if lost and not self._lost_logged:
             log.warning("%s: %s", self.robot_id, self._lost_detail(now))
             self._lost_logged = True
@@ -265,7 +332,7 @@ class MavlinkDriver:
         ago = "ever" if self._last_heard is None else f"{now - self._last_heard:.2f} s"
         return (
             f"robot {self.robot_id!r}: link lost, no HEARTBEAT from system {self.system_id} "
-            f"on {self.cfg.url} for {ago} (link_timeout {self.cfg.link_timeout} s)"
+            f"on {self.cfg.url} for {ago} (link timeout {self.link_timeout:.2f} s)"
         )
 
     def _wait(self, seconds: float) -> None:
@@ -306,12 +373,18 @@ class MavlinkDriver:
         if kind == "HEARTBEAT":
             if m.get_srcComponent() != AUTOPILOT_COMPONENT or m.autopilot == mc.AUTOPILOT_INVALID:
                 return
+            if self._last_heard is not None and now > self._last_heard:
+                self._hb_gaps.append(now - self._last_heard)
             self._last_heard = now
             self._mode = m.custom_mode
             self._armed = bool(m.base_mode & mc.MODE_FLAG_ARMED)
             self._autopilot = m.autopilot
         elif kind == "COMMAND_ACK":
             self._acks[m.command] = m.result
+        elif kind == "PARAM_VALUE":
+            name = m.param_id.decode() if isinstance(m.param_id, bytes) else str(m.param_id)
+            if math.isfinite(m.param_value):
+                self._params[name.rstrip("\x00")] = float(m.param_value)
         elif kind == "ATTITUDE":
             self._att = m
             self._try_pose(now)
@@ -394,6 +467,61 @@ class MavlinkDriver:
             )
         )
 
+    def _send_hold(self) -> None:
+        """Ask the vehicle for HOLD once (no ACK awaited)."""
+        if self.profile == "ardurover":
+            params = (mc.MODE_FLAG_CUSTOM, mc.ROVER_HOLD, 0.0)
+        else:
+            params = (mc.MODE_FLAG_CUSTOM, mc.PX4_MAIN_AUTO, mc.PX4_SUB_AUTO_LOITER)
+        p = list(params) + [0.0] * 4
+        self._send(
+            lambda mav: mav.command_long_encode(
+                self.system_id, AUTOPILOT_COMPONENT, mc.CMD_DO_SET_MODE, 0, *p
+            )
+        )
+
+    def _read_param(self, name: str, timeout: float) -> float | None:
+        """A vehicle parameter by name (PARAM_REQUEST_READ, re-asked every COMMAND_RETRY s), or
+        None when it does not answer within ``timeout``."""
+        self._params.pop(name, None)
+        deadline = self._clock() + timeout
+        pid = name.encode()
+        while True:
+            self._send(
+                lambda mav: mav.param_request_read_encode(
+                    self.system_id, AUTOPILOT_COMPONENT, pid, -1
+                )
+            )
+            retry_at = self._clock() + COMMAND_RETRY
+            if self._wait_until(lambda: name in self._params, min(deadline, retry_at)):
+                return self._params[name]
+            if self._clock() >= deadline or time.monotonic() > self._wall_deadline:
+                return None
+
+    def _check_vehicle_timeout(self, timeout: float) -> None:
+        """Read the vehicle's own setpoint timeout where it is a parameter (PX4
+        ``COM_OF_LOSS_T``) and warn, or refuse when ``strict``, above ``max_vehicle_timeout``."""
+        if self.profile != "px4":
+            return
+        name = mc.PX4_OFFBOARD_LOSS_PARAM
+        limit = self.cfg.max_vehicle_timeout
+        value = self._read_param(name, min(timeout, PARAM_READ_TIMEOUT))
+        self.vehicle_timeout = value
+        where = f"robot {self.robot_id!r}: system {self.system_id} on {self.cfg.url}"
+        if value is None:
+            problem = f"{where} did not answer a read of {name}: its offboard timeout is unknown"
+        elif value > limit + 1e-6:
+            problem = (
+                f"{where} has {name} = {value:g} s, longer than max_vehicle_timeout = {limit:g} s:"
+                f" if this process dies the rover drives on for {value:g} s; set {name} <= "
+                f"{limit:g} on the vehicle"
+            )
+        else:
+            return
+        if self.strict:
+            raise DriverError(problem + " (refused: --strict)")
+        log.warning("%s", problem)
+
     def _command(self, command: int, params: tuple[float, ...], timeout: float, what: str) -> None:
         """Send a COMMAND_LONG until its COMMAND_ACK arrives; raise if refused or unanswered."""
         p = list(params) + [0.0] * (7 - len(params))
@@ -463,15 +591,21 @@ class MavlinkDriver:
                 timeout,
                 f"SET_MESSAGE_INTERVAL {name}",
             )
+        hb = min(DEFAULT_VEHICLE_HEARTBEAT, self.cfg.link_timeout / 4.0)
         try:  # heartbeats often enough that link_timeout never flaps (vehicles default to 1 Hz)
             self._command(
                 mc.CMD_SET_MESSAGE_INTERVAL,
-                (mc.MSG_HEARTBEAT, 1e6 * min(1.0, self.cfg.link_timeout / 4.0)),
+                (mc.MSG_HEARTBEAT, 1e6 * hb),
                 timeout,
                 "SET_MESSAGE_INTERVAL HEARTBEAT",
             )
+            self._hb_assumed = hb
         except DriverError as exc:
-            log.warning("%s: %s; link_timeout may flap with 1 Hz heartbeats", self.robot_id, exc)
+            self._hb_assumed = DEFAULT_VEHICLE_HEARTBEAT
+            log.info("%s: %s; assuming %g s heartbeats", self.robot_id, exc, self._hb_assumed)
+        self._hb_gaps.clear()  # gaps seen before the rate was set say nothing
+        _ = self.link_timeout  # warns now if the vehicle's heartbeats widen it
+        self._check_vehicle_timeout(timeout)
         if self.profile == "ardurover":
             self._command(
                 mc.CMD_DO_SET_MODE, (mc.MODE_FLAG_CUSTOM, mc.ROVER_GUIDED), timeout, "GUIDED"

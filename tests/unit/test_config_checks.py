@@ -1,0 +1,174 @@
+"""`fleet check` catches what `fleet run` would crash on: each case exits 2 naming the key or
+the file, and `fleet run` refuses the same config with the same exit status before it starts."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from controller.cli import main
+from controller.config import ConfigError, endpoint_error, load_config
+from tests.support.config import base_config_dict, write_toml
+
+
+def _write(tmp_path: Path, mutate) -> Path:
+    data = base_config_dict()
+    data["log"]["dir"] = str(tmp_path / "runs")
+    mutate(data)
+    return write_toml(tmp_path / "bad.toml", data)
+
+
+def _check_fails(path: Path, key: str, words: str, capsys) -> None:
+    assert main(["check", "--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert key in err and words in err, err
+    assert main(["check", "--config", str(path), "--json"]) == 2
+    out = json.loads(capsys.readouterr().out)
+    assert out["ok"] is False and out["path"] == key and out["file"] == str(path)
+
+
+def _set(section: str, key: str, value):
+    def mutate(d):
+        d.setdefault(section, {})[key] = value
+
+    return mutate
+
+
+def _robot_start(i: int, start):
+    def mutate(d):
+        d["robots"][i]["start"] = start
+
+    return mutate
+
+
+def _robot_on_robot(d):
+    x, y, _ = d["robots"][0]["start"]
+    d["robots"][3]["start"] = [x + 0.15, y, 0.0]  # radii 0.1 + 0.1 > 0.15
+
+
+CASES = {
+    # name: (mutate, key path, words in the message)
+    "listen-not-an-endpoint": (
+        _set("zenoh", "listen", ["tcp/not-an-endpoint"]),
+        "zenoh.listen[0]",
+        "expected tcp/HOST:PORT",
+    ),
+    "listen-port-out-of-range": (
+        _set("zenoh", "listen", ["tcp/127.0.0.1:70000"]),
+        "zenoh.listen[0]",
+        "0..65535",
+    ),
+    "connect-port-zero": (
+        _set("zenoh", "connect", ["tcp/127.0.0.1:7447", "udp/127.0.0.1:0"]),
+        "zenoh.connect[1]",
+        "1..65535",
+    ),
+    "connect-bad-ipv4": (
+        _set("zenoh", "connect", ["quic/300.0.0.1:7447"]),
+        "zenoh.connect[0]",
+        "not an IPv4 address",
+    ),
+    "unknown-protocol": (
+        _set("zenoh", "listen", ["http/127.0.0.1:80"]),
+        "zenoh.listen[0]",
+        "PROTOCOL one of tcp",
+    ),
+    "no-protocol": (
+        _set("zenoh", "listen", ["127.0.0.1:7447"]),
+        "zenoh.listen[0]",
+        "not a zenoh endpoint",
+    ),
+    "robots-overlap": (_robot_on_robot, "robots[3].start", "overlaps robot"),
+    "robot-on-obstacle": (
+        _robot_start(1, [5.55, 5.4, 0.0]),  # 5 cm off the bench's west edge, radius 0.1
+        "robots[1].start",
+        "overlaps obstacles[0]",
+    ),
+    "robot-inside-obstacle": (
+        _robot_start(2, [9.3, 2.8, 0.0]),
+        "robots[2].start",
+        "overlaps obstacles[1]",
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_check_and_load_name_the_key(tmp_path, capsys, name):
+    mutate, key, words = CASES[name]
+    path = _write(tmp_path, mutate)
+    with pytest.raises(ConfigError) as err:
+        load_config(path)
+    assert err.value.path == key and words in err.value.message
+    _check_fails(path, key, words, capsys)
+
+
+def test_touching_robots_are_fine(tmp_path):
+    def mutate(d):
+        x, y, _ = d["robots"][0]["start"]
+        d["robots"][3]["start"] = [x + 0.2, y, 0.0]  # radii 0.1 + 0.1: touching
+
+    load_config(_write(tmp_path, mutate))
+
+
+@pytest.mark.parametrize(
+    "endpoint",
+    [
+        "tcp/127.0.0.1:7447",
+        "tcp/localhost:7447",
+        "udp/[::1]:7447",
+        "tls/lab-hub.example.org:7447#root_ca_certificate=/etc/ca.pem",
+        "quic/10.0.0.2:7447",
+        "unixsock-stream//tmp/zenoh.sock",
+    ],
+)
+def test_good_endpoints(endpoint):
+    assert endpoint_error(endpoint, listen=False) is None
+
+
+def test_listen_on_port_zero_is_any_free_port():
+    assert endpoint_error("tcp/127.0.0.1:0", listen=True) is None
+
+
+@pytest.mark.parametrize(
+    "content", [b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe", b"\xff\xfe\x00[fleet]"]
+)
+def test_binary_file_exits_2_naming_the_file(tmp_path, capsys, content):
+    path = tmp_path / "binary.toml"
+    path.write_bytes(content)
+    assert main(["check", "--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "not a text file" in err and "Traceback" not in err
+
+
+def test_unreadable_file_exits_2_naming_the_file(tmp_path, capsys):
+    path = tmp_path / "adir.toml"
+    path.mkdir()  # a directory: unreadable as a file, also for root
+    assert main(["check", "--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "cannot read" in err
+
+
+def test_unwritable_log_dir_exits_2(tmp_path, capsys):
+    blocker = tmp_path / "afile"
+    blocker.write_text("not a directory")
+    path = _write(tmp_path, _set("log", "dir", str(blocker / "runs")))
+    load_config(path)  # the config itself is fine: only the file system says no
+    _check_fails(path, "log.dir", "is not a directory", capsys)
+    assert not (blocker / "runs").exists()
+
+
+def test_fleet_run_refuses_the_same_before_starting(tmp_path, capsys):
+    """`fleet run` gets the same checks: exit 2 naming the key, nothing started."""
+    bad_zenoh = _write(tmp_path, _set("zenoh", "listen", ["tcp/not-an-endpoint"]))
+    assert main(["run", "--config", str(bad_zenoh), "--backend", "ideal"]) == 2
+    assert "zenoh.listen[0]" in capsys.readouterr().err
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    bad_log = _write(tmp_path, _set("log", "dir", str(blocker / "runs")))
+    assert main(["run", "--config", str(bad_log), "--backend", "ideal"]) == 2
+    assert "log.dir" in capsys.readouterr().err
+    out = blocker / "sub" / "run.mcap"
+    assert main(["run", "--config", str(bad_zenoh.parent / "bad.toml"), "--out", str(out)]) == 2
+    assert "--out" in capsys.readouterr().err
