@@ -42,6 +42,8 @@ class HubLatch:
             log.warning("e-stop %s by %s", state, msg.source)
 
     def answer(self, msg: wire.EStop) -> None:
+        if msg.t <= 0.0:
+            return  # a holder that never latched anything: nothing to learn
         with self._lock:
             if self.msg is not None and wire.newest_estop([self.msg, msg]) is self.msg:
                 return
