@@ -25,6 +25,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("run",), "run", "the pybullet dry run of the whole job"),
     (("daemon",), "daemon", "the controller on the lab network"),
     (("driver",), "driver", "one robot's agent: its driver bound to the bus"),
+    (("hub",), "hub", "the fleet's zenoh hub, keeper of the latched e-stop"),
     (("status",), "remote", "query a running daemon's status"),
     (("estop",), "remote", "engage the latched emergency stop"),
     (("resume",), "remote", "release the emergency stop"),

@@ -183,6 +183,17 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
     )
 }
 
+
+def newest_estop(msgs: typing.Iterable[EStop]) -> EStop | None:
+    """The newest of several latched e-stop states (greatest ``t``, the operator's stamp; an
+    engage wins a tie, so two holders that disagree at one instant resolve to stopped)."""
+    best: EStop | None = None
+    for m in msgs:
+        if best is None or (m.t, m.engaged) > (best.t, best.engaged):
+            best = m
+    return best
+
+
 # --------------------------------------------------------------------------- codec
 
 
@@ -371,6 +382,9 @@ TOPICS: dict[str, Topic] = {
         Topic("robot_event", "fleet/{fleet}/robot/{id}/event", PlanEvent, 0.0),
         Topic("plan", "fleet/{fleet}/plan/{what}", PlanEvent, 0.0),
         Topic("estop", "fleet/{fleet}/estop", EStop, 0.0),
+        # the latched e-stop as each holder (hub, controller, every agent) knows it: a queryable
+        # per holder, so a late agent or a restarted daemon asks them all (QueryTarget.ALL)
+        Topic("estop_state", "fleet/{fleet}/estop/state/{role}/{id}", EStop, 0.0, logged=False),
         Topic("status", "fleet/{fleet}/status", FleetStatus, 0.0, logged=False),
         Topic("sim_clock", "fleet/{fleet}/sim/clock", SimTick, 20.0),
         Topic("sim_done", "fleet/{fleet}/sim/done", TickDone, 20.0),

@@ -8,8 +8,15 @@ and the robot-side safety layer that does not trust the network:
   gets vy dropped (counted);
 - **watchdog**: no valid command for ``cmd_ttl`` (or the command's own shorter ``ttl``) → stop
   the robot; it resumes on the next command;
-- **e-stop**: a latched stop on the ``estop`` key, released only by an explicit resume;
-- **link**: a driver whose link is lost stops, its token is withdrawn and an event is published.
+- **e-stop**: a latched stop on the ``estop`` key, released only by an explicit resume. The agent
+  holds the latch itself and answers queries for it (``estop/state/robot/<id>``, its latched
+  ``EStop``): a late agent asks every holder (hub, controller, other agents) and comes up
+  stopped when the newest says engaged, and ``fleet estop`` reads each agent's answer as its
+  confirmation;
+- **stamps**: a command stamped further than ``max_clock_skew`` from the agent's clock (the same
+  domain: wall time in the lab, sim time in the dry run) is dropped and counted (``skewed``);
+- **link**: a driver whose link is lost stops, its token is withdrawn and an event is published
+  (``link_lost``); when the link comes back (or a new agent starts) ``link_restored`` follows.
 
 ``AgentCore`` is the pure decision part (time passed in); ``Agent`` is the I/O shell the lab
 daemon and the lockstep dry run both drive by calling ``step(now)``.
@@ -20,6 +27,8 @@ from __future__ import annotations
 import logging
 import math
 import threading
+import time
+from collections import deque
 from dataclasses import dataclass, field
 
 from controller import wire
@@ -35,6 +44,7 @@ class AgentParams:
     robot_id: str
     fleet: str
     cmd_ttl: float = 0.3
+    max_clock_skew: float = 1.0
 
 
 @dataclass
@@ -46,6 +56,8 @@ class AgentCounters:
     estop_rejected: int = 0
     poses: int = 0
     link_lost: int = 0
+    link_restored: int = 0
+    skewed: int = 0
 
 
 @dataclass
@@ -56,6 +68,8 @@ class AgentCore:
     cmd_ttl: float
     counters: AgentCounters = field(default_factory=AgentCounters)
     estop: bool = False
+    max_clock_skew: float = math.inf
+    latched: wire.EStop | None = None  # the message that set the e-stop state, if any
     last_cmd: wire.Twist2D | None = None
     last_cmd_time: float = -math.inf
     stopped_by_watchdog: bool = True
@@ -80,7 +94,11 @@ class AgentCore:
         return wire.Twist2D(t=cmd.t, seq=cmd.seq, vx=vx, vy=vy, wz=wz, ttl=cmd.ttl)
 
     def on_command(self, now: float, cmd: wire.Twist2D) -> wire.Twist2D | None:
-        """A command arrived at ``now``: the command to forward, or None (e-stopped)."""
+        """A command arrived at ``now``: the command to forward, or None (e-stopped, or its
+        stamp too far from ``now``)."""
+        if abs(cmd.t - now) > self.max_clock_skew:
+            self.counters.skewed += 1
+            return None
         if self.estop:
             self.counters.estop_rejected += 1
             return None
@@ -91,7 +109,17 @@ class AgentCore:
         return self.last_cmd
 
     def on_estop(self, msg: wire.EStop) -> None:
+        """A live e-stop or resume: applied in arrival order."""
         self.estop = bool(msg.engaged)
+        self.latched = msg
+
+    def on_latch(self, msg: wire.EStop) -> bool:
+        """Another holder's latched state (a query's answer): applied only when newer than what
+        this agent holds (``wire.newest_estop``). Returns whether it was applied."""
+        if self.latched is not None and wire.newest_estop([self.latched, msg]) is self.latched:
+            return False
+        self.on_estop(msg)
+        return True
 
     def expired(self, now: float) -> bool:
         """Whether the watchdog must stop the robot at ``now``."""
@@ -103,6 +131,23 @@ class AgentCore:
     def must_stop(self, now: float) -> bool:
         """Whether the robot must be held stopped now (e-stop or an expired command)."""
         return self.estop or self.expired(now)
+
+
+class _Replies:
+    """Latch answers put by zenoh's thread (items with ``key`` and ``msg``), drained by the
+    agent loop (``deque`` appends and pops are atomic)."""
+
+    def __init__(self) -> None:
+        self._q: deque = deque()
+
+    def put(self, item) -> None:
+        self._q.append(item)
+
+    def drain(self) -> list:
+        out = []
+        while self._q:
+            out.append(self._q.popleft())
+        return out
 
 
 class Agent:
@@ -119,16 +164,65 @@ class Agent:
         self.bus = bus
         self.driver = driver
         self.params = params
-        self.core = AgentCore(driver.capabilities, params.cmd_ttl)
+        self.core = AgentCore(
+            driver.capabilities, params.cmd_ttl, max_clock_skew=params.max_clock_skew
+        )
         rid = params.robot_id
         self._cmds = bus.subscribe_topic("robot_cmd", waker=commands_arrived, id=rid)
         self._estops = bus.subscribe_topic("estop")
+        self._latch_replies = _Replies()
         self._pose_pub = bus.publisher("robot_pose", id=rid)
         self._event_pub = bus.publisher("robot_event", id=rid)
+        self._latch_key = bus.serve_estop("robot", rid, self.latch_state)
         self._token = bus.declare_alive("robot", rid)
         self.link_ok = True
+        self.latch_answered = False  # some other holder answered a latch query
         self._seq = 0
         self._stopped_sent = False
+
+    def latch_state(self) -> wire.EStop:
+        """This agent's latched e-stop (answered on ``estop/state/robot/<id>``; runs on zenoh's
+        thread). Never latched: released at t = 0, which any real message outranks."""
+        held = self.core.latched
+        if held is not None:
+            return held
+        return wire.EStop(t=0.0, engaged=False, source=f"robot/{self.params.robot_id}")
+
+    def request_latch(self, timeout: float = 1.0) -> None:
+        """Ask every holder for the latched e-stop without waiting; the answers are applied by
+        ``handle_inputs`` (newest wins)."""
+        self.bus.query_async(
+            self.bus.estop_wildcard(), wire.EStop, self._latch_replies, timeout=timeout
+        )
+
+    def sync_latch(self, timeout: float) -> bool:
+        """Ask every holder for the latched e-stop until one (not this agent) answers or
+        ``timeout`` s pass (a session just opened may not yet see the holders' queryables);
+        applies the newest answer. Returns whether anyone answered."""
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            got = [
+                msg
+                for k, msg in self.bus.query_replies(
+                    self.bus.estop_wildcard(), wire.EStop, timeout=max(0.05, min(0.5, left))
+                )
+                if k != self._latch_key
+            ]
+            if got:
+                self.latch_answered = True
+                self._apply_latch(wire.newest_estop(got), "latch query")
+                return True
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.05)  # polling: nobody answered yet (a retry, not a handshake stand-in)
+
+    def _apply_latch(self, msg: wire.EStop | None, how: str) -> None:
+        if msg is None:
+            return
+        before = self.core.estop
+        if self.core.on_latch(msg):
+            self._note_estop(before, msg, how)
 
     @property
     def pose_publisher(self):
@@ -141,24 +235,23 @@ class Agent:
     def commands_seen(self) -> int:
         """Commands received so far, taken in or still queued (the lockstep handshake)."""
         c = self.core.counters
-        return c.commands + c.estop_rejected + self._cmds.qsize()
+        return c.commands + c.estop_rejected + c.skewed + self._cmds.qsize()
 
     def _event(self, now: float, kind: str, **data) -> None:
         self._seq += 1
         self._event_pub.put(wire.PlanEvent(t=now, seq=self._seq, kind=kind, data=data))
 
     def handle_inputs(self, now: float) -> None:
-        """Apply e-stops and commands received since the last call, in arrival order."""
+        """Apply e-stops (live ones in arrival order, latch answers when newer) and commands
+        received since the last call."""
+        replies = [i.msg for i in self._latch_replies.drain() if i.key != self._latch_key]
+        if replies:
+            self.latch_answered = True
+            self._apply_latch(wire.newest_estop(replies), "latch query")
         for item in self._estops.drain():
             before = self.core.estop
             self.core.on_estop(item.msg)
-            if self.core.estop != before:
-                state = "engaged" if self.core.estop else "released"
-                log.warning(
-                    "robot %s: e-stop %s by %s", self.params.robot_id, state, item.msg.source
-                )
-                if self.core.estop:
-                    self.driver.stop()
+            self._note_estop(before, item.msg, "live")
         latest = None
         for item in self._cmds.drain():
             out = self.core.on_command(now, item.msg)
@@ -171,12 +264,22 @@ class Agent:
             except DriverError as exc:
                 self._lose_link(now, str(exc))
 
+    def _note_estop(self, before: bool, msg: wire.EStop, how: str) -> None:
+        if self.core.estop == before:
+            return
+        state = "engaged" if self.core.estop else "released"
+        log.warning("robot %s: e-stop %s by %s (%s)", self.params.robot_id, state, msg.source, how)
+        if self.core.estop:
+            self.driver.stop()
+            self._stopped_sent = True
+
     def enforce(self, now: float) -> None:
         """Watchdog, e-stop and link checks at ``now``."""
-        if self.link_ok:
-            health = self.driver.health()
-            if not health.ok:
-                self._lose_link(now, health.detail)
+        health = self.driver.health()
+        if self.link_ok and not health.ok:
+            self._lose_link(now, health.detail)
+        elif not self.link_ok and health.ok:
+            self._restore_link(now, "link back")
         if self.core.must_stop(now) and not self._stopped_sent:
             if self.core.expired(now) and not self.core.estop and self.core.last_cmd is not None:
                 self.core.counters.watchdog_stops += 1
@@ -212,6 +315,18 @@ class Agent:
             self._token.undeclare()
         except Exception:  # noqa: BLE001 - already gone
             pass
+
+    def _restore_link(self, now: float, detail: str) -> None:
+        self.link_ok = True
+        self.core.counters.link_restored += 1
+        log.warning("robot %s: link restored (%s)", self.params.robot_id, detail)
+        self._token = self.bus.declare_alive("robot", self.params.robot_id)
+        self._event(now, "link_restored", detail=detail)
+
+    def announce(self, now: float) -> None:
+        """A new agent for this robot is up with a working link: ``link_restored`` (clears a
+        ``link_lost`` the controller may hold from this robot's previous agent)."""
+        self._event(now, "link_restored", detail="agent started")
 
     def close(self) -> None:
         self.driver.close()

@@ -79,6 +79,10 @@ class SimDriver:
         """Make the link fail as a real one would (the robot keeps its last command)."""
         self._lost = detail
 
+    def restore_link(self) -> None:
+        """The link comes back (after ``fail_link``)."""
+        self._lost = ""
+
     def close(self) -> None:
         self.stop()
         self._connected = False

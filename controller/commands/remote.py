@@ -1,8 +1,11 @@
-"""``fleet status|estop|resume [--config F] [--json]``: talk to a running daemon over the bus.
+"""``fleet status|estop|resume [--config F] [--json]``: talk to the fleet over the bus.
 
-``status`` queries the daemon's status queryable. ``estop`` publishes a latched emergency stop
-(every agent stops its robot and refuses commands until ``resume``); both then query the status
-to confirm the daemon saw it. Exit 1 when no daemon answers.
+``status`` queries the daemon's status queryable (exit 1 when no daemon answers). ``estop``
+publishes a latched emergency stop straight to the agents (through the hub, or the daemon's
+session when no hub runs): every agent stops its robot and refuses commands until ``resume``.
+Both then ask every holder of the latch (``estop/state/<role>/<id>``) until each known agent
+(the config's robots and every robot liveliness token) answers with the new state; exit 0 when
+all did, 1 otherwise, naming those that did not. The daemon's answer is reported, not needed.
 """
 
 from __future__ import annotations
@@ -10,7 +13,6 @@ from __future__ import annotations
 import getpass
 import socket
 import sys
-import time
 
 from controller.commands import add_config_argument
 
@@ -52,44 +54,41 @@ def run(args) -> int:
         )
     except BusError as exc:
         if args.json:
-            emit_json({"ok": False, "error": f"no daemon answered: {exc}"})
+            extra = {}
+            if word in ("estop", "resume"):
+                extra = {
+                    "command": word,
+                    "engaged": word == "estop",
+                    "confirmed": False,
+                    "phase": None,
+                    "agents_missing": list(cfg.robot_ids),
+                }
+            emit_json({"ok": False, "error": f"no daemon answered: {exc}", **extra})
         print(
             f"fleet {word}: no daemon of fleet {cfg.fleet.name!r} answered: {exc}", file=sys.stderr
         )
         return 1
     with bus:
         if word in ("estop", "resume"):
-            engaged = word == "estop"
-            msg = wire.EStop(
-                t=time.time(), engaged=engaged, source=source, reason=getattr(args, "reason", "")
-            )
-            pub = bus.publisher("estop")
-            deadline = time.monotonic() + args.timeout
-            while not pub.matching() and time.monotonic() < deadline:
-                time.sleep(0.01)  # polling for the subscribers' declarations (a handshake)
-            pub.put(msg)
-            # confirm: the daemon's status shows the new state
-            status = None
-            while time.monotonic() < deadline:
-                replies = bus.query(
-                    "status", wire.FleetStatus, timeout=max(0.1, deadline - time.monotonic())
-                )
-                if replies and replies[0].estop == engaged:
-                    status = replies[0]
-                    break
-                time.sleep(0.05)
-            result = {
-                "command": word,
-                "engaged": engaged,
-                "confirmed": status is not None,
-                "phase": status.phase if status else None,
-            }
+            from controller.runtime.estop import put_estop
+
+            result = put_estop(bus, cfg, word, source, getattr(args, "reason", ""), args.timeout)
+            missing = result["agents_missing"]
             if args.json:
                 emit_json(result)
+            elif missing:
+                print(
+                    f"fleet {word}: sent; NOT confirmed by {', '.join(missing)} (confirmed by "
+                    f"{', '.join(result['agents_confirmed']) or 'no agent'})"
+                )
             else:
-                state = "confirmed by the daemon" if status else "NOT confirmed (no daemon?)"
-                print(f"fleet {word}: sent, {state}")
-            return 0 if status is not None else 1
+                print(
+                    f"fleet {word}: confirmed by every agent "
+                    f"({', '.join(result['agents_confirmed'])}) in "
+                    f"{result['elapsed_s'] * 1e3:.0f} ms; daemon "
+                    f"{'too' if result['daemon_confirmed'] else 'not seen'}"
+                )
+            return 0 if not missing else 1
         replies = bus.query("status", wire.FleetStatus, timeout=args.timeout)
         if not replies:
             if args.json:

@@ -482,13 +482,16 @@ class Bus:
         self._handles.append(sub)
 
     # -- queries
-    def serve(self, topic: str, responder: Callable[[], wire.Message]) -> None:
-        """Answer queries on a topic's key with ``responder()`` (e.g. the fleet status)."""
-        k = self.key(topic)
+    def serve(self, topic: str, responder: Callable[[], wire.Message | None], **parts: str) -> None:
+        """Answer queries on a topic's key (``parts`` fill its placeholders) with ``responder()``
+        (e.g. the fleet status, a holder's latched e-stop); a None answer sends no reply."""
+        k = self.key(topic, **parts)
 
         def cb(query: zenoh.Query) -> None:
             try:
-                query.reply(k, wire.encode(responder()))
+                msg = responder()
+                if msg is not None:
+                    query.reply(k, wire.encode(msg))
             except Exception:  # noqa: BLE001
                 log.exception("queryable %s failed", k)
 
@@ -497,12 +500,62 @@ class Bus:
     def query(self, topic: str, msg_type: type[wire.Message], timeout: float) -> list[wire.Message]:
         """Ask every replier on a topic's key; bad replies are counted and dropped."""
         k = self.key(topic)
-        out: list[wire.Message] = []
-        for reply in self.session.get(k, target=zenoh.QueryTarget.ALL, timeout=timeout):
+        return [msg for _, msg in self.query_replies(k, msg_type, timeout)]
+
+    def query_replies(
+        self, key_expr: str, msg_type: type[wire.Message], timeout: float
+    ) -> Iterator[tuple[str, wire.Message]]:
+        """Ask every replier on ``key_expr`` (QueryTarget.ALL): (replier's key, message) as the
+        replies come, until all answered or ``timeout``. The caller may stop early (a hung
+        replier then costs nothing)."""
+        replies = self.session.get(key_expr, target=zenoh.QueryTarget.ALL, timeout=timeout)
+        for reply in replies:
             if reply.ok is None:
                 continue
+            k = str(reply.ok.key_expr)
             try:
-                out.append(wire.decode(msg_type, reply.ok.payload.to_bytes()))
+                yield k, wire.decode(msg_type, reply.ok.payload.to_bytes())
             except wire.WireError as exc:
                 self.stats.bad(k, exc)
-        return out
+
+    def query_async(
+        self, key_expr: str, msg_type: type[wire.Message], inbox: Inbox, timeout: float
+    ) -> None:
+        """Ask every replier on ``key_expr`` without waiting: decoded replies go into ``inbox``
+        (as ``Received`` with the replier's key) on zenoh's thread."""
+        stats = self.stats
+
+        def cb(reply: zenoh.Reply) -> None:
+            ok = reply.ok
+            if ok is None:
+                return
+            k = str(ok.key_expr)
+            try:
+                msg = wire.decode(msg_type, ok.payload.to_bytes())
+            except Exception as exc:  # noqa: BLE001 - a callback must never raise
+                stats.bad(k, exc)
+                return
+            inbox.put(Received(time.time(), k, msg))
+
+        self.session.get(key_expr, cb, target=zenoh.QueryTarget.ALL, timeout=timeout)
+
+    # -- the latched e-stop
+    def serve_estop(self, role: str, ident: str, responder: Callable[[], wire.EStop]) -> str:
+        """Answer e-stop latch queries as holder ``role``/``ident``; returns the holder's key."""
+        self.serve("estop_state", responder, role=role, id=ident)
+        return self.key("estop_state", role=role, id=ident)
+
+    def estop_wildcard(self) -> str:
+        """The key expression of every holder's latched e-stop."""
+        return wire.TOPICS["estop_state"].wildcard(self.fleet)
+
+    def alive_ids(self, role: str, timeout: float = 1.0) -> list[str]:
+        """The idents of the ``role`` liveliness tokens on the bus now."""
+        prefix = wire.alive_key(self.fleet, role, "")
+        out = []
+        for reply in self.session.liveliness().get(
+            wire.alive_key(self.fleet, role, "*"), timeout=timeout
+        ):
+            if reply.ok is not None:
+                out.append(str(reply.ok.key_expr)[len(prefix) :])
+        return sorted(set(out))

@@ -35,6 +35,7 @@ class MemoryBus:
         self.inboxes: dict[str, Inbox] = {}
         self.alive_cb: dict[str, Any] = {}
         self.served: dict[str, Any] = {}
+        self.queries: list[tuple[str, Inbox]] = []
         self.bad = 0
 
     def key(self, topic: str, **parts: str) -> str:
@@ -54,8 +55,19 @@ class MemoryBus:
     def watch_alive(self, role: str, callback) -> None:
         self.alive_cb[role] = callback
 
-    def serve(self, topic: str, responder) -> None:
-        self.served[topic] = responder
+    def serve(self, topic: str, responder, **parts: str) -> None:
+        self.served[self.key(topic, **parts) if parts else topic] = responder
+
+    def serve_estop(self, role: str, ident: str, responder) -> str:
+        self.serve("estop_state", responder, role=role, id=ident)
+        return self.key("estop_state", role=role, id=ident)
+
+    def estop_wildcard(self) -> str:
+        return wire.TOPICS["estop_state"].wildcard(self.fleet)
+
+    def query_async(self, key_expr: str, msg_type, inbox, timeout: float) -> None:
+        """Nothing answers on the in-memory bus (a test puts replies in ``inbox`` itself)."""
+        self.queries.append((key_expr, inbox))
 
     def declare_alive(self, role: str, ident: str) -> None:
         pass

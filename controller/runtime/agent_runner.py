@@ -16,6 +16,9 @@ from sim_backend.hub import SimHub
 
 log = logging.getLogger(__name__)
 
+LATCH_WAIT = 2.0  # s an agent waits at start for a holder of the latched e-stop to answer
+LATCH_EVERY = 2.0  # s between the agent's later latch queries
+
 
 def _open_until(stop: threading.Event, cfg: FleetConfig, who: str) -> Bus | None:
     """A robot-side session to the daemon's endpoints as robot ``who``'s own zenoh identity,
@@ -88,12 +91,28 @@ def run_agent(
         if bus is None:
             return 0, ""
         with bus:
-            agent = Agent(bus, driver, AgentParams(robot.id, cfg.fleet.name, cfg.fleet.cmd_ttl))
+            params = AgentParams(
+                robot.id, cfg.fleet.name, cfg.fleet.cmd_ttl, cfg.fleet.max_clock_skew
+            )
+            agent = Agent(bus, driver, params)
+            # the latched e-stop first: a robot started after an e-stop comes up stopped
+            if not agent.sync_latch(LATCH_WAIT):
+                log.warning("robot %s: nobody answered the e-stop latch query", robot.id)
+            log.info(
+                "robot %s: agent up (%s driver), e-stop %s",
+                robot.id,
+                robot.driver,
+                "ENGAGED" if agent.core.estop else "off",
+            )
+            agent.announce(time.time())
             rk = Ratekeeper(max(cfg.fleet.rate_hz, 20.0))
-            log.info("robot %s: agent up (%s driver)", robot.id, robot.driver)
+            next_latch = time.monotonic() + LATCH_EVERY
             while not stop.is_set():
                 rk.keep_time()
                 now = time.time()
+                if time.monotonic() >= next_latch:  # re-read: an e-stop missed while cut off
+                    agent.request_latch()
+                    next_latch = time.monotonic() + LATCH_EVERY
                 if hub is not None:
                     hub.advance_to(now - wall0)
                 agent.step(now)

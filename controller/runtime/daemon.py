@@ -1,10 +1,15 @@
 """``fleet daemon``: the controller on the lab network, ticking on the wall clock.
 
-Listens on the config's zenoh endpoints (robot agents and tools connect to it), ticks at
-``fleet.rate_hz`` with a drift-free rate keeper, runs the mission, serves ``fleet status`` and
-obeys ``fleet estop``/``resume``, and records the bus to MCAP. Returns when ``stop`` is set,
-after ``duration`` seconds, or when the mission ends (robots then stop by their own watchdogs
-after one last zero command for everyone).
+Listens on the config's zenoh endpoints (robot agents and tools connect to it) or, when a
+``fleet hub`` already listens there, joins the hub as a client; ticks at ``fleet.rate_hz`` with a
+drift-free rate keeper, runs the mission, serves ``fleet status`` and obeys ``fleet estop``/
+``resume``, and records the bus to MCAP. Returns when ``stop`` is set, after ``duration``
+seconds, or when the mission ends (robots then stop by their own watchdogs after one last zero
+command for everyone).
+
+The e-stop latch: at start, and after the loop was held up (a hung process, SIGSTOP), the
+controller asks every holder (hub, agents) for the latched e-stop and commands zero until one
+answers, so a restarted or resumed daemon never drives robots through an e-stop it missed.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from pathlib import Path
 
 from controller import wire
 from controller.config import FleetConfig
-from controller.io.bus import Bus
+from controller.io.bus import Bus, BusError
 from controller.io.ratekeeper import Ratekeeper
 from controller.mission.types import Mission
 from controller.runtime.node import ControllerNode
@@ -25,6 +30,54 @@ from controller.runtime.recording import open_recorder
 from controller.runtime.wiring import make_estimator
 
 log = logging.getLogger(__name__)
+
+LATCH_WAIT_AT_START = 2.0  # s: nobody answers the latch query at start → go on released
+LATCH_RETRY = 0.5  # s between latch queries while one is pending
+# s: a loop held up this long (a hung process) re-reads the latch before commanding again
+GAP = 1.0
+
+
+def open_daemon_bus(cfg: FleetConfig) -> tuple[Bus, str]:
+    """The daemon's session: listening on ``zenoh.listen`` as before, or, when the endpoints
+    are taken (a ``fleet hub`` listens there), a client of the hub. Returns (bus, how)."""
+    try:
+        return Bus(cfg.zenoh, cfg.fleet.name), "listening"
+    except BusError as listen_error:
+        try:
+            bus = Bus(
+                cfg.zenoh,
+                cfg.fleet.name,
+                mode="client",
+                listen=[],
+                connect=list(cfg.zenoh.listen),
+                lease_s=cfg.fleet.liveliness_lease,
+            )
+        except BusError:
+            raise listen_error from None
+        return bus, "joined the hub"
+
+
+class LatchWatch:
+    """When the controller must (re-)read the latched e-stop, and for how long it waits."""
+
+    def __init__(self, node: ControllerNode) -> None:
+        self.node = node
+        self.give_up_at: float | None = None  # None: wait as long as it takes
+        self.next_query = 0.0
+
+    def start(self, mono: float, give_up_after: float | None) -> None:
+        self.give_up_at = None if give_up_after is None else mono + give_up_after
+        self.node.expect_latch(timeout=LATCH_RETRY)
+        self.next_query = mono + LATCH_RETRY
+
+    def poll(self, mono: float) -> None:
+        if not self.node.latch_pending:
+            return
+        if self.give_up_at is not None and mono >= self.give_up_at:
+            self.node.release_latch()
+        elif mono >= self.next_query:
+            self.node.expect_latch(timeout=LATCH_RETRY)
+            self.next_query = mono + LATCH_RETRY
 
 
 def run_daemon(
@@ -41,7 +94,8 @@ def run_daemon(
     recorder = open_recorder(cfg, out, f"daemon/{mission_kind}", viz=viz, who="fleet daemon")
     status = 0
     try:
-        with Bus(cfg.zenoh, cfg.fleet.name) as bus:
+        bus, how = open_daemon_bus(cfg)
+        with bus:
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
             node = ControllerNode(
                 cfg,
@@ -51,16 +105,25 @@ def run_daemon(
                 extra_drops=recorder.drops,
                 clock=time.monotonic,
             )
+            latch = LatchWatch(node)
+            latch.start(time.monotonic(), LATCH_WAIT_AT_START)
             rk = Ratekeeper(cfg.fleet.rate_hz)
             print(
-                f"fleet daemon: fleet {cfg.fleet.name!r} on {list(cfg.zenoh.listen)}, "
+                f"fleet daemon: fleet {cfg.fleet.name!r} on {list(cfg.zenoh.listen)} ({how}), "
                 f"{cfg.fleet.rate_hz} Hz, log {recorder.location}",
                 file=sys.stderr,
             )
             t0 = time.time()
             lag_reported = 0
+            last = time.monotonic()
             while not stop.is_set():
                 rk.keep_time()
+                mono = time.monotonic()
+                if mono - last > GAP:
+                    log.warning("the loop was held up %.1f s: re-reading the e-stop", mono - last)
+                    latch.start(mono, None)
+                last = mono
+                latch.poll(mono)
                 now = time.time()  # wall clock: pose stamps come from other computers
                 result = node.tick(now)
                 if rk.lagged > lag_reported:

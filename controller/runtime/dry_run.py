@@ -336,7 +336,7 @@ class DryRun:
             Agent(
                 robot_bus,
                 drv,
-                AgentParams(r.id, cfg.fleet.name, cfg.fleet.cmd_ttl),
+                AgentParams(r.id, cfg.fleet.name, cfg.fleet.cmd_ttl, cfg.fleet.max_clock_skew),
                 commands_arrived,
             )
             for r, drv in zip(cfg.robots, drivers, strict=True)

@@ -2,7 +2,9 @@
 
 Fixed, named pipeline per tick (``tick``):
 
-1. **sample** - drain the inboxes: e-stops, robot events, pose measurements into the filters;
+1. **sample** - drain the inboxes: e-stops (live, and the latch's answers), robot events
+   (``link_lost`` / ``link_restored``), pose measurements into the filters (a stamp further than
+   ``fleet.max_clock_skew`` from the tick time, the same clock domain, is dropped and counted);
 2. **estimate** - every filter predicted to the tick time (``FleetView``);
 3. **plan** - the mission's plan stage (pure): nominal velocities, phase, events (``Intent``);
 4. **safety** - the mission's safety stage (pure): CBF filter and tracking law, body-frame
@@ -27,6 +29,7 @@ import numpy as np
 
 from controller import wire
 from controller.config import FleetConfig
+from controller.io.bus import Inbox
 from controller.mission.types import FleetView, Mission, MissionOutput
 
 log = logging.getLogger(__name__)
@@ -54,6 +57,8 @@ class NodeCounters:
     out_of_order: int = 0
     commands: int = 0
     link_events: int = 0
+    link_restored: int = 0
+    skewed: int = 0  # poses stamped further than fleet.max_clock_skew from the tick time
 
 
 class ControllerNode:
@@ -83,6 +88,9 @@ class ControllerNode:
         self.counters = NodeCounters()
         self.phase = "init"
         self.estop = False
+        self.estop_msg: wire.EStop | None = None  # the message that set the e-stop state
+        # True from ``expect_latch`` until a holder answers: every command is zero meanwhile
+        self.latch_pending = False
         self.present = np.zeros(len(self.ids), dtype=bool)
         self.link_lost = np.zeros(len(self.ids), dtype=bool)
         self.arrested = False
@@ -94,6 +102,8 @@ class ControllerNode:
         self._object = bus.subscribe_topic("object_pose", waker=self.inputs_arrived)
         self._estops = bus.subscribe_topic("estop")
         self._robot_events = bus.subscribe_topic("robot_event")
+        self._latch_replies = Inbox()
+        self._latch_key = bus.serve_estop("controller", "main", self.latch_state)
         lossless = lossless_commands
         self._cmd_pub = {
             r: bus.publisher("robot_cmd", command=True, lossless=lossless, id=r) for r in self.ids
@@ -119,33 +129,99 @@ class ControllerNode:
             )
         self.present[i] = alive
 
-    def sample(self) -> None:
-        """Drain the inboxes into the filters and the latched e-stop."""
+    # -- the latched e-stop
+    def latch_state(self) -> wire.EStop:
+        """The controller's latched e-stop, answered on ``estop/state/controller/main`` (zenoh's
+        thread). Never latched: released at t = 0, which any real message outranks."""
+        held = self.estop_msg
+        if held is not None:
+            return held
+        return wire.EStop(t=0.0, engaged=False, source="controller/main")
+
+    def expect_latch(self, timeout: float = 1.0) -> None:
+        """Ask every holder of the latched e-stop (hub, agents) and command zero until one
+        answers (a start, or a resume after the loop was hung): the controller must not command
+        robots on a state it may have missed. ``release_latch`` ends the wait unanswered."""
+        self.latch_pending = True
+        self.bus.query_async(
+            self.bus.estop_wildcard(), wire.EStop, self._latch_replies, timeout=timeout
+        )
+
+    def release_latch(self) -> None:
+        """Nobody answered the latch query (no hub, no agent): go on with what this node holds."""
+        if self.latch_pending:
+            log.warning("no holder answered the e-stop latch query; e-stop %s", self.estop)
+        self.latch_pending = False
+
+    def _set_estop(self, msg: wire.EStop, how: str) -> None:
+        if self.estop != msg.engaged:
+            state = "engaged" if msg.engaged else "released"
+            log.warning("e-stop %s by %s (%s)", state, msg.source, how)
+        self.estop = bool(msg.engaged)
+        self.estop_msg = msg
+
+    def _sample_estop(self) -> None:
+        replies = [i.msg for i in self._latch_replies.drain() if i.key != self._latch_key]
+        if replies:
+            self.latch_pending = False
+            newest = wire.newest_estop(replies)
+            held = self.estop_msg
+            if newest is not None and (
+                held is None or wire.newest_estop([held, newest]) is not held
+            ):
+                self._set_estop(newest, "latch query")
         for item in self._estops.drain():
-            if self.estop != item.msg.engaged:
-                log.warning(
-                    "e-stop %s by %s",
-                    "engaged" if item.msg.engaged else "released",
-                    item.msg.source,
-                )
-            self.estop = item.msg.engaged
+            self._set_estop(item.msg, "live")
+
+    def _sample_events(self) -> None:
         for item in self._robot_events.drain():
             rid = self._robot_id(item.key)
-            if item.msg.kind == "link_lost" and rid in self.index:
+            if rid not in self.index:
+                continue
+            if item.msg.kind == "link_lost":
                 self.link_lost[self.index[rid]] = True
                 self.counters.link_events += 1
                 log.error("robot %s reports a lost link: %s", rid, item.msg.data.get("detail"))
+            elif item.msg.kind == "link_restored":
+                if self.link_lost[self.index[rid]]:
+                    log.warning("robot %s: link restored (%s)", rid, item.msg.data.get("detail"))
+                self.link_lost[self.index[rid]] = False
+                self.counters.link_restored += 1
+
+    def _skewed(self, t: float, now: float | None) -> bool:
+        if now is None or abs(t - now) <= self.cfg.fleet.max_clock_skew:
+            return False
+        self.counters.skewed += 1
+        if self.counters.skewed == 1 or self.counters.skewed % 100 == 0:
+            log.warning(
+                "dropped a pose stamped %.3f s at tick %.3f s (%d so far)",
+                t,
+                now,
+                self.counters.skewed,
+            )
+        return True
+
+    def sample(self, now: float | None = None) -> None:
+        """Drain the inboxes into the filters and the latched e-stop. With ``now`` (the tick
+        time: the same clock domain as the stamps) a pose stamped further than
+        ``fleet.max_clock_skew`` from it is dropped and counted (``skewed``)."""
+        self._sample_estop()
+        self._sample_events()
         for item in self._poses.drain():
             rid = self._robot_id(item.key)
             if rid not in self.index:
                 continue
             m = item.msg
+            if self._skewed(m.t, now):
+                continue
             res = self.est.measure_robot(rid, m.t, m.x, m.y, m.theta)
             self.counters.poses += 1
             self.counters.rejected += res == "rejected"
             self.counters.out_of_order += res == "out_of_order"
         for item in self._object.drain():
             m = item.msg
+            if self._skewed(m.t, now):
+                continue
             self.est.measure_object(m.t, m.x, m.y, m.theta)
             self.counters.object_poses += 1
 
@@ -187,7 +263,7 @@ class ControllerNode:
     def tick(self, now: float, step: int | None = None) -> MissionOutput:
         """sample → estimate → plan → safety → publish, at time ``now``."""
         marks = [self._now()]
-        self.sample()
+        self.sample(now)
         self.last_tick = now
         view = self.view(now)
         marks.append(self._now())
@@ -223,7 +299,8 @@ class ControllerNode:
         }
 
     def _publish(self, now: float, view: FleetView, out: MissionOutput, step: int | None) -> None:
-        cmds = np.zeros_like(out.commands) if self.estop else out.commands
+        stopped = self.estop or self.latch_pending
+        cmds = np.zeros_like(out.commands) if stopped else out.commands
         if out.arrest and not self.arrested:
             self.arrested = True
             self.est.set_object_arrested(True)

@@ -155,3 +155,45 @@ def test_core_expiry_honours_shorter_command_ttl():
     core.on_command(1.0, wire.Twist2D(t=1.0, vx=0.1, ttl=0.1))
     assert not core.expired(1.09)
     assert core.expired(1.11)
+
+
+def test_a_command_stamped_far_from_the_agents_clock_is_dropped_and_counted(rig):
+    w, hub, agent = rig["world"], rig["hub"], rig["agent"]
+    deliver(rig["cmd"], agent, wire.Twist2D(t=100000.0, seq=1, vx=0.2))
+    agent.step(0.0)
+    hub.advance_to(TICK)
+    assert speed(w) == 0.0 and agent.counters.skewed == 1 and agent.commands_seen() == 1
+    deliver(rig["cmd"], agent, wire.Twist2D(t=TICK, seq=2, vx=0.2))
+    agent.step(TICK)
+    hub.advance_to(2 * TICK)
+    assert speed(w) == pytest.approx(0.2)
+
+
+def test_a_late_agent_reads_the_latch_from_another_holder_and_comes_up_stopped(rig):
+    agent, hub = rig["agent"], rig["hub"]
+    deliver(rig["estop"], agent, wire.EStop(t=5.0, engaged=True, source="op"), "_estops")
+    agent.step(0.0)
+    assert agent.latch_state().engaged
+    r2 = Capabilities("omni", True, 0.5, 2.0, 0.15)
+    drv = SimDriver(hub, "r2", r2)
+    drv.connect(1.0)
+    late = Agent(rig["ctl"], drv, AgentParams("r2", "lab"))
+    assert late.sync_latch(5.0) and late.core.estop and late.latch_answered
+    deliver(rig["ctl"].publisher("robot_cmd", id="r2"), late, wire.Twist2D(t=0.0, vx=0.2))
+    late.step(0.0)
+    assert late.counters.estop_rejected == 1 and late.counters.commands == 0
+
+
+def test_link_restored_follows_link_lost_when_the_driver_link_comes_back(rig):
+    agent, drv, ctl = rig["agent"], rig["drv"], rig["ctl"]
+    events = ctl.subscribe_topic("robot_event", id="r1")
+    wait_for(agent._event_pub.matching, 5, "the event subscription")
+    drv.fail_link()
+    agent.step(0.0)
+    assert not agent.link_ok
+    drv.restore_link()
+    agent.step(TICK)
+    assert agent.link_ok and agent.counters.link_restored == 1
+    got: list[str] = []
+    wait_for(lambda: got.extend(i.msg.kind for i in events.drain()) or len(got) >= 2, 5, "events")
+    assert got == ["link_lost", "link_restored"]

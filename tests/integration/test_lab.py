@@ -43,6 +43,8 @@ def spawn(log_path, *args: str) -> subprocess.Popen:
 @pytest.fixture
 def lab_config(tmp_path, port):
     cfg = base_config_dict()
+    # one robot: `fleet estop` is confirmed only when every robot of the config confirms
+    cfg["robots"] = cfg["robots"][:1]
     cfg["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
     cfg["sim"]["backend"] = "ideal"
     cfg["log"] = {"dir": str(tmp_path / "runs")}

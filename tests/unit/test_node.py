@@ -102,3 +102,76 @@ def test_status_reports_every_drop_counter(rig):
     counters = node.status().counters
     assert counters["bad_payloads"] == 3 and counters["recorder_dropped"] == 2
     assert "inbox_overflow" in counters
+
+
+def test_a_pose_stamped_far_in_the_future_is_dropped_and_counted_not_freezing_the_estimate(rig):
+    cfg, bus, mission, node = rig
+    r1 = cfg.robot_ids[0]
+    x0, y0, th = cfg.robot(r1).start
+    bus.deliver("robot_pose", wire.PoseMeasurement(t=1.0, x=x0, y=y0, theta=th), id=r1)
+    node.tick(1.0)
+    bad = wire.PoseMeasurement(t=100001.0, x=x0, y=y0, theta=th)
+    bus.deliver("robot_pose", bad, id=r1)
+    node.tick(1.05)
+    assert node.counters.skewed == 1
+    assert node.status().counters["skewed"] == 1  # in fleet status
+    # later real poses still move the estimate (nothing is out of order)
+    for k in range(1, 21):
+        t = 1.05 + 0.05 * k
+        m = wire.PoseMeasurement(t=t, x=x0 + 0.01 * k, y=y0, theta=th)
+        bus.deliver("robot_pose", m, id=r1)
+        node.tick(t)
+    assert node.counters.out_of_order == 0
+    i = cfg.robot_ids.index(r1)
+    view = mission.views[-1]
+    assert view.poses[i, 0] == pytest.approx(x0 + 0.2, abs=0.03)
+    assert not view.stale[i]
+    # and a pose from the far past is dropped too
+    bus.deliver("robot_pose", wire.PoseMeasurement(t=0.0, x=x0, y=y0, theta=th), id=r1)
+    node.tick(2.1)
+    assert node.counters.skewed == 2
+
+
+def test_link_restored_clears_link_lost(rig):
+    cfg, bus, mission, node = rig
+    r1 = cfg.robot_ids[0]
+    bus.deliver("robot_event", wire.PlanEvent(t=0.0, kind="link_lost"), id=r1)
+    node.tick(1.0)
+    assert not mission.views[-1].present[0]
+    bus.deliver("robot_event", wire.PlanEvent(t=1.0, kind="link_restored"), id=r1)
+    node.tick(1.05)
+    assert mission.views[-1].present[0]
+    assert [r["link_lost"] for r in node.status().robots if r["id"] == r1] == [False]
+    assert node.counters.link_restored == 1
+
+
+def test_commands_are_zero_while_the_latch_is_unread_and_a_newer_latch_engages(rig):
+    from controller.io.bus import Received
+
+    cfg, bus, _, node = rig
+    node.expect_latch()
+    ((key, replies),) = bus.queries
+    assert key == "fleet/lab/estop/state/*/*"
+    node.tick(1.0)
+    assert all(bus.last("robot_cmd", id=r.id).vx == 0.0 for r in cfg.robots)
+    # the controller's own (stale) answer does not count; an agent's newer engaged one does
+    own = node.latch_state()
+    replies.put(Received(0.0, "fleet/lab/estop/state/controller/main", own))
+    node.tick(1.05)
+    assert node.latch_pending
+    engaged = wire.EStop(t=5.0, engaged=True, source="op")
+    replies.put(Received(0.0, "fleet/lab/estop/state/robot/r1", engaged))
+    node.tick(1.1)
+    assert not node.latch_pending and node.estop and node.status().estop
+    assert all(bus.last("robot_cmd", id=r.id).vx == 0.0 for r in cfg.robots)
+    assert node.latch_state() == engaged
+    # an older released answer does not lift it; only a (newer) resume does
+    node.expect_latch()
+    old = wire.EStop(t=1.0, engaged=False, source="op")
+    bus.queries[-1][1].put(Received(0.0, "fleet/lab/estop/state/hub/main", old))
+    node.tick(1.15)
+    assert node.estop
+    bus.deliver("estop", wire.EStop(t=6.0, engaged=False, source="op"))
+    node.tick(1.2)
+    assert not node.estop
+    assert all(bus.last("robot_cmd", id=r.id).vx == 0.2 for r in cfg.robots)

@@ -1,0 +1,76 @@
+"""Time from ``fleet estop`` to every agent engaged, with the daemon alive, hung (SIGSTOP) and
+dead: a hub, a daemon (mission hold) and three sim agents on 127.0.0.1 (ideal backend).
+
+Prints one JSON object: per case the median and max over N tries of ``elapsed_s`` (from the
+tool's publication to the last agent's confirmation, as the tool reports it) and of the whole
+command's wall time (process start to exit, Python start-up included).
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from tests.support.config import free_port  # noqa: E402
+from tests.support.lab import fleet_json, lab_config, spawn, stop_all  # noqa: E402
+
+N = int(sys.argv[1]) if len(sys.argv) > 1 else 10
+
+
+def tries(cfg: Path) -> dict:
+    el, wall = [], []
+    for _ in range(N):
+        t0 = time.monotonic()
+        code, out = fleet_json("estop", "--config", str(cfg), "--timeout", "5")
+        wall.append(time.monotonic() - t0)
+        assert code == 0, out
+        el.append(out["elapsed_s"])
+        code, out = fleet_json("resume", "--config", str(cfg), "--timeout", "5")
+        assert code == 0, out
+    return {
+        "elapsed_median_ms": round(statistics.median(el) * 1e3, 1),
+        "elapsed_max_ms": round(max(el) * 1e3, 1),
+        "command_wall_median_s": round(statistics.median(wall), 3),
+        "tries": N,
+    }
+
+
+def main() -> int:
+    tmp = Path(tempfile.mkdtemp(prefix="estop-bench-"))
+    cfg = lab_config(tmp, free_port(), robots=3)
+    c = str(cfg)
+    procs = [spawn(tmp / "hub.txt", "hub", "--config", c)]
+    out: dict = {}
+    try:
+        time.sleep(1.0)  # bench only: the hub's start-up (the tests wait on a handshake)
+        daemon = spawn(tmp / "d.txt", "daemon", "--config", c, "--mission", "hold", "--out",
+                       str(tmp / "d.mcap"))  # fmt: skip
+        procs.append(daemon)
+        procs += [spawn(tmp / f"{r}.txt", "driver", r, "--config", c) for r in ("r1", "r2", "r3")]
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            code, st = fleet_json("status", "--config", c, "--timeout", "1")
+            if code == 0 and all(r["present"] for r in st["robots"]):
+                break
+        out["alive"] = tries(cfg)
+        daemon.send_signal(signal.SIGSTOP)
+        out["hung"] = tries(cfg)
+        daemon.send_signal(signal.SIGCONT)
+        daemon.kill()
+        daemon.wait()
+        out["dead"] = tries(cfg)
+    finally:
+        stop_all(procs)
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

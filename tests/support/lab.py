@@ -1,0 +1,93 @@
+"""The lab as separate processes for the integration tests: ``fleet`` subprocesses writing to
+log files, stopped (SIGCONT first, SIGTERM, then SIGKILL) in a ``finally``; lab configs on a free
+loopback port; a test-side zenoh session to watch the e-stop latch."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from controller import wire
+from tests.support.config import ROOT, base_config_dict, write_toml
+
+
+def fleet(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    """Run one ``fleet`` command to its end."""
+    return subprocess.run(
+        [sys.executable, "-m", "controller.cli", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+    )
+
+
+def fleet_json(*args: str, timeout: float = 60) -> tuple[int, dict[str, Any]]:
+    """Run a ``fleet ... --json`` command: (exit status, its JSON object)."""
+    proc = fleet(*args, "--json", timeout=timeout)
+    try:
+        out = json.loads(proc.stdout)
+    except json.JSONDecodeError as exc:
+        raise AssertionError(f"no JSON from fleet {args}: {proc.stdout!r} {proc.stderr}") from exc
+    return proc.returncode, out
+
+
+def spawn(log_path: Path, *args: str) -> subprocess.Popen:
+    """A fleet process writing to a file, so a chatty child never blocks on a full pipe."""
+    with open(log_path, "w") as out:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "controller.cli", *args],
+            cwd=ROOT,
+            env=dict(os.environ, PYTHONPATH=str(ROOT)),
+            stdout=out,
+            stderr=out,
+        )
+    proc.log_path = log_path  # type: ignore[attr-defined]
+    return proc
+
+
+def stop_all(procs: list[subprocess.Popen]) -> list[int]:
+    """Stop every process (a SIGSTOPped one is continued first); kill what does not end."""
+    codes = []
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGCONT)
+            p.send_signal(signal.SIGTERM)
+    for p in procs:
+        try:
+            codes.append(p.wait(timeout=20))
+        except subprocess.TimeoutExpired:
+            p.kill()  # never leave a process behind
+            codes.append(p.wait())
+    return codes
+
+
+def tail(p: subprocess.Popen, n: int = 2000) -> str:
+    return Path(p.log_path).read_text()[-n:]  # type: ignore[attr-defined]
+
+
+def lab_config(tmp_path: Path, port: int, robots: int = 2, **fleet_keys: Any) -> Path:
+    """The shipped config cut to ``robots`` robots, on the ideal backend, zenoh on ``port``."""
+    cfg = base_config_dict()
+    cfg["robots"] = cfg["robots"][:robots]
+    cfg["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
+    cfg["sim"]["backend"] = "ideal"
+    cfg["log"] = {"dir": str(tmp_path / "runs")}
+    cfg["fleet"].update(fleet_keys)
+    return write_toml(tmp_path / "lab.toml", cfg)
+
+
+def latch_states(bus, timeout: float = 1.0) -> dict[str, wire.EStop]:
+    """Every holder's latched e-stop, by ``role/id``."""
+    out = {}
+    for key, msg in bus.query_replies(bus.estop_wildcard(), wire.EStop, timeout):
+        parsed = wire.parse_key(key, bus.fleet)
+        if parsed is not None:
+            out[f"{parsed.parts['role']}/{parsed.id}"] = msg
+    return out
