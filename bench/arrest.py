@@ -23,6 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from controller.mission.factory import build_mission  # noqa: E402
 from controller.runtime.dry_run import DryRun  # noqa: E402
 from tests.support.arrest_scenarios import (  # noqa: E402
+    OPEN,
+    OPEN_STARTS,
     RECT,
     SCENARIOS,
     ArrestScenario,
@@ -71,11 +73,13 @@ def speed_edge(speeds: list[float], out_dir: Path) -> dict:
             sc = ArrestScenario(
                 f"edge-{v:.2f}-{k}",
                 RECT,
-                (2.5, 3.0 if heading > 0 else 4.5, 0.0),
+                (5.0, 5.0 if heading > 0 else 11.0, 0.0),
                 {"kind": "line", "speed": v, "heading": heading},
                 kinds="oooooo",
                 max_speed=0.5,
                 seed=21 + k,
+                room=OPEN,
+                robot_starts=tuple((*p, 0.0) for p in OPEN_STARTS),
             )
             ok += run_one(sc, out_dir)["outcome"] == "arrest"
         rows.append({"speed": v, "arrested": ok, "runs": 2})

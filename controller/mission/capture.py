@@ -55,8 +55,10 @@ from controller.planning.approach import (
     ray_first_hit,
     ray_to_convex,
     separate_stations,
+    static_free_distance,
 )
 
+STATION_SLACK = 0.02  # m beyond the safety filter's margin a station keeps from walls, obstacles
 CLOSED = (Phase.HOLD, Phase.ARRESTED, Phase.DONE)  # robots in contact, preloading
 
 
@@ -118,6 +120,7 @@ class Goals:
     stations: np.ndarray  # on the convex envelope (approach)
     touch: np.ndarray  # disc centres touching the surface (closing in)
     preload: np.ndarray  # disc centres ``preload_depth`` inside it (hold)
+    shortfall: np.ndarray  # (M,) m a station lies beyond where a wall lets a robot stand
 
 
 @dataclass(frozen=True)
@@ -293,6 +296,12 @@ class CaptureMission:
         self.state = CaptureState(contact_t=np.full(len(self.points), np.nan))
         self.heading: np.ndarray | None = None
         self._detours_planned = False
+        # stations keep the discs this far from walls and obstacles (what the safety filter
+        # lets a robot reach, with a station gap to spare)
+        self.static_clearance = self.radii[self.assignment] + ap.safety_margin + STATION_SLACK
+        grow = float(self.static_clearance.max()) if len(self.assignment) else 0.0
+        self.grown_obstacles = [envelope(p, grow, 8) for p in self.obstacles]
+        self.bounds = cfg.bounds_array() if cfg.world.walls else None
 
     @property
     def phase(self) -> str:
@@ -319,11 +328,18 @@ class CaptureMission:
         # a ray out of a deep notch crosses the object's own arm before it leaves the hull:
         # keep the station on the free part of the ray (the robot waits inside the notch)
         free = ray_first_hit(pts, nrm, world) - r - STATION_GAP
-        out = np.minimum(np.sum((img - pts) * nrm, axis=1), free)
+        # an object against a wall: the station stays where a robot can stand (off the wall)
+        static = static_free_distance(
+            pts, nrm, self.static_clearance, self.grown_obstacles, self.bounds
+        )
+        out = np.minimum(np.sum((img - pts) * nrm, axis=1), np.minimum(free, static))
         out = separate_stations(pts, nrm, out, r, self.s.station_gap)
+        # a station the walls leave no room for (a point beside a wall the object touches) is
+        # reached as near as the robot can get: the shortfall widens its arrival tolerance
+        shortfall = np.maximum(out - static, 0.0)
         touch = pts + (r + self.s.station_gap)[:, None] * nrm
         preload = pts + (r - self.s.preload_depth)[:, None] * nrm
-        return Goals(pts, nrm, pts + nrm * out[:, None], touch, preload)
+        return Goals(pts, nrm, pts + nrm * out[:, None], touch, preload, shortfall)
 
     # --- stage 3: detours around static obstacles (once) ----------------------------------
     def plan_detours(self, centers: np.ndarray, stations: np.ndarray) -> None:
@@ -431,6 +447,8 @@ class CaptureMission:
         world = geometry.transform(self.object_poly, np.asarray(view.object_pose, float))
         gap = self.gaps(view)
         dist = np.linalg.norm(xy - tgt, axis=1)
+        if self.state.phase == Phase.APPROACH:
+            dist = np.maximum(dist - goals.shortfall, 0.0)
         return Measures(view.t, dist, goals.preload, gap, world, bool(self.waypoints))
 
     def _caged(self) -> np.ndarray | None:

@@ -264,6 +264,38 @@ def separate_stations(
     return out
 
 
+def static_free_distance(
+    origins: np.ndarray,
+    dirs: np.ndarray,
+    clearance: np.ndarray,
+    grown_obstacles: list[np.ndarray],
+    bounds: np.ndarray | None,
+) -> np.ndarray:
+    """How far (m) along each unit ray a disc centre may go and stay ``clearance`` (M,) clear of
+    the room's walls (``bounds`` [[x0, y0], [x1, y1]], None: no walls) and of obstacles given
+    already grown by the largest clearance (convex hulls, CCW). 0 where the origin itself is
+    too close (the point is out of reach); inf where nothing is in the way.
+
+    An approach station beyond this distance could never be reached: the safety filter keeps
+    the robot off the wall, and the approach would wait for it until its timeout."""
+    o = np.asarray(origins, float)
+    d = np.asarray(dirs, float)
+    c = np.asarray(clearance, float)
+    out = np.full(len(o), np.inf)
+    if bounds is not None:
+        lo = np.asarray(bounds, float)[0] + c[:, None]
+        hi = np.asarray(bounds, float)[1] - c[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s_lo = np.where(d < -1e-9, (o - lo) / -d, np.inf)
+            s_hi = np.where(d > 1e-9, (hi - o) / d, np.inf)
+        out = np.minimum(out, np.minimum(s_lo, s_hi).min(axis=1))
+    for g in grown_obstacles:
+        inside = geometry.points_in_polygon(o, g)
+        hit = ray_first_hit(o, d, g)
+        out = np.minimum(out, np.where(inside, 0.0, hit))
+    return np.maximum(out, 0.0)
+
+
 def ray_first_hit(origins: np.ndarray, dirs: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """Distance along each ray to its first crossing of a polygon edge, ignoring the edge the
     ray starts on (inf when it never crosses): a ray out of a deep notch hits the object's own

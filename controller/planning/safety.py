@@ -14,7 +14,10 @@ The sparsity pattern is built once for N robots and P polygons; each call only u
 (``Ax``, ``q``, ``l``, ``u``) and warm-starts. Differential robots are filtered as single
 integrators at their centre (the mission turns the filtered velocity into (v, wz), driving
 forwards or backwards along its axis); the look-ahead-point model for them is not done yet.
-If the QP is infeasible (or osqp fails), the robots whose constraints are already violated
+If the QP is infeasible while some robot is already inside a margin (squeezed between the
+object and a wall, say), its violated rows are relaxed to "no closer" and the QP solved again
+(status ``relaxed``: u = 0 is then feasible, so the robot slides out along the tangent). If it is
+still infeasible (or osqp fails), the robots whose constraints are already violated
 stop, the others keep their nominal velocity (speed-capped), and the status says so.
 """
 
@@ -29,6 +32,14 @@ from scipy import sparse
 from controller import geometry
 
 INF = 1e20
+
+
+def _solved(res) -> bool:
+    return (
+        res.x is not None
+        and str(res.info.status).startswith("solved")
+        and bool(np.all(np.isfinite(res.x)))
+    )
 
 
 @dataclass
@@ -207,7 +218,17 @@ class SafetyFilter:
         res = self._prob.solve(raise_error=False)
         status = str(res.info.status)
         stopped = np.zeros(n, bool)
-        if res.x is None or not status.startswith("solved") or not np.all(np.isfinite(res.x)):
+        if not _solved(res) and (lo[: len(lo_pair) + lo_poly.size] > 0).any():
+            # a robot already inside a margin, squeezed (the object pushing it against a wall or
+            # another robot): recovering at gamma is impossible, so its violated rows only ask
+            # "no closer" (u = 0 is then feasible) and it slides out along the tangent
+            k = len(lo_pair) + lo_poly.size
+            relaxed = lo.copy()
+            relaxed[:k] = np.minimum(relaxed[:k], 0.0)
+            self._prob.update(l=relaxed)
+            res = self._prob.solve(raise_error=False)
+            status = "relaxed" if _solved(res) else str(res.info.status)
+        if not _solved(res):
             # infeasible: stop the robots whose constraints are violated by stopping less
             stopped = self._concerned(lo_pair, lo_poly)
             out = np.where(stopped[:, None], 0.0, u_nom)

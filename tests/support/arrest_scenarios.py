@@ -26,6 +26,8 @@ STAR = [[0.5, 0.0], [0.62, 0.33], [0.98, 0.35], [0.69, 0.56], [0.8, 0.9], [0.5, 
         [0.2, 0.9], [0.31, 0.56], [0.02, 0.35], [0.38, 0.33]]  # fmt: skip
 
 ROOM = ((0.0, 0.0), (8.0, 7.0))
+OPEN = ((0.0, 0.0), (24.0, 16.0))  # open space: a fast object meets no wall for a minute
+OPEN_STARTS = ((2.0, 2.0), (2.0, 12.0), (10.0, 2.0), (10.0, 14.0), (18.0, 4.0), (18.0, 12.0))
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,7 @@ class ArrestScenario:
     seed: int = 11
     max_time: float = 150.0
     robot_starts: tuple = ()  # default: spread along the south and west walls
+    room: tuple = ROOM
     patch: dict = field(default_factory=dict)
 
 
@@ -66,7 +69,7 @@ def _robots(sc: ArrestScenario) -> list[dict]:
 def arrest_config(sc: ArrestScenario, port: int | None = None) -> FleetConfig:
     """The scenario's config (a capture job: no goal) on a free loopback port, in pybullet."""
     d = copy.deepcopy(base_config_dict())
-    d["world"] = {"bounds": [list(b) for b in ROOM], "walls": True}
+    d["world"] = {"bounds": [list(b) for b in sc.room], "walls": True}
     d["obstacles"] = []
     d["object"].update(
         {"polygon": sc.polygon, "start": list(sc.start), "motion": {"max_force": 4.0, **sc.motion}}
@@ -97,10 +100,12 @@ SCENARIOS = [
     ArrestScenario("corner-nw-U", U_SHAPE, (1.3, 5.4, 0.0), {"kind": "line", "speed": 0.1,
                    "heading": 2.356}),
     # fast objects in open space, six omni robots of 0.5 m/s
-    ArrestScenario("fast-0.30", RECT, (2.5, 3.0, 0.0), {"kind": "line", "speed": 0.30,
-                   "heading": 0.3}, kinds="oooooo", max_speed=0.5),
-    ArrestScenario("fast-0.40", RECT, (2.0, 2.5, 0.0), {"kind": "line", "speed": 0.40,
-                   "heading": 0.5}, kinds="oooooo", max_speed=0.5),
+    ArrestScenario("fast-0.30", RECT, (5.0, 5.0, 0.0), {"kind": "line", "speed": 0.30,
+                   "heading": 0.3}, kinds="oooooo", max_speed=0.5, room=OPEN,
+                   robot_starts=tuple((*p, 0.0) for p in OPEN_STARTS)),
+    ArrestScenario("fast-0.40", RECT, (5.0, 6.0, 0.0), {"kind": "line", "speed": 0.40,
+                   "heading": 0.2}, kinds="oooooo", max_speed=0.5, room=OPEN,
+                   robot_starts=tuple((*p, 0.0) for p in OPEN_STARTS)),
     # evasive: flees the nearest robot
     ArrestScenario("evade-L", L_SHAPE, (4.0, 3.5, 0.0), {"kind": "evade", "max_speed": 0.25,
                    "flee_radius": 1.5}),
