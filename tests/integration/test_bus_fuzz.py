@@ -32,7 +32,7 @@ FLEET = "fz"
 SEED = 20261117
 # every topic a controller or an agent decodes (status replies and liveliness tokens aside)
 TOPICS = [n for n, t in wire.TOPICS.items() if t.msg is not wire.Message and n != "status"]
-PARTS = {"id": "r1", "what": "phase"}
+PARTS = {"id": "r1", "what": "phase", "role": "robot"}
 
 
 def key_of(topic: str) -> str:
