@@ -13,7 +13,8 @@ The profile (``default_permission: deny``):
 - operators (``zenoh.operators``) may put ``fleet/<fleet>/estop`` (stop and resume) and
   receive every publication (a viewer);
 - robot ``X``'s agent (``robots[i].zenoh_user``) may put only ``robot/X/pose`` and
-  ``robot/X/event``, declare only its own ``alive/robot/X`` token, and is sent only
+  ``robot/X/event``, declare only its own ``alive/robot/X`` token, answer only for its own
+  latched e-stop (``estop/state/robot/X``), and is sent only
   ``robot/X/cmd`` and ``estop`` publications (it receives nothing of another robot's
   commands, whatever it subscribes to).
 
@@ -92,6 +93,12 @@ def acl_for(config: FleetConfig) -> dict[str, Any]:
             _rule(
                 own_token, ["liveliness_token"], ["ingress"], [wire.alive_key(fleet, "robot", r.id)]
             ),
+            _rule(  # it answers for its own latched e-stop (fleet estop waits for that answer)
+                f"robot-{r.id}-estop-state",
+                ["declare_queryable", "reply"],
+                ["ingress"],
+                [wire.key("estop_state", fleet, role="robot", id=r.id)],
+            ),
             _rule(
                 own_out,
                 ["put"],
@@ -103,7 +110,7 @@ def acl_for(config: FleetConfig) -> dict[str, Any]:
         policies.append(
             {
                 "id": f"robot-{r.id}",
-                "rules": [own_in, own_token, own_out],
+                "rules": [own_in, own_token, f"robot-{r.id}-estop-state", own_out],
                 "subjects": [f"robot-{r.id}"],
             }
         )

@@ -296,6 +296,7 @@ class CaptureMission:
         self.state = CaptureState(contact_t=np.full(len(self.points), np.nan))
         self.heading: np.ndarray | None = None
         self._detours_planned = False
+        self.last_distance: np.ndarray | None = None
         # stations keep the discs this far from walls and obstacles (what the safety filter
         # lets a robot reach, with a station gap to spare)
         self.static_clearance = self.radii[self.assignment] + ap.safety_margin + STATION_SLACK
@@ -449,6 +450,7 @@ class CaptureMission:
         dist = np.linalg.norm(xy - tgt, axis=1)
         if self.state.phase == Phase.APPROACH:
             dist = np.maximum(dist - goals.shortfall, 0.0)
+        self.last_distance = dist  # read by the capture job (a robot stuck on its way)
         return Measures(view.t, dist, goals.preload, gap, world, bool(self.waypoints))
 
     def _caged(self) -> np.ndarray | None:

@@ -110,15 +110,34 @@ def _reinforce(
 
 
 TOKEN_LOAD = 0.05  # N: the load a closure-only set (capture.hold_force 0) must hold
-WALL_TOLERANCE = 0.03  # m: an object vertex this close to a wall or an obstacle touches it
+# m: an object vertex this close to a wall or an obstacle touches it (an object turned a degree
+# or two in a corner keeps both walls; the hold allows 5 cm)
+WALL_TOLERANCE = 0.04
+REASSIGN_PERIOD = 2.0  # s between looks at a better assignment during the approach
+REASSIGN_GAIN = 0.25  # the share of the total interception time a new assignment must save
+REASSIGN_MIN_S = 5.0  # s of total interception time it must save at least
+REASSIGN_MIN_SPEED = 0.1  # m/s: slower objects keep their first assignment
 PIN_TICKS = 10  # ticks a capture point must stay blocked by a wall before the capture re-plans
+MAX_REPLANS = 8  # capture re-plans at walls before the set stands as it is
+PIN_RETRIES = 6  # re-plans that find no set before an object at rest is declared pinned
+PIN_STILL_SPEED = 0.03  # m/s: an object slower than this has come to rest against the wall
+STUCK_S = 8.0  # s a robot may come no closer to its station (object at rest) before its point
+STUCK_PROGRESS = 0.05  # m  ... is taken for out of reach and the capture re-planned without it
+STUCK_POCKET = 0.3  # m around a stuck point whose nodes are excluded with it
+STUCK_OBJECT_MOVE = 0.1  # m the object may move (estimate) and still count as at rest
 
 
-def replan_pinned(cfg: FleetConfig, capture: CaptureSet, pose: np.ndarray) -> CaptureSet | None:
+def replan_pinned(
+    cfg: FleetConfig,
+    capture: CaptureSet,
+    pose: np.ndarray,
+    exclude: frozenset[int] = frozenset(),
+) -> CaptureSet | None:
     """The capture re-planned for an object pressed against walls or obstacles at ``pose``:
     capture points a robot disc cannot reach there are dropped, the walls count as fixed
-    frictionless contacts, and points are added or moved until the set holds. None: no set
-    holds with the fleet (the object is ``pinned`` out of reach)."""
+    frictionless contacts, and points are added or moved until the set holds. ``exclude``:
+    candidate nodes (indices) a robot could not get to. None: no set holds with the fleet (the
+    object is ``pinned`` out of reach)."""
     from controller.planning.hold import push_wrenches, wall_contacts
 
     poly = geometry.ensure_ccw(cfg.object_polygon())
@@ -128,7 +147,10 @@ def replan_pinned(cfg: FleetConfig, capture: CaptureSet, pose: np.ndarray) -> Ca
     centres = geometry.transform(
         capture.candidates + (r + cfg.capture.clearance) * capture.candidate_normals, pose
     )
-    allowed = ~geometry.discs_touch_static(centres, r, obstacles, bounds, slack=0.0)
+    # a robot can stand there only with the safety filter's margin to the wall or obstacle
+    reach = r + cfg.approach.safety_margin
+    allowed = ~geometry.discs_touch_static(centres, reach, obstacles, bounds, slack=0.0)
+    allowed[list(exclude)] = False  # nodes robots were seen not to reach (a closed pocket)
     world = geometry.transform(poly, pose)
     pts, pushes = wall_contacts(world, obstacles, bounds, WALL_TOLERANCE)
     local = geometry.inverse_transform(pts, pose) if len(pts) else pts
@@ -171,6 +193,11 @@ class CaptureJob:
         self.inner: Any = None
         self.blocked_ticks = 0
         self.replans = 0
+        self.reassignments = 0
+        self.pin_fails = 0
+        self.unreachable: set[int] = set()  # candidate nodes robots could not get to
+        self.progress: tuple[np.ndarray, np.ndarray, np.ndarray, Any] | None = None
+        self.assigned_t = -math.inf
         self.failed = False
         self.transport: Any = None
         self.arrest_t: float | None = None
@@ -181,6 +208,14 @@ class CaptureJob:
             self.route_planner = route_planner_for(cfg)
 
     def _assign(self, view: FleetView) -> np.ndarray:
+        rows, cols = linear_sum_assignment(self._costs(view))
+        out = np.empty(len(rows), dtype=int)
+        out[rows] = cols
+        return out
+
+    def _costs(self, view: FleetView) -> np.ndarray:
+        """(M, N) s for each robot to meet each capture point's station where the moving
+        object will be (interception at full speed, scaled by the detour around the object)."""
         radius = self.cfg.max_robot_radius
         margin = self.cfg.approach.envelope_margin
         stations = geometry.transform(
@@ -199,11 +234,33 @@ class CaptureJob:
         )
         around = geometry.distance_around_convex(stations, view.poses[:, :2], hull)
         straight = np.linalg.norm(stations[:, None] - view.poses[None, :, :2], axis=-1)
-        cost = cost * around / np.maximum(straight, 1e-9)
-        rows, cols = linear_sum_assignment(cost)
-        out = np.empty(len(stations), dtype=int)
-        out[rows] = cols
-        return out
+        return cost * around / np.maximum(straight, 1e-9)
+
+    def _reassign(self, view: FleetView) -> list:
+        """During the approach, every ``REASSIGN_PERIOD`` s: hand the capture points to other
+        robots when that meets the object sooner by ``REASSIGN_GAIN`` (the first assignment
+        is made before the object's velocity estimate has settled: a fast object runs away from
+        the robots that were nearest at first sight, toward others). Returns its events."""
+        if view.t - self.assigned_t < REASSIGN_PERIOD or self.inner.phase != Phase.APPROACH:
+            return []
+        ovel = view.object_velocity
+        if ovel is None or float(np.hypot(ovel[0], ovel[1])) < REASSIGN_MIN_SPEED:
+            return []  # a slow object: the first assignment stands (no thrashing)
+        self.assigned_t = view.t
+        cost = self._costs(view)
+        new = self._assign(view)
+        m = np.arange(len(new))
+        now, better = cost[m, self.assignment].sum(), cost[m, new].sum()
+        gain = now - better
+        if not (np.isfinite(better) and gain > REASSIGN_GAIN * now and gain > REASSIGN_MIN_S):
+            return []
+        t0 = self.inner.state.t0
+        self.assignment = new
+        self.inner = self._mission(view)
+        self.inner.state = dataclasses.replace(self.inner.state, t0=t0)  # the same timeout
+        self.reassignments += 1
+        robots = [view.ids[i] for i in new]
+        return [("reassign", {"robots": robots, "t": view.t, "eta_s": [now, better]})]
 
     def plan(self, view: FleetView) -> Intent:
         if self.failed:
@@ -216,7 +273,9 @@ class CaptureJob:
             if not ready:
                 return Intent(np.zeros((self.n, 2)), Phase.PLAN, stop=True)
             return self._start(view, pinned=False)
+        events = self._reassign(view)
         intent = self.inner.plan(view)
+        intent.events[:0] = events
         if self._blocked(view):
             return self._replan(view, intent)
         if intent.arrest:
@@ -243,20 +302,9 @@ class CaptureJob:
 
     def _start(self, view: FleetView, pinned: bool) -> Intent:
         """Assign robots to the capture set and start the approach (the capture event first)."""
-        from controller.mission.capture import CaptureMission, CaptureSettings
-
         self.assignment = self._assign(view)
-        settings = CaptureSettings.from_config(self.cfg)
-        if self.cfg.object.goal is not None:  # the arrested object is carried, not let go
-            settings = dataclasses.replace(settings, settle_s=math.inf)
-        self.inner = CaptureMission(
-            self.capture.points,
-            self.capture.normals,
-            self.assignment,
-            self.cfg,
-            self.rng,
-            settings=settings,
-        )
+        self.assigned_t = view.t
+        self.inner = self._mission(view)
         data = {
             "points": self.capture.points.round(4).tolist(),
             "normals": self.capture.normals.round(4).tolist(),
@@ -273,11 +321,55 @@ class CaptureJob:
         intent.events.insert(0, ("capture", data))
         return intent
 
+    def _mission(self, view: FleetView):
+        from controller.mission.capture import CaptureMission, CaptureSettings
+
+        settings = CaptureSettings.from_config(self.cfg)
+        if self.cfg.object.goal is not None:  # the arrested object is carried, not let go
+            settings = dataclasses.replace(settings, settle_s=math.inf)
+        return CaptureMission(
+            self.capture.points,
+            self.capture.normals,
+            self.assignment,
+            self.cfg,
+            self.rng,
+            settings=settings,
+        )
+
+    def _stuck(self, view: FleetView) -> bool:
+        """Whether, with the object at rest, some robot of the approach has come no closer to
+        its station by ``STUCK_PROGRESS`` m for ``STUCK_S`` s: its point is out of reach in a
+        way a disc test cannot see (a notch a wall closes, a gap too narrow to pass). The point
+        is then excluded and the capture re-planned."""
+        dist = getattr(self.inner, "last_distance", None)
+        if self.inner.phase != Phase.APPROACH or dist is None:
+            return False
+        xy = np.asarray(view.object_pose[:2], float)
+        fresh = self.progress is None or self.progress[3] is not self.inner  # a new approach
+        if fresh or np.linalg.norm(xy - self.progress[2]) > STUCK_OBJECT_MOVE:
+            # (re)start: a moving object is chased, not stuck on (its pose, not its noisy speed)
+            self.progress = (dist.copy(), np.full(len(dist), view.t), xy, self.inner)
+        best, since, _, _ = self.progress
+        better = dist < best - STUCK_PROGRESS
+        best[better], since[better] = dist[better], view.t
+        stuck = (view.t - since > STUCK_S) & (dist > self.cfg.approach.envelope_tolerance)
+        if not stuck.any():
+            return False
+        # the nodes around a stuck point are in the same pocket: exclude them together
+        cand = self.capture.candidates
+        for m in np.flatnonzero(stuck):
+            near = np.linalg.norm(cand - self.capture.points[m], axis=1) < STUCK_POCKET
+            self.unreachable |= {int(i) for i in np.flatnonzero(near)}
+        return True
+
     def _blocked(self, view: FleetView) -> bool:
         """Whether some capture point has been out of a robot's reach (a wall or an obstacle
-        where its disc must go) for ``PIN_TICKS`` ticks, before the fleet closes in."""
-        if self.inner.phase not in (Phase.APPROACH, Phase.CLOSE_IN) or self.replans >= 3:
+        where its disc must go) for ``PIN_TICKS`` ticks, before the fleet closes in, or a robot
+        is stuck on the way to it (``_stuck``)."""
+        if self.inner.phase not in (Phase.APPROACH, Phase.CLOSE_IN) or self.replans >= MAX_REPLANS:
             return False
+        if self._stuck(view):
+            return True
         r = self.cfg.max_robot_radius
         centres = geometry.transform(
             self.capture.points + (r + self.cfg.capture.clearance) * self.capture.normals,
@@ -285,7 +377,11 @@ class CaptureJob:
         )
         bounds = self.cfg.bounds_array() if self.cfg.world.walls else None
         hit = geometry.discs_touch_static(
-            centres, r, self.cfg.obstacle_polygons(), bounds, slack=0.0
+            centres,
+            r + self.cfg.approach.safety_margin,
+            self.cfg.obstacle_polygons(),
+            bounds,
+            slack=0.0,
         )
         self.blocked_ticks = self.blocked_ticks + 1 if hit.any() else 0
         return self.blocked_ticks >= PIN_TICKS
@@ -293,14 +389,22 @@ class CaptureJob:
     def _replan(self, view: FleetView, intent: Intent) -> Intent:
         """The object is against a wall: capture it there (the wall a fixed contact), or fail
         fast with ``pinned`` when no set of reachable points holds it."""
-        self.replans += 1
         self.blocked_ticks = 0
         pose = np.asarray(view.object_pose, float)
-        new = replan_pinned(self.cfg, self.capture, pose)
+        new = replan_pinned(self.cfg, self.capture, pose, frozenset(self.unreachable))
         if new is None:
+            # a standoff first: an object still sliding along a wall or into a corner may
+            # come to rest where the walls help (robots keep their stations meanwhile)
+            self.pin_fails += 1
+            ovel = view.object_velocity
+            moving = ovel is not None and float(np.hypot(ovel[0], ovel[1])) > PIN_STILL_SPEED
+            if moving or self.pin_fails < PIN_RETRIES:
+                return intent
+            x, y, th = (float(v) for v in pose)
             detail = (
                 "the object is against a wall or an obstacle and no set of capture points a "
-                f"robot can reach there holds it with {self.n} robots"
+                f"robot can reach there holds it with {self.n} robots (object at "
+                f"({x:.2f}, {y:.2f}, {math.degrees(th):.0f}°), at rest, {self.pin_fails} tries)"
             )
             events = [
                 ("phase", {"phase": str(Phase.FAILED), "t": view.t}),
@@ -311,6 +415,7 @@ class CaptureJob:
                 np.zeros((self.n, 2)), Phase.FAILED, events, stop=True, failed=True,
                 reason=Reason.PINNED,
             )  # fmt: skip
+        self.replans += 1
         self.capture = new
         return self._start(view, pinned=True)
 
@@ -337,6 +442,9 @@ class CaptureJob:
             "assigned": None
             if self.assignment is None
             else [self.cfg.robots[i].id for i in self.assignment],
+            "reassignments": self.reassignments,
+            "wall_replans": self.replans,
+            "unreachable_nodes": len(self.unreachable),
         }
         if self.inner is not None and hasattr(self.inner, "summary"):
             out.update(self.inner.summary())

@@ -62,6 +62,9 @@ class LockstepCoordinator:
         self.tick_timeout = tick_timeout
         self.counters = LockstepCounters()
         self.step_index = 0
+        # the sim time the first tick is at: connecting MAVLink drivers steps the world (their
+        # handshakes run on sim time), and the ticks continue from there
+        self.t0 = float(hub.t)
         self._clock = bus.publisher("sim_clock")
         self._done = bus.subscribe_topic("sim_done")
         self._object_pub = bus.publisher("object_pose")
@@ -79,7 +82,7 @@ class LockstepCoordinator:
 
     @property
     def t(self) -> float:
-        return self.step_index * self.dt
+        return self.t0 + self.step_index * self.dt
 
     def publish_measurements(self) -> int:
         n = 0

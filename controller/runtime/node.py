@@ -239,8 +239,9 @@ class ControllerNode:
 
     @property
     def received(self) -> int:
-        """Pose measurements (robots and object) taken in so far."""
-        return self.counters.poses + self.counters.object_poses
+        """Pose measurements (robots and object) taken in so far, those dropped for their
+        stamp included (they arrived: the lockstep handshake counts arrivals)."""
+        return self.counters.poses + self.counters.object_poses + self.counters.skewed
 
     # -- the tick
     def view(self, now: float) -> FleetView:

@@ -78,16 +78,34 @@ def test_replay_of_a_crash_cut_log(dry_run_log, tmp_path, capsys):
 
 
 def test_bad_messages_are_counted_not_fatal(tmp_path):
+    """The recorder drops a bad payload (counted); a log written by another tool with one in it
+    still replays, the bad message counted as undecodable."""
+    from mcap.writer import Writer
+
     cfg = make_config()
     path = tmp_path / "bad.mcap"
+    key = wire.key("robot_pose", cfg.fleet.name, id="r1")
+    bad = b'{"t": 0.6, "seq": 6, "x": "far"}'
     with McapRecorder(path, cfg.fleet.name) as rec:
-        key = wire.key("robot_pose", cfg.fleet.name, id="r1")
         for i in range(5):
             msg = wire.PoseMeasurement(t=0.1 * i, seq=i, x=1.0 + i, y=2.0, theta=0.0)
             rec.on_sample(key, wire.encode(msg), 0.1 * i)
-        rec.on_sample(key, b'{"t": 0.6, "seq": 6, "x": "far"}', 0.6)
+        rec.on_sample(key, bad, 0.6)
+    assert rec.bad_payloads == 1
+    assert metrics_of(load_run(path))["undecodable"] == 0  # never written
+    other = tmp_path / "other.mcap"
+    with open(other, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("fleet.PoseMeasurement", "jsonschema", b"{}")
+        cid = w.register_channel(key, "json", sid)
+        for i in range(5):
+            msg = wire.PoseMeasurement(t=0.1 * i, seq=i, x=1.0 + i, y=2.0, theta=0.0)
+            w.add_message(cid, int(i * 1e8), wire.encode(msg), int(i * 1e8))
+        w.add_message(cid, int(6e8), bad, int(6e8))
+        w.finish()
     assert read_metadata(path) == {}
-    r = metrics_of(load_run(path))
+    r = metrics_of(load_run(other))
     assert r["undecodable"] == 1
     assert r["robots"]["r1"]["poses"] == 5
     assert r["config_recorded"] is False and r["min_clearance_m"] is None

@@ -1,0 +1,38 @@
+"""The arrest, judged from ground truth in pybullet with the object alive: it never gives up
+(``give_up_after = 0``), so its drive pushes against the robots through the hold and after the
+arrest. Walls, corners, fast (0.3 and 0.4 m/s against robots of 0.5 m/s), evasive and concave
+objects (tests/support/arrest_scenarios.py, also run by bench/arrest.py).
+
+Each run either arrests (every contact robot truly within 2 cm of the surface at the arrest, the
+object held within 5 cm from the start of the hold on, a clean verdict) or, at a wall or in a
+corner, fails with reason ``pinned`` and says where; none runs into a timeout."""
+
+from __future__ import annotations
+
+import pytest
+
+from controller.mission.factory import build_mission
+from controller.runtime.dry_run import RULES, DryRun, judge
+from tests.support.arrest_scenarios import SCENARIOS, arrest_config
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sc", SCENARIOS, ids=[s.name for s in SCENARIOS])
+def test_arrest_holds_or_fails_with_its_reason(sc, tmp_path):
+    cfg = arrest_config(sc)
+    assert cfg.object.motion.give_up_after == 0.0  # alive to the end
+    res = DryRun(cfg, build_mission(cfg), tmp_path / "run.mcap", max_time=sc.max_time).run()
+    failure = res.get("failure") or {}
+    outcome = "arrest" if res["arrested"] else failure.get("reason")
+    assert outcome in sc.expect, failure
+    assert judge(res) == [], res["verdict"]
+    if outcome == "arrest":
+        assert res["status"] == "ok" and res["phase"] == "done"
+        gaps = res["contact_gaps_at_arrest_m"]
+        assert gaps and max(gaps.values()) <= 0.02, gaps  # touching, by the physics
+        assert res["hold_displacement_m"] is not None
+        assert res["hold_displacement_m"] < RULES.max_hold_displacement_m
+    else:  # pinned: said so, and where, with the object truly at a wall
+        assert res["status"] == "failed" and res["phase"] == "failed" and not res["arrested"]
+        assert "wall" in failure["detail"] and "object at" in failure["detail"]
+        assert res["object_min_clearance_m"] < 0.3
