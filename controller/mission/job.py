@@ -368,10 +368,10 @@ class CaptureJob:
         if self.failed:
             zero = np.zeros((self.n, 2))
             return Intent(zero, Phase.FAILED, stop=True, failed=True, reason=self.failure_reason)
+        view = self._parked(view)  # (a robot never seen: no estimate)
         if self.transport is not None:
             return self.transport.plan(view)
         gone = self._gone(view)
-        view = self._parked(view)
         if self.inner is None:
             return self._wait(view)
         events = self._joins(view, gone)
@@ -622,9 +622,9 @@ class CaptureJob:
         return self._start(view, pinned=True)
 
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
+        view = self._parked(view)
         if self.transport is not None:
             return self.transport.safety(view, intent)
-        view = self._parked(view)
         if self.inner is None or self.failed:
             return MissionOutput(
                 np.zeros((self.n, 3)),
