@@ -99,6 +99,9 @@ class FleetSection:
     cmd_ttl: float = _rule(0.3, gt=0, max=10)
     stale_after: float = _rule(0.3, gt=0, max=10)
     liveliness_lease: float = _rule(1.0, gt=0, max=60)
+    # s after the first estimates: the capture starts without robots never seen by then (once
+    # the object and enough robots to close it are seen); a robot seen later joins as a spare
+    start_wait: float = _rule(5.0, min=0, max=3600)
     # s: a pose or command stamped further than this from the receiver's clock (same domain:
     # wall time in the lab, sim time in the dry run) is dropped and counted
     max_clock_skew: float = _rule(1.0, gt=0, max=3600)

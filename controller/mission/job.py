@@ -44,18 +44,21 @@ class CaptureSet:
     walls: int = 0  # wall contacts the set counts on (an object pinned against a wall)
 
 
-def plan_capture_set(cfg: FleetConfig, rng: np.random.Generator) -> CaptureSet:
+def plan_capture_set(
+    cfg: FleetConfig, rng: np.random.Generator, max_robots: int | None = None
+) -> CaptureSet:
     """The GA's capture points, reinforced to hold ``capture.hold_force`` (MissionError when the
-    GA finds no feasible plan, with its reason, or the fleet is too small to hold the object)."""
+    GA finds no feasible plan, with its reason, or the fleet is too small to hold the object);
+    ``max_robots``: the robots available (None: the fleet)."""
     from controller.planning.capture import plan_for_fleet
 
-    plan = plan_for_fleet(cfg, rng)
+    plan = plan_for_fleet(cfg, rng, max_robots)
     if not plan.feasible:
         raise MissionError(f"no feasible capture plan: {plan.reason}")
     chosen = np.asarray(plan.chosen, int)
     capacity, added = None, 0
     if cfg.capture.hold_force > 0:
-        res = _reinforce(cfg, plan.candidates, plan.normals, chosen)
+        res = _reinforce(cfg, plan.candidates, plan.normals, chosen, robots=max_robots)
         if not res.holds:
             raise MissionError(_cannot_hold(cfg, res))
         chosen, capacity, added = res.chosen, res.capacity, res.added
@@ -89,9 +92,11 @@ def _reinforce(
     chosen: np.ndarray,
     allowed: np.ndarray | None = None,
     fixed: np.ndarray | None = None,
+    robots: int | None = None,
 ):
     """The GA's set reinforced to hold ``capture.hold_force`` (a set that only has to close the
-    object, ``hold_force`` 0, is held to a token load)."""
+    object, ``hold_force`` 0, is held to a token load), with at most ``robots`` points (None:
+    the fleet)."""
     from controller.planning.hold import disturbances, reinforce
 
     poly = geometry.ensure_ccw(cfg.object_polygon())
@@ -105,7 +110,7 @@ def _reinforce(
     load = disturbances(force, force * np.sqrt(geometry.polar_moment_per_mass(poly)))
     weakest = min(rb.max_force for rb in cfg.robots)
     ok = np.ones(len(cand), bool) if allowed is None else allowed
-    n = len(cfg.robots)
+    n = len(cfg.robots) if robots is None else robots
     return reinforce(cand, nrm, c, chosen, ok, conflict, weakest, load, n, fixed=fixed)
 
 
@@ -132,12 +137,13 @@ def replan_pinned(
     capture: CaptureSet,
     pose: np.ndarray,
     exclude: frozenset[int] = frozenset(),
+    robots: int | None = None,
 ) -> CaptureSet | None:
     """The capture re-planned for an object pressed against walls or obstacles at ``pose``:
     capture points a robot disc cannot reach there are dropped, the walls count as fixed
     frictionless contacts, and points are added or moved until the set holds. ``exclude``:
-    candidate nodes (indices) a robot could not get to. None: no set holds with the fleet (the
-    object is ``pinned`` out of reach)."""
+    candidate nodes (indices) a robot could not get to; ``robots``: the robots available (None:
+    the fleet). None: no set holds with them (the object is ``pinned`` out of reach)."""
     from controller.planning.hold import push_wrenches, wall_contacts
 
     poly = geometry.ensure_ccw(cfg.object_polygon())
@@ -157,8 +163,10 @@ def replan_pinned(
     local_push = pushes @ geometry.rot(float(pose[2])) if len(pushes) else pushes
     fixed = push_wrenches(local, local_push, geometry.centroid(poly))
     chosen = np.array([i for i in capture.chosen if allowed[i]], int)
-    res = _reinforce(cfg, capture.candidates, capture.candidate_normals, chosen, allowed, fixed)
-    if not res.holds or len(res.chosen) == 0:
+    res = _reinforce(
+        cfg, capture.candidates, capture.candidate_normals, chosen, allowed, fixed, robots
+    )
+    if not res.holds or len(res.chosen) == 0 or (robots is not None and len(res.chosen) > robots):
         return None
     return CaptureSet(
         capture.candidates[res.chosen],
@@ -174,14 +182,98 @@ def replan_pinned(
     )
 
 
+def replan_for_robots(
+    cfg: FleetConfig,
+    capture: CaptureSet,
+    keep: np.ndarray,
+    robots: int,
+    rng: np.random.Generator,
+    pose: np.ndarray | None = None,
+    exclude: frozenset[int] = frozenset(),
+) -> CaptureSet | None:
+    """The capture re-planned for the ``robots`` left after some were lost: the points of
+    ``capture`` a robot still holds (``keep``, (M,) bool) stay and candidate nodes are added
+    until the set holds again, with the first plan's certificates (first-order form closure,
+    ``capture.hold_force`` held); when no such set exists, the GA once more, limited to
+    ``robots``. A set that counts on walls (``capture.walls``) is re-planned against them at
+    ``pose`` (``replan_pinned``). ``exclude``: nodes robots could not get to. None: no set
+    closes the object with ``robots`` robots."""
+    if robots < 1:
+        return None
+    keep = np.asarray(keep, bool)
+    kept = dataclasses.replace(
+        capture,
+        points=capture.points[keep],
+        normals=capture.normals[keep],
+        chosen=capture.chosen[keep],
+    )
+    if capture.walls and pose is not None:
+        return replan_pinned(cfg, kept, pose, exclude, robots)
+    new = _repair(cfg, kept, robots, exclude) if len(kept.chosen) <= robots else None
+    if new is not None:
+        return new
+    try:
+        return plan_capture_set(cfg, rng, max_robots=robots)
+    except MissionError:
+        return None
+
+
+def _repair(
+    cfg: FleetConfig, kept: CaptureSet, robots: int, exclude: frozenset[int]
+) -> CaptureSet | None:
+    """``kept``'s points reinforced to hold with at most ``robots`` points, in form closure
+    (None: they cannot). Its objective stays the first GA set's."""
+    from controller.planning.capture import certify_form_closure
+
+    allowed = np.ones(len(kept.candidates), bool)
+    allowed[list(exclude)] = False
+    res = _reinforce(
+        cfg, kept.candidates, kept.candidate_normals, kept.chosen, allowed, robots=robots
+    )
+    if not res.holds or len(res.chosen) > robots:
+        return None
+    pts, nrm = kept.candidates[res.chosen], kept.candidate_normals[res.chosen]
+    centroid = geometry.centroid(geometry.ensure_ccw(cfg.object_polygon()))
+    if not certify_form_closure(pts, nrm, centroid):
+        return None
+    return CaptureSet(
+        pts,
+        nrm,
+        kept.objective,
+        True,
+        res.capacity if cfg.capture.hold_force > 0 else None,
+        kept.reinforced + res.added,
+        kept.candidates,
+        kept.candidate_normals,
+        res.chosen,
+    )
+
+
+# s a robot's estimate may stay stale (no pose for fleet.stale_after) before the capture takes
+# the robot for lost (a robot whose liveliness token or link is gone is lost at once)
+LOST_STALE_S = 0.5
+WATCHED = (Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD)  # phases a lost robot re-plans
+PARK = 1.0e3  # m: a robot never seen is parked this far away in the views the capture reads
+
+
 class CaptureJob:
     """The capture: the plan at construction, robot assignment once the first estimates are in
     (robots and object), then the approach-and-arrest mission.
 
     Until every robot is present with a fresh estimate and the object has been seen, every robot
-    holds still (phase ``plan``). The assignment minimises the total time for the robots to meet
-    their points' stations where the moving object will be (interception at full speed); robots
-    left over stay where they are.
+    holds still (phase ``plan``); ``fleet.start_wait`` s after the first estimates, robots never
+    seen no longer block: the capture starts with those seen (re-planned for them when the set
+    needs more). The assignment minimises the total time for the robots to meet their points'
+    stations where the moving object will be (interception at full speed), over the robots
+    *available*; robots left over stay where they are.
+
+    Robot loss and join: a robot whose liveliness or link is gone, or whose estimate has been
+    stale for ``LOST_STALE_S`` s, during the approach, close-in or hold is lost (event
+    ``robot_lost``) and no longer available. When it held a capture point, the capture is
+    re-planned with the robots left (``replan_for_robots``) and re-assigned; when none closes
+    the object, the job fails with ``robots_lost``, every robot stopped. A robot present and
+    fresh again (or seen for the first time) is available again (event ``robot_joined``): a
+    later re-plan or re-assignment may pick it; it never gets its old point back by itself.
     """
 
     def __init__(self, cfg: FleetConfig, rng: np.random.Generator | None = None) -> None:
@@ -199,6 +291,14 @@ class CaptureJob:
         self.progress: tuple[np.ndarray, np.ndarray, np.ndarray, Any] | None = None
         self.assigned_t = -math.inf
         self.failed = False
+        self.failure_reason: str = Reason.PINNED
+        self.available = np.ones(self.n, bool)  # robots an assignment may use
+        self.lost: list[int] = []  # robots lost during the capture, in order
+        self.stale_since = np.full(self.n, np.nan)  # s: when each estimate turned stale
+        self.first_t: float | None = None  # s: the first estimates (robot or object)
+        self.start_tried = -1  # robots a start without the missing ones was last planned for
+        self.loss_replans = 0
+        self.lost_t: float | None = None  # s: the last loss that re-planned
         self.transport: Any = None
         self.arrest_t: float | None = None
         self.route_planner: Any = None
@@ -208,9 +308,11 @@ class CaptureJob:
             self.route_planner = route_planner_for(cfg)
 
     def _assign(self, view: FleetView) -> np.ndarray:
-        rows, cols = linear_sum_assignment(self._costs(view))
+        """Each capture point's robot (M,), among the available ones only."""
+        cols = np.flatnonzero(self.available)
+        rows, picked = linear_sum_assignment(self._costs(view)[:, cols])
         out = np.empty(len(rows), dtype=int)
-        out[rows] = cols
+        out[rows] = cols[picked]
         return out
 
     def _costs(self, view: FleetView) -> np.ndarray:
@@ -265,15 +367,20 @@ class CaptureJob:
     def plan(self, view: FleetView) -> Intent:
         if self.failed:
             zero = np.zeros((self.n, 2))
-            return Intent(zero, Phase.FAILED, stop=True, failed=True, reason=Reason.PINNED)
+            return Intent(zero, Phase.FAILED, stop=True, failed=True, reason=self.failure_reason)
+        view = self._parked(view)  # (a robot never seen: no estimate)
         if self.transport is not None:
             return self.transport.plan(view)
+        gone = self._gone(view)
         if self.inner is None:
-            ready = view.object_pose is not None and bool(np.all(view.present & ~view.stale))
-            if not ready:
-                return Intent(np.zeros((self.n, 2)), Phase.PLAN, stop=True)
-            return self._start(view, pinned=False)
-        events = self._reassign(view)
+            return self._wait(view)
+        events = self._joins(view, gone)
+        if self.inner.phase in WATCHED:
+            lost, replan = self._losses(view, gone)
+            events += lost
+            if replan:
+                return self._replan_lost(view, events)
+        events += self._reassign(view)
         intent = self.inner.plan(view)
         intent.events[:0] = events
         if self._blocked(view):
@@ -300,6 +407,107 @@ class CaptureJob:
             route_planner=self.route_planner,
         )
 
+    # --- robot loss and join ---------------------------------------------------------------
+    def _gone(self, view: FleetView) -> np.ndarray:
+        """(N,) robots gone this tick: liveliness or link lost, or stale for ``LOST_STALE_S``."""
+        stale = np.asarray(view.stale, bool)
+        self.stale_since[~stale] = np.nan
+        self.stale_since[stale & np.isnan(self.stale_since)] = view.t
+        held = stale & (view.t - np.nan_to_num(self.stale_since, nan=view.t) >= LOST_STALE_S)
+        return ~np.asarray(view.present, bool) | held
+
+    def _parked(self, view: FleetView) -> FleetView:
+        """The view with robots never seen (no estimate: NaN) parked far away, standing still:
+        the planners and the safety filter read every robot's pose."""
+        unknown = ~np.all(np.isfinite(view.poses), axis=1)
+        if not unknown.any():
+            return view
+        poses, vels = view.poses.copy(), view.velocities.copy()
+        k = np.flatnonzero(unknown)
+        poses[k] = np.stack([PARK + 10.0 * k, np.full(len(k), PARK), np.zeros(len(k))], 1)
+        vels[k] = 0.0
+        return dataclasses.replace(view, poses=poses, velocities=vels)
+
+    def _wait(self, view: FleetView) -> Intent:
+        """Phase ``plan``: start when the object and every robot are seen, or, ``start_wait``
+        s after the first estimates, with the robots seen when they can close the object."""
+        still = Intent(np.zeros((self.n, 2)), Phase.PLAN, stop=True)
+        ready = np.asarray(view.present & ~view.stale, bool)
+        if self.first_t is None and (view.object_pose is not None or ready.any()):
+            self.first_t = view.t
+        if view.object_pose is None:
+            return still
+        if not ready.all():
+            if view.t - self.first_t < self.cfg.fleet.start_wait:
+                return still
+            k = int(ready.sum())
+            if k < len(self.capture.points):
+                if k == self.start_tried:
+                    return still  # planned for this many already: wait for another robot
+                self.start_tried = k
+                keep = np.zeros(len(self.capture.points), bool)
+                new = replan_for_robots(self.cfg, self.capture, keep, k, self.rng)
+                if new is None:
+                    return still
+                self.capture = new
+        self.available = ready
+        return self._start(view, pinned=False)
+
+    def _joins(self, view: FleetView, gone: np.ndarray) -> list:
+        """Robots present with a fresh estimate again (or seen at last) are available again."""
+        back = ~self.available & ~gone & view.present & ~view.stale
+        self.available |= back
+        return [("robot_joined", {"t": view.t, "robot": view.ids[i]}) for i in np.flatnonzero(back)]
+
+    def _losses(self, view: FleetView, gone: np.ndarray) -> tuple[list, bool]:
+        """Robots lost this tick (events), and whether one of them held a capture point."""
+        new = np.flatnonzero(gone & self.available)
+        self.available[new] = False
+        self.lost += [int(i) for i in new]
+        assigned = {int(i) for i in self.assignment}
+        phase = str(self.inner.phase)
+        events = [
+            ("robot_lost", {"t": view.t, "robot": view.ids[i], "phase": phase, "assigned": a})
+            for i, a in ((int(i), int(i) in assigned) for i in new)
+        ]
+        return events, any(int(i) in assigned for i in new)
+
+    def _replan_lost(self, view: FleetView, events: list) -> Intent:
+        """An assigned robot is lost: the capture re-planned for the robots left and re-assigned
+        (the approach starts over), or the job fails with ``robots_lost``."""
+        keep = self.available[self.assignment]
+        k = int(self.available.sum())
+        pose = np.asarray(view.object_pose, float)
+        new = replan_for_robots(
+            self.cfg, self.capture, keep, k, self.rng, pose, frozenset(self.unreachable)
+        )
+        if new is None:
+            lost = ", ".join(view.ids[i] for i in self.lost)
+            detail = (
+                f"robots lost ({lost}): the {k} robots left cannot close the object "
+                f"(the capture needs {len(self.capture.points)})"
+            )
+            return self._fail(view, Reason.ROBOTS_LOST, detail, events)
+        self.loss_replans += 1
+        self.lost_t = view.t
+        self.capture = new
+        self.blocked_ticks = 0
+        intent = self._start(view, pinned=bool(new.walls))
+        intent.events[:0] = events
+        return intent
+
+    def _fail(self, view: FleetView, reason: str, detail: str, events: list) -> Intent:
+        """Fail safe: every robot stopped, the failure event with its detail."""
+        events = events + [
+            ("phase", {"phase": str(Phase.FAILED), "t": view.t}),
+            ("failure", {"reason": str(reason), "t": view.t, "detail": detail}),
+        ]
+        self.failed = True
+        self.failure_reason = reason
+        return Intent(
+            np.zeros((self.n, 2)), Phase.FAILED, events, stop=True, failed=True, reason=reason
+        )
+
     def _start(self, view: FleetView, pinned: bool) -> Intent:
         """Assign robots to the capture set and start the approach (the capture event first)."""
         self.assignment = self._assign(view)
@@ -316,6 +524,7 @@ class CaptureJob:
             "reinforced": self.capture.reinforced,
             "pinned": pinned,
             "wall_contacts": self.capture.walls,
+            "unavailable": [view.ids[i] for i in np.flatnonzero(~self.available)],
         }
         intent = self.inner.plan(view)
         intent.events.insert(0, ("capture", data))
@@ -391,7 +600,8 @@ class CaptureJob:
         fast with ``pinned`` when no set of reachable points holds it."""
         self.blocked_ticks = 0
         pose = np.asarray(view.object_pose, float)
-        new = replan_pinned(self.cfg, self.capture, pose, frozenset(self.unreachable))
+        k = int(self.available.sum())
+        new = replan_pinned(self.cfg, self.capture, pose, frozenset(self.unreachable), k)
         if new is None:
             # a standoff first: an object still sliding along a wall or into a corner may
             # come to rest where the walls help (robots keep their stations meanwhile)
@@ -406,20 +616,13 @@ class CaptureJob:
                 f"robot can reach there holds it with {self.n} robots (object at "
                 f"({x:.2f}, {y:.2f}, {math.degrees(th):.0f}°), at rest, {self.pin_fails} tries)"
             )
-            events = [
-                ("phase", {"phase": str(Phase.FAILED), "t": view.t}),
-                ("failure", {"reason": str(Reason.PINNED), "t": view.t, "detail": detail}),
-            ]
-            self.failed = True
-            return Intent(
-                np.zeros((self.n, 2)), Phase.FAILED, events, stop=True, failed=True,
-                reason=Reason.PINNED,
-            )  # fmt: skip
+            return self._fail(view, Reason.PINNED, detail, [])
         self.replans += 1
         self.capture = new
         return self._start(view, pinned=True)
 
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
+        view = self._parked(view)
         if self.transport is not None:
             return self.transport.safety(view, intent)
         if self.inner is None or self.failed:
@@ -445,6 +648,8 @@ class CaptureJob:
             "reassignments": self.reassignments,
             "wall_replans": self.replans,
             "unreachable_nodes": len(self.unreachable),
+            "robots_lost": [self.cfg.robots[i].id for i in self.lost],
+            "loss_replans": self.loss_replans,
         }
         if self.inner is not None and hasattr(self.inner, "summary"):
             out.update(self.inner.summary())

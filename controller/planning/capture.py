@@ -876,9 +876,12 @@ def plan_capture(
     return describe(prob, res.best, res.evaluations, res.history, reason, violated)
 
 
-def plan_for_fleet(cfg: Any, rng: np.random.Generator | None = None) -> CapturePlan:
+def plan_for_fleet(
+    cfg: Any, rng: np.random.Generator | None = None, max_robots: int | None = None
+) -> CapturePlan:
     """The capture plan for a config: its object, the fleet's largest robot radius, at most as
-    many robots as the fleet has, the ``[capture]`` parameters (``rng`` from capture.seed).
+    many robots as the fleet has (or ``max_robots``: the robots left after some were lost),
+    the ``[capture]`` parameters (``rng`` from capture.seed).
 
     The robots' spacing uses the larger of ``capture.clearance`` and ``approach.safety_margin``:
     the approach's safety filter keeps robot centres ``r_i + r_j + safety_margin`` apart, so
@@ -890,7 +893,7 @@ def plan_for_fleet(cfg: Any, rng: np.random.Generator | None = None) -> CaptureP
         cfg.max_robot_radius,
         dataclasses.replace(params, clearance=clearance),
         rng if rng is not None else np.random.default_rng(cfg.capture.seed),
-        max_robots=len(cfg.robots),
+        max_robots=len(cfg.robots) if max_robots is None else max_robots,
     )
 
 

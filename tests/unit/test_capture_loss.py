@@ -1,0 +1,190 @@
+"""Robot loss and join during the capture (issue 17), tick by tick on hand-made views (no bus,
+no world): an assigned robot lost mid-approach re-plans the capture over the robots left, a
+spare lost is only marked unavailable, too few left fail with ``robots_lost``, a robot back is
+available without its old point, and ``fleet.start_wait`` starts without a robot never seen."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controller.config import ConfigError
+from controller.mission.job import LOST_STALE_S, CaptureJob
+from controller.mission.types import FleetView, Phase, step
+from tests.support.config import base_config_dict, deep_update, make_config
+
+DT = 0.05
+
+
+def job(hold_force: float = 4.0, start_wait: float = 5.0) -> CaptureJob:
+    cfg = make_config(
+        {
+            "sim": {"backend": "ideal"},
+            "capture": {"hold_force": hold_force},
+            "fleet": {"start_wait": start_wait},
+        }
+    )
+    return CaptureJob(cfg)
+
+
+def view(j: CaptureJob, t: float, present=None, stale=None, unseen=()) -> FleetView:
+    n = j.n
+    poses = np.array([r.start for r in j.cfg.robots], float)
+    stale = np.zeros(n, bool) if stale is None else np.asarray(stale, bool)
+    present = np.ones(n, bool) if present is None else np.asarray(present, bool)
+    for i in unseen:  # never seen: no estimate, stale, no liveliness
+        poses[i] = np.nan
+        stale[i], present[i] = True, False
+    obj = np.asarray(j.cfg.object.start, float)
+    return FleetView(
+        t, j.cfg.robot_ids, poses, np.zeros((n, 3)), stale, present, obj, np.zeros(3), None,
+        False,
+    )  # fmt: skip
+
+
+def without(n: int, *gone: int) -> np.ndarray:
+    out = np.ones(n, bool)
+    out[list(gone)] = False
+    return out
+
+
+def kinds(out) -> list[str]:
+    return [k for k, _ in out.events]
+
+
+def started(j: CaptureJob, ticks: int = 3) -> float:
+    """Start the job and run a few approach ticks; the next tick's time."""
+    t = 0.0
+    for _ in range(ticks):
+        out = step(j, view(j, t))
+        t += DT
+    assert out.phase == Phase.APPROACH
+    return t
+
+
+def test_losing_an_assigned_robot_mid_approach_replans_over_the_robots_left():
+    j = job()
+    t = started(j)
+    lost = int(j.assignment[0])
+    out = step(j, view(j, t, present=without(j.n, lost)))
+    assert kinds(out)[:2] == ["robot_lost", "capture"]
+    ev = dict(out.events)
+    assert ev["robot_lost"] == {
+        "t": t, "robot": j.cfg.robots[lost].id, "phase": "approach", "assigned": True,
+    }  # fmt: skip
+    assert lost not in j.assignment and len(set(j.assignment)) == len(j.assignment)
+    assert ev["capture"]["robots"] == [j.cfg.robots[i].id for i in j.assignment]
+    assert j.cfg.robots[lost].id in ev["capture"]["unavailable"]
+    # the same certificates as the first plan: form closure, the hold force held
+    assert j.capture.form_closure and j.capture.hold_capacity >= 1.0
+    assert len(j.capture.points) <= j.n - 1
+    assert out.phase == Phase.APPROACH and not out.failed
+    assert np.all(out.commands[lost] == 0.0)  # a lost robot is told nothing
+    summary = j.summary()
+    assert summary["loss_replans"] == 1 and summary["robots_lost"] == [j.cfg.robots[lost].id]
+
+
+def test_a_stale_robot_is_lost_only_after_the_grace():
+    j = job()
+    t0 = started(j)
+    i = int(j.assignment[1])
+    stale = without(j.n, i) == 0
+    t = t0
+    while t - t0 < LOST_STALE_S - 1e-9:
+        out = step(j, view(j, t, stale=stale))
+        assert "robot_lost" not in kinds(out) and np.all(out.commands[i] == 0.0)
+        t += DT
+    out = step(j, view(j, t, stale=stale))
+    assert kinds(out)[:2] == ["robot_lost", "capture"]
+    assert i not in j.assignment
+
+
+def test_losing_a_spare_only_marks_it_unavailable():
+    j = job(hold_force=0.0)  # the GA's 4 points: two spares
+    t = started(j)
+    before = j.assignment.copy()
+    spare = next(i for i in range(j.n) if i not in before)
+    out = step(j, view(j, t, present=without(j.n, spare)))
+    assert kinds(out) == ["robot_lost"]
+    assert dict(out.events)["robot_lost"]["assigned"] is False
+    assert np.array_equal(j.assignment, before) and not j.available[spare]
+    out = step(j, view(j, t + DT, present=without(j.n, spare)))
+    assert "robot_lost" not in kinds(out)  # reported once
+
+
+def test_losing_too_many_fails_safe_with_robots_lost():
+    j = job()
+    t = started(j)
+    gone = [int(i) for i in j.assignment[:3]]
+    out = step(j, view(j, t, present=without(j.n, *gone)))
+    assert out.failed and out.reason == "robots_lost" and out.phase == Phase.FAILED
+    assert np.all(out.commands == 0.0)
+    detail = dict(out.events)["failure"]["detail"]
+    assert all(j.cfg.robots[i].id in detail for i in gone)
+    assert kinds(out).count("robot_lost") == 3
+    out = step(j, view(j, t + DT))  # they come back: the job stays failed, every robot stopped
+    assert out.failed and out.reason == "robots_lost" and np.all(out.commands == 0.0)
+
+
+def test_a_robot_back_is_available_but_never_gets_its_old_point():
+    j = job()
+    t = started(j)
+    first = int(j.assignment[0])
+    step(j, view(j, t, present=without(j.n, first)))
+    for _ in range(3):  # it comes back: available, no point (nothing to chase)
+        t += DT
+        intent = j.plan(view(j, t))
+        assert first not in j.assignment and np.all(intent.velocities[first] == 0.0)
+        j.safety(view(j, t), intent)
+    assert j.available[first]
+    # another assigned robot is lost: the re-plan needs five robots and may pick it again
+    second = int(j.assignment[0])
+    t += DT
+    out = step(j, view(j, t, present=without(j.n, second)))
+    assert "capture" in kinds(out) and first in j.assignment and second not in j.assignment
+
+
+def test_a_robot_back_emits_joined_once():
+    j = job()
+    t = started(j)
+    first = int(j.assignment[0])
+    step(j, view(j, t, present=without(j.n, first)))
+    out = step(j, view(j, t + DT))
+    assert dict(out.events)["robot_joined"] == {"t": t + DT, "robot": j.cfg.robots[first].id}
+    out = step(j, view(j, t + 2 * DT))
+    assert "robot_joined" not in kinds(out)
+
+
+@pytest.mark.parametrize("hold_force", [0.0, 4.0])
+def test_start_wait_starts_without_a_robot_never_seen(hold_force):
+    j = job(hold_force=hold_force, start_wait=1.0)
+    missing = 2
+    t = 0.0
+    while t < 1.0 - 1e-9:
+        out = step(j, view(j, t, unseen=[missing]))
+        assert out.phase == Phase.PLAN and np.all(out.commands == 0.0)
+        t += DT
+    out = step(j, view(j, t, unseen=[missing]))
+    assert out.phase == Phase.APPROACH and "capture" in kinds(out)
+    assert missing not in j.assignment
+    assert dict(out.events)["capture"]["unavailable"] == [j.cfg.robots[missing].id]
+    assert np.all(np.isfinite(out.commands)) and np.all(out.commands[missing] == 0.0)
+    assert np.any(out.commands != 0.0)
+    out = step(j, view(j, t + DT))  # seen at last: a spare
+    assert "robot_joined" in kinds(out) and j.available[missing]
+    assert missing not in j.assignment
+
+
+def test_every_robot_seen_starts_at_once():
+    j = job(start_wait=100.0)
+    out = step(j, view(j, 0.0))
+    assert out.phase == Phase.APPROACH and dict(out.events)["capture"]["unavailable"] == []
+
+
+def test_start_wait_is_validated_with_its_key_path():
+    from controller.config import parse_config
+
+    data = deep_update(base_config_dict(), {"fleet": {"start_wait": -1.0}})
+    with pytest.raises(ConfigError) as e:
+        parse_config(data, "test")
+    assert e.value.path == "fleet.start_wait"
