@@ -3,10 +3,11 @@
     python -m tests.replay.make_golden capture [transport] [--force]
 
 Each golden log is the dry run of ``tests/replay/data/<name>.toml`` (ideal backend, seeded) on
-a free loopback port, with its run summary beside it (``<name>.json``: what
-``tests/replay/test_golden.py`` compares the replay's metrics and verdict with). A log is only
-written when its run succeeded (``--force``: anyway), when the regression replay of it agrees
-with itself, and when it is under 2 MB.
+a free loopback port, with the mission of ``MISSIONS`` (``capture``: the whole job;
+``transport``: robots already holding the object carry it to its goal), with its run summary
+beside it (``<name>.json``: what ``tests/replay/test_golden.py`` compares the replay's metrics
+and verdict with). A log is only written when its run succeeded (``--force``: anyway), when the
+regression replay of it agrees with itself, and when it is under 2 MB.
 
 When to run it: after a deliberate change of the controller's behaviour (the regression replay
 then fails on the old logs, naming the first tick and robot that changed). Commit the new logs
@@ -31,19 +32,21 @@ from controller.runtime.sweep import on_free_port
 DATA = Path(__file__).resolve().parent / "data"
 MAX_BYTES = 2 * 1024 * 1024
 NAMES = ("capture", "transport")
+# the mission each golden log runs (the transport log: robots already holding the object)
+MISSIONS = {"capture": "capture", "transport": "transport"}
 
 
 def make(name: str, force: bool = False) -> dict:
     cfg = on_free_port(load_config(DATA / f"{name}.toml"))
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / f"{name}.mcap"
-        summary = DryRun(cfg, build_mission(cfg), out).run()
+        summary = DryRun(cfg, build_mission(cfg, MISSIONS[name]), out).run()
         if summary["status"] != "ok" and not force:
             raise SystemExit(f"{name}: the run failed ({summary['failure']}); not written")
         size = out.stat().st_size
         if size > MAX_BYTES:
             raise SystemExit(f"{name}: {size} bytes > {MAX_BYTES}; not written")
-        check = check_log(out)
+        check = check_log(out, mission=MISSIONS[name])
         if not check["ok"]:
             raise SystemExit(f"{name}: the replay of the new log disagrees: {check['message']}")
         shutil.copyfile(out, DATA / f"{name}.mcap")

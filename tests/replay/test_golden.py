@@ -43,6 +43,38 @@ def test_todays_controller_reproduces_the_capture_log(capture_check):
     assert r["max_error"] <= r["tolerance"]
 
 
+def test_todays_controller_reproduces_the_transport_log():
+    """Robots holding a crate carry it to its goal: route, re-arrangement, the SA local planner
+    every interval (seeded), all reproduced command by command."""
+    r = check_log(DATA / "transport.mcap", mission="transport")
+    summary = json.loads((DATA / "transport.json").read_text())
+    assert summary["status"] == "ok" and summary["transported"] is True
+    assert r["ok"], r["message"]
+    assert r["mission"] == "transport" and r["input_mismatches"] == 0
+    assert r["ticks"] == r["logged_ticks"] == summary["ticks"]
+    assert r["compared"] == summary["ticks"] * 6 and r["missing"] == 0
+
+
+def test_a_one_line_change_in_the_transport_planner_is_caught(monkeypatch):
+    # the change: the annealer cools 10 % faster
+    import dataclasses
+
+    from controller.planning import transport
+
+    plan_local = transport.plan_local
+
+    def cooler(state, params, *rest, **kw):
+        return plan_local(
+            state, dataclasses.replace(params, cooling=0.9 * params.cooling), *rest, **kw
+        )
+
+    monkeypatch.setattr(transport, "plan_local", cooler)
+    r = check_log(DATA / "transport.mcap", mission="transport")
+    first = r["first_divergence"]
+    assert not r["ok"] and first is not None
+    assert first["robot"] in {f"r{i}" for i in range(1, 7)} and first["error"] > r["tolerance"]
+
+
 def test_a_one_line_change_in_the_approach_planner_is_caught(monkeypatch, capsys):
     # the change: robots turn at most 90 % of approach.max_turn_deg per tick
     turn = approach.turn_limited

@@ -62,6 +62,11 @@ def holding_starts(cfg_dict: dict[str, Any], n: int) -> list[list[float]]:
 
 def scenario_config(sc: Scenario, port: int | None = None) -> FleetConfig:
     """The config of a scenario, on a free loopback port."""
+    return parse_config(scenario_dict(sc, port), f"scenario:{sc.name}")
+
+
+def scenario_dict(sc: Scenario, port: int | None = None) -> dict[str, Any]:
+    """The config of a scenario as data (what ``scenario_config`` parses)."""
     d = copy.deepcopy(base_config_dict())
     d["world"] = {"bounds": [list(b) for b in sc.bounds], "walls": True}
     d["obstacles"] = [{"polygon": [list(p) for p in o]} for o in sc.obstacles]
@@ -96,4 +101,4 @@ def scenario_config(sc: Scenario, port: int | None = None) -> FleetConfig:
             r["start"] = s
     p = port or free_port()
     d["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{p}"], "connect": []}
-    return parse_config(d, f"scenario:{sc.name}")
+    return d
