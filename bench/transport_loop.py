@@ -226,10 +226,11 @@ def main() -> None:
          "shape": "crate" if s.polygon == CRATE else "L", "fleet": s.kinds}
         for s in suite
     ]  # fmt: skip
-    log(f"suite of {len(suite)} scenarios x {strategies}")
-    out["closed_loop"] = summarise(strategies, suite, run_one)
-    if "sa" in strategies and "serpentine" in strategies:
-        out["sa_vs_serpentine"] = paired(out["closed_loop"], "sa", "serpentine")
+    if suite:  # --scenarios 0: the sweep alone (run it beside the suite on a second core)
+        log(f"suite of {len(suite)} scenarios x {strategies}")
+        out["closed_loop"] = summarise(strategies, suite, run_one)
+        if "sa" in strategies and "serpentine" in strategies:
+            out["sa_vs_serpentine"] = paired(out["closed_loop"], "sa", "serpentine")
     if args.sweep:
         log(f"robustness sweep: {args.sweep} runs x {strategies}")
         sweep = summarise(strategies, sweep_suite(args.sweep), run_one)

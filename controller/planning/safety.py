@@ -14,9 +14,10 @@ The sparsity pattern is built once for N robots and P polygons; each call only u
 (``Ax``, ``q``, ``l``, ``u``) and warm-starts. Differential robots are filtered as single
 integrators at their centre (the mission turns the filtered velocity into (v, wz), driving
 forwards or backwards along its axis); the look-ahead-point model for them is not done yet.
-If the QP is infeasible while some robot is already inside a margin (squeezed between the
-object and a wall, say), its violated rows are relaxed to "no closer" and the QP solved again
-(status ``relaxed``: u = 0 is then feasible, so the robot slides out along the tangent). If it is
+If the QP is infeasible while some robot is already inside its margin to a polygon it is not
+closing in on (squeezed between the object and a wall, say), with ``relax``, those violated
+rows are relaxed to "no closer" and the QP solved again (status ``relaxed``: the robot slides
+out along the tangent). If it is
 still infeasible (or osqp fails), the robots whose constraints are already violated
 stop, the others keep their nominal velocity (speed-capped), and the status says so.
 """
@@ -130,6 +131,7 @@ class SafetyFilter:
         motion: list | None = None,
         overlap: np.ndarray | None = None,
         hold: np.ndarray | None = None,
+        relax: bool = True,
     ) -> FilterResult:
         """Filter nominal world velocities (N, 2) at robot centres (N, 2).
 
@@ -218,13 +220,19 @@ class SafetyFilter:
         res = self._prob.solve(raise_error=False)
         status = str(res.info.status)
         stopped = np.zeros(n, bool)
-        if not _solved(res) and (lo[: len(lo_pair) + lo_poly.size] > 0).any():
-            # a robot already inside a margin, squeezed (the object pushing it against a wall or
-            # another robot): recovering at gamma is impossible, so its violated rows only ask
-            # "no closer" (u = 0 is then feasible) and it slides out along the tangent
-            k = len(lo_pair) + lo_poly.size
+        # rows a squeezed robot may relax: inside its margin to a polygon it is not closing
+        # in on (a robot in contact with the object stops as before)
+        squeezed = lo_poly > 0
+        if exempt is not None:
+            squeezed &= ~np.asarray(exempt, bool)[:, : lo_poly.shape[1]]
+        if relax and not _solved(res) and squeezed.any():
+            # a robot already inside its margin to the object or an obstacle, squeezed (the
+            # object pushing it against a wall): recovering at gamma is impossible, so those
+            # rows only ask "no closer" and it slides out along the tangent. Robot-robot rows
+            # are not relaxed (two robots inside each other's margin still stop).
             relaxed = lo.copy()
-            relaxed[:k] = np.minimum(relaxed[:k], 0.0)
+            rows = relaxed[len(lo_pair) : len(lo_pair) + lo_poly.size].reshape(lo_poly.shape)
+            rows[squeezed] = 0.0
             self._prob.update(l=relaxed)
             res = self._prob.solve(raise_error=False)
             status = "relaxed" if _solved(res) else str(res.info.status)
