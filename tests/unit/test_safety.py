@@ -77,19 +77,17 @@ def test_warm_equals_cold():
         p = p + 0.05 * ra.velocities
 
 
-def test_robots_deep_in_each_others_margin_come_no_closer_and_the_rest_go_on():
+def test_infeasible_stops_the_robots_concerned():
     # two robots already deep inside each other's margin: no bounded velocity restores it now,
-    # so their rows are relaxed to "no closer" (not a stop): they slide apart or stay
+    # and robot-robot rows are never relaxed: both stop, the third goes on
     r = np.full(3, 0.1)
     flt = SafetyFilter(r, np.full(3, 0.4), BOUNDS, 0, margin=0.05)
     p = np.array([[5.0, 5.0], [5.05, 5.0], [8.0, 8.0]])
-    res = flt.filter(p, np.array([[0.3, 0.1], [-0.3, 0.1], [0.2, 0.1]]), [])
-    assert res.status == "relaxed"
-    assert not res.stopped.any()
-    closing = np.dot(p[1] - p[0], res.velocities[1] - res.velocities[0])
-    assert closing >= -1e-4  # no closer (to the QP tolerance)
-    assert np.allclose(res.velocities[:2, 1], 0.1, atol=1e-3)  # the free direction is kept
-    assert np.allclose(res.velocities[2], [0.2, 0.1], atol=1e-3)
+    res = flt.filter(p, np.array([[0.3, 0.0], [-0.3, 0.0], [0.2, 0.1]]), [])
+    assert not res.status.startswith("solved")
+    assert res.stopped.tolist() == [True, True, False]
+    assert np.allclose(res.velocities[:2], 0.0)
+    assert np.allclose(res.velocities[2], [0.2, 0.1])
 
 
 def test_a_robot_squeezed_between_the_object_and_a_wall_slides_out():
@@ -103,5 +101,10 @@ def test_a_robot_squeezed_between_the_object_and_a_wall_slides_out():
                     [wall_gap + 0.12, 6.0]])  # fmt: skip
     p = np.array([[wall_gap, 5.0]])
     res = flt.filter(p, np.array([[0.0, 0.3]]), [box], motion=[(-0.2, 0.0, 0.0)])
-    assert not res.stopped.any()
+    assert res.status == "relaxed" and not res.stopped.any()
     assert res.velocities[0, 1] > 0.2  # it slides along the wall instead of freezing
+    assert res.velocities[0, 0] >= -1e-4  # and comes no closer to the wall
+    # without the relaxation (transport) the same robot stops
+    stop = SafetyFilter(r, np.full(1, 0.4), BOUNDS, 1, margin=0.05)
+    res = stop.filter(p, np.array([[0.0, 0.3]]), [box], motion=[(-0.2, 0.0, 0.0)], relax=False)
+    assert res.stopped.all() and np.allclose(res.velocities, 0.0)
