@@ -283,7 +283,11 @@ class Agent:
         if self.core.must_stop(now) and not self._stopped_sent:
             if self.core.expired(now) and not self.core.estop and self.core.last_cmd is not None:
                 self.core.counters.watchdog_stops += 1
-                log.info("robot %s: watchdog stop (no command)", self.params.robot_id)
+                log.info(
+                    "robot %s: watchdog stop (no command for %.3f s)",
+                    self.params.robot_id,
+                    now - self.core.last_cmd_time,
+                )
             self.driver.stop()
             self._stopped_sent = True
 
