@@ -284,8 +284,10 @@ def main() -> None:
                 "heavy for 2 shared cores)",
                 "latency": "command stamp t (tick time, before the stages) to the agent's "
                 "receive time, same clock",
-                "replan": "not measured: the capture mission emits no robot_lost event on this "
-                "branch (only the transport mission does, after the arrest); detection only",
+                "replan": "not measured here (the hold mission has nothing to re-plan): the "
+                "capture re-plans on the tick a robot is seen lost (robot_lost, then capture); "
+                "tests/scenarios/test_capture_loss_scenario.py: link cut at 3.00 s sim time, "
+                "re-planned at 3.05 s",
                 "sizes": results,
             }
         )
