@@ -21,6 +21,7 @@ imports nothing of the controller but the wire contract.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 
@@ -69,6 +70,9 @@ class RemoteSimDriver:
 
     # -- link
     def connect(self, timeout: float) -> None:
+        """The handshake: the world serves this robot (its first pose sample arrived) and hears
+        its commands (the command publisher matches the world's subscriber)."""
+        deadline = self._mono() + max(0.0, timeout)
         item = self._poses.get(timeout=max(0.0, timeout))
         if item is None:
             raise ConnectTimeout(
@@ -76,8 +80,20 @@ class RemoteSimDriver:
                 f"within {timeout:g} s (is `fleet world` running with this robot?)"
             )
         self._take([item])
+        wait = threading.Event()
+        while not self._pub.matching():
+            if self._mono() >= deadline:
+                raise ConnectTimeout(
+                    f"robot {self.robot_id!r}: the world process does not take commands on "
+                    f"{self._pub.key} (within {timeout:g} s)"
+                )
+            wait.wait(0.01)  # polling the match (a handshake with a deadline)
         self._connected = True
         self._closed = False
+
+    def samples_seen(self) -> int:
+        """Pose samples received so far, taken or still queued (a lockstep handshake)."""
+        return self.received + self._poses.qsize()
 
     def _take(self, items) -> None:
         for item in items:

@@ -67,6 +67,18 @@ class WorldServer:
         self.failsafe_stops = 0  # robots stopped by their setpoint timeout
         self.samples = 0  # pose samples published (robots and object)
 
+    def commands_seen(self) -> int:
+        """Command samples received so far, applied or still queued (a lockstep handshake)."""
+        return self.commands + sum(box.qsize() for box in self._cmds.values())
+
+    def published(self, robot_id: str) -> int:
+        """Pose samples of ``robot_id`` published so far."""
+        return self._seq[robot_id]
+
+    def serving(self, robot_id: str) -> bool:
+        """Whether some agent listens to ``robot_id``'s samples (the publisher matches)."""
+        return self._poses[robot_id].matching()
+
     def apply_commands(self, mono: float) -> None:
         """Each robot's latest applied command; a silent stream past its ttl stops the robot."""
         w = self.hub.world
