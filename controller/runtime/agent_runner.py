@@ -82,7 +82,8 @@ def run_agent(
     A ``mavlink`` robot connects to its vehicle at its url; a ``sim`` robot runs alone in a
     real-time stand-in world of its own, or, with ``sim.world = "process"``, is the robot of
     that id in the shared ``fleet world`` process (reached over the bus). Exit 1 when the robot
-    does not answer or its link is lost (the robot is stopped first). ``strict``: a MAVLink
+    does not answer or its link is lost (the robot is stopped first; a robot of the world process
+    instead waits, stopped, for the world to come back). ``strict``: a MAVLink
     vehicle whose own setpoint timeout is longer than ``max_vehicle_timeout`` (or unreadable)
     is refused (exit 1).
     """
@@ -134,7 +135,9 @@ def _run_remote(
         except DriverError as exc:
             return 1, str(exc)
         try:
-            return _serve(cfg, robot, bus, driver, stop, duration, wall0, None)
+            # the world going silent (restarted, or starved of CPU) is not the end of the agent:
+            # it reports link_lost, holds the robot stopped, and link_restored when it is back
+            return _serve(cfg, robot, bus, driver, stop, duration, wall0, None, exit_on_loss=False)
         finally:
             driver.close()
 
@@ -148,8 +151,11 @@ def _serve(
     duration: float,
     wall0: float,
     hub: SimHub | None,
+    *,
+    exit_on_loss: bool = True,
 ) -> tuple[int, str]:
-    """The agent's wall-clock loop until ``stop``, ``duration`` or a lost link."""
+    """The agent's wall-clock loop until ``stop``, ``duration`` or (``exit_on_loss``) a lost
+    link."""
     from controller.io.ratekeeper import Ratekeeper
 
     params = AgentParams(robot.id, cfg.fleet.name, cfg.fleet.cmd_ttl, cfg.fleet.max_clock_skew)
@@ -176,7 +182,7 @@ def _serve(
         if hub is not None:
             hub.advance_to(now - wall0)
         agent.step(now)
-        if not agent.link_ok:
+        if exit_on_loss and not agent.link_ok:
             return 1, "link lost: robot stopped"
         if duration and now - wall0 >= duration:
             break

@@ -54,7 +54,7 @@ class WorldServer:
         self.sigma = (sigma_xy, sigma_theta)
         ids = tuple(hub.robot_sensors)
         self.robot_ids = ids
-        self._cmds = {rid: bus.subscribe_topic("world_cmd", id=rid) for rid in ids}
+        self._cmds = bus.subscribe_topic("world_cmd")  # every robot's: the id is in the key
         self._poses = {rid: bus.publisher("world_pose", id=rid) for rid in ids}
         self._object = bus.publisher("object_pose")
         self._truth_robot = {rid: bus.publisher("truth_robot", id=rid) for rid in ids}
@@ -69,7 +69,7 @@ class WorldServer:
 
     def commands_seen(self) -> int:
         """Command samples received so far, applied or still queued (a lockstep handshake)."""
-        return self.commands + sum(box.qsize() for box in self._cmds.values())
+        return self.commands + self._cmds.qsize()
 
     def published(self, robot_id: str) -> int:
         """Pose samples of ``robot_id`` published so far."""
@@ -81,21 +81,20 @@ class WorldServer:
 
     def apply_commands(self, mono: float) -> None:
         """Each robot's latest applied command; a silent stream past its ttl stops the robot."""
+        latest: dict[str, wire.Twist2D] = {}
+        for item in self._cmds.drain():
+            parsed = wire.parse_key(item.key)
+            if parsed is not None and parsed.id in self._expires:
+                latest[parsed.id] = item.msg
+                self.commands += 1
         w = self.hub.world
-        for rid, box in self._cmds.items():
-            items = box.drain()
-            if items:
-                cmd: wire.Twist2D = items[-1].msg
-                self.commands += len(items)
-                w.set_command(rid, cmd.vx, cmd.vy, cmd.wz)
-                moving = cmd.vx != 0.0 or cmd.vy != 0.0 or cmd.wz != 0.0
-                # a stopped robot has nothing to time out
-                self._expires[rid] = (
-                    (mono + cmd.ttl if cmd.ttl > 0 else math.inf) if moving else None
-                )
-                continue
-            due = self._expires[rid]
-            if due is not None and mono > due:
+        for rid, cmd in latest.items():
+            w.set_command(rid, cmd.vx, cmd.vy, cmd.wz)
+            moving = cmd.vx != 0.0 or cmd.vy != 0.0 or cmd.wz != 0.0
+            # a stopped robot has nothing to time out
+            self._expires[rid] = (mono + cmd.ttl if cmd.ttl > 0 else math.inf) if moving else None
+        for rid, due in self._expires.items():
+            if rid not in latest and due is not None and mono > due:
                 w.set_command(rid, 0.0, 0.0, 0.0)
                 self._expires[rid] = None
                 self.failsafe_stops += 1
