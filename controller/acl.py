@@ -16,7 +16,9 @@ The profile (``default_permission: deny``):
   ``robot/X/event``, declare only its own ``alive/robot/X`` token, answer only for its own
   latched e-stop (``estop/state/robot/X``), and is sent only
   ``robot/X/cmd`` and ``estop`` publications (it receives nothing of another robot's
-  commands, whatever it subscribes to).
+  commands, whatever it subscribes to); with ``sim.world = "process"`` a ``sim`` robot's agent
+  also puts ``sim/world/X/cmd`` and is sent ``sim/world/X/pose`` (its link to ``fleet world``,
+  which runs as the controller's identity).
 
 Blocked traffic is dropped silently (zenoh logs nothing per message). Pure: no I/O but
 :func:`write_acl`.
@@ -83,12 +85,18 @@ def acl_for(config: FleetConfig) -> dict[str, Any]:
         )
     for r in config.robots:
         own_in, own_token, own_out = f"robot-{r.id}-in", f"robot-{r.id}-token", f"robot-{r.id}-out"
+        # a sim robot of the shared `fleet world` process: its agent puts the command it
+        # applies and is sent that robot's samples (only when the config rehearses that way)
+        remote = config.sim.world == "process" and r.driver == "sim"
+        world_in = [wire.key("world_cmd", fleet, id=r.id)] if remote else []
+        world_out = [wire.key("world_pose", fleet, id=r.id)] if remote else []
         rules += [
             _rule(
                 own_in,
                 ["put"],
                 ["ingress"],
-                [wire.key("robot_pose", fleet, id=r.id), wire.key("robot_event", fleet, id=r.id)],
+                [wire.key("robot_pose", fleet, id=r.id), wire.key("robot_event", fleet, id=r.id)]
+                + world_in,
             ),
             _rule(
                 own_token, ["liveliness_token"], ["ingress"], [wire.alive_key(fleet, "robot", r.id)]
@@ -103,7 +111,7 @@ def acl_for(config: FleetConfig) -> dict[str, Any]:
                 own_out,
                 ["put"],
                 ["egress"],
-                [wire.key("robot_cmd", fleet, id=r.id), wire.key("estop", fleet)],
+                [wire.key("robot_cmd", fleet, id=r.id), wire.key("estop", fleet)] + world_out,
             ),
         ]
         subjects.append({"id": f"robot-{r.id}", "usernames": [r.zenoh_user]})

@@ -26,6 +26,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("daemon",), "daemon", "the controller on the lab network"),
     (("driver",), "driver", "one robot's agent: its driver bound to the bus"),
     (("hub",), "hub", "the fleet's zenoh hub, keeper of the latched e-stop"),
+    (("world",), "world", "the shared stand-in world as its own process (lab rehearsal)"),
     (("status",), "remote", "query a running daemon's status"),
     (("estop",), "remote", "engage the latched emergency stop"),
     (("resume",), "remote", "release the emergency stop"),

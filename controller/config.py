@@ -45,6 +45,9 @@ TRANSPORT_STRATEGIES = ("sa", "serpentine", "downhill")
 TRANSPORT_SCHEDULES = ("geometric", "logarithmic")
 TRANSPORT_INITIAL = ("lp", "hold", "random")
 SIM_BACKENDS = ("pybullet", "ideal")
+# where a `fleet driver` of a `sim` robot finds its world: "solo" (a world of its own, that robot
+# alone) or "process" (the shared `fleet world` process, over the bus)
+SIM_WORLDS = ("solo", "process")
 FILTERS = ("ekf", "ukf")
 ZENOH_MODES = ("peer", "client", "router")
 # access-control profiles generated from the config (controller/acl.py); else zenoh.acl is a file
@@ -336,6 +339,7 @@ class PoseNoise:
 @dataclass(frozen=True, kw_only=True)
 class SimSection:
     backend: str = _rule("pybullet", choices=SIM_BACKENDS)
+    world: str = _rule("solo", choices=SIM_WORLDS)  # what `fleet driver` attaches a sim robot to
     timestep: float = _rule(1.0 / 240.0, gt=0, max=1)
     seed: int = _rule(0, min=0)
     pose_noise: PoseNoise = _rule(PoseNoise())

@@ -390,6 +390,10 @@ TOPICS: dict[str, Topic] = {
         Topic("sim_done", "fleet/{fleet}/sim/done", TickDone, 20.0),
         Topic("truth_robot", "fleet/{fleet}/sim/truth/robot/{id}", PoseMeasurement, 20.0),
         Topic("truth_object", "fleet/{fleet}/sim/truth/object", PoseMeasurement, 20.0),
+        # the shared stand-in world process (``fleet world``) and the ``sim`` agents attached to
+        # it: the velocity each agent applies to its robot, and that robot's sensor samples
+        Topic("world_cmd", "fleet/{fleet}/sim/world/{id}/cmd", Twist2D, 20.0),
+        Topic("world_pose", "fleet/{fleet}/sim/world/{id}/pose", PoseMeasurement, 30.0),
         Topic("alive", "fleet/{fleet}/alive/{role}/{id}", Message, 0.0, logged=False),
     )
 }

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -45,6 +46,28 @@ def _open_until(stop: threading.Event, cfg: FleetConfig, who: str) -> Bus | None
     return None
 
 
+def _local_driver(cfg: FleetConfig, robot, wall0: float, strict: bool):
+    """The driver of a robot that needs no bus to connect: a MAVLink vehicle at its url, or a
+    ``sim`` robot alone in a real-time world of its own (``sim.world = "solo"``). Returns
+    (driver, the solo world's hub or None)."""
+    from drivers.mavlink.driver import MavlinkDriver
+
+    if robot.driver == "mavlink":
+        return MavlinkDriver(robot, clock=time.time, strict=strict), None
+    solo = dataclasses.replace(cfg, robots=(robot,))
+    hub = make_hub(solo)
+    noise = cfg.sim.pose_noise
+    driver = SimDriver(
+        hub, robot.id, capabilities_of(robot), noise.xy, noise.theta, time_offset=wall0
+    )
+    return driver, hub
+
+
+def uses_world_process(cfg: FleetConfig, robot) -> bool:
+    """Whether ``fleet driver`` attaches this robot to the shared ``fleet world`` process."""
+    return robot.driver == "sim" and cfg.sim.world == "process"
+
+
 def run_agent(
     cfg: FleetConfig,
     robot_id: str,
@@ -57,72 +80,110 @@ def run_agent(
     """``fleet driver``: one robot's agent on the wall clock. Returns (exit status, message).
 
     A ``mavlink`` robot connects to its vehicle at its url; a ``sim`` robot runs alone in a
-    real-time stand-in world of its own. Exit 1 when the robot does not answer or its link is
-    lost (the robot is stopped first). ``strict``: a MAVLink vehicle whose own setpoint timeout
-    is longer than ``max_vehicle_timeout`` (or unreadable) is refused (exit 1).
+    real-time stand-in world of its own, or, with ``sim.world = "process"``, is the robot of
+    that id in the shared ``fleet world`` process (reached over the bus). Exit 1 when the robot
+    does not answer or its link is lost (the robot is stopped first; a robot of the world process
+    instead waits, stopped, for the world to come back). ``strict``: a MAVLink
+    vehicle whose own setpoint timeout is longer than ``max_vehicle_timeout`` (or unreadable)
+    is refused (exit 1).
     """
-    import dataclasses
-
-    from controller.io.ratekeeper import Ratekeeper
     from drivers.base import DriverError
-    from drivers.mavlink.driver import MavlinkDriver
 
     robot = cfg.robot(robot_id)
-    hub: SimHub | None = None
     # Stamps are wall-clock seconds (time.time): the daemon may run on another computer, and
     # NTP keeps lab machines within milliseconds; monotonic clocks are not comparable across them.
     wall0 = time.time()
-    if robot.driver == "mavlink":
-        driver = MavlinkDriver(robot, clock=time.time, strict=strict)
-    else:
-        solo = dataclasses.replace(cfg, robots=(robot,))
-        hub = make_hub(solo)
-        noise = cfg.sim.pose_noise
-        driver = SimDriver(
-            hub, robot.id, capabilities_of(robot), noise.xy, noise.theta, time_offset=wall0
-        )
+    if uses_world_process(cfg, robot):
+        return _run_remote(cfg, robot, stop, duration, connect_timeout, wall0)
+    driver, hub = _local_driver(cfg, robot, wall0, strict)
     try:
         driver.connect(timeout=connect_timeout)
     except DriverError as exc:
         return 1, str(exc)
-    code, message = 0, ""
     try:
         bus = _open_until(stop, cfg, robot_id)
         if bus is None:
             return 0, ""
         with bus:
-            params = AgentParams(
-                robot.id, cfg.fleet.name, cfg.fleet.cmd_ttl, cfg.fleet.max_clock_skew
-            )
-            agent = Agent(bus, driver, params)
-            # the latched e-stop first: a robot started after an e-stop comes up stopped
-            if not agent.sync_latch(LATCH_WAIT):
-                log.warning("robot %s: nobody answered the e-stop latch query", robot.id)
-            log.info(
-                "robot %s: agent up (%s driver), e-stop %s",
-                robot.id,
-                robot.driver,
-                "ENGAGED" if agent.core.estop else "off",
-            )
-            agent.announce(time.time())
-            rk = Ratekeeper(max(cfg.fleet.rate_hz, 20.0))
-            next_latch = time.monotonic() + LATCH_EVERY
-            while not stop.is_set():
-                rk.keep_time()
-                now = time.time()
-                if time.monotonic() >= next_latch:  # re-read: an e-stop missed while cut off
-                    agent.request_latch()
-                    next_latch = time.monotonic() + LATCH_EVERY
-                if hub is not None:
-                    hub.advance_to(now - wall0)
-                agent.step(now)
-                if not agent.link_ok:
-                    code, message = 1, "link lost: robot stopped"
-                    break
-                if duration and now - wall0 >= duration:
-                    break
+            return _serve(cfg, robot, bus, driver, stop, duration, wall0, hub)
     finally:
         driver.close()
         if hub is not None:
             hub.world.close()
-    return code, message
+
+
+def _run_remote(
+    cfg: FleetConfig,
+    robot,
+    stop: threading.Event,
+    duration: float,
+    connect_timeout: float,
+    wall0: float,
+) -> tuple[int, str]:
+    """A ``sim`` robot of the shared world process: the bus first (the link to the world runs
+    over it), then the driver's handshake (the world's first pose sample for this robot)."""
+    from drivers.base import DriverError
+    from drivers.remote_sim import RemoteSimDriver
+
+    bus = _open_until(stop, cfg, robot.id)
+    if bus is None:
+        return 0, ""
+    with bus:
+        driver = RemoteSimDriver(bus, robot.id, capabilities_of(robot), clock=time.time)
+        try:
+            driver.connect(timeout=connect_timeout)
+        except DriverError as exc:
+            return 1, str(exc)
+        try:
+            # the world going silent (restarted, or starved of CPU) is not the end of the agent:
+            # it reports link_lost, holds the robot stopped, and link_restored when it is back
+            return _serve(cfg, robot, bus, driver, stop, duration, wall0, None, exit_on_loss=False)
+        finally:
+            driver.close()
+
+
+def _serve(
+    cfg: FleetConfig,
+    robot,
+    bus: Bus,
+    driver,
+    stop: threading.Event,
+    duration: float,
+    wall0: float,
+    hub: SimHub | None,
+    *,
+    exit_on_loss: bool = True,
+) -> tuple[int, str]:
+    """The agent's wall-clock loop until ``stop``, ``duration`` or (``exit_on_loss``) a lost
+    link."""
+    from controller.io.ratekeeper import Ratekeeper
+
+    params = AgentParams(robot.id, cfg.fleet.name, cfg.fleet.cmd_ttl, cfg.fleet.max_clock_skew)
+    agent = Agent(bus, driver, params)
+    # the latched e-stop first: a robot started after an e-stop comes up stopped
+    if not agent.sync_latch(LATCH_WAIT):
+        log.warning("robot %s: nobody answered the e-stop latch query", robot.id)
+    log.info(
+        "robot %s: agent up (%s driver%s), e-stop %s",
+        robot.id,
+        robot.driver,
+        ", shared world process" if hub is None and robot.driver == "sim" else "",
+        "ENGAGED" if agent.core.estop else "off",
+    )
+    agent.announce(time.time())
+    rk = Ratekeeper(max(cfg.fleet.rate_hz, 20.0))
+    next_latch = time.monotonic() + LATCH_EVERY
+    while not stop.is_set():
+        rk.keep_time()
+        now = time.time()
+        if time.monotonic() >= next_latch:  # re-read: an e-stop missed while cut off
+            agent.request_latch()
+            next_latch = time.monotonic() + LATCH_EVERY
+        if hub is not None:
+            hub.advance_to(now - wall0)
+        agent.step(now)
+        if exit_on_loss and not agent.link_ok:
+            return 1, "link lost: robot stopped"
+        if duration and now - wall0 >= duration:
+            break
+    return 0, ""

@@ -1,13 +1,15 @@
 """One contract suite for every driver adapter (drivers.base.RobotDriver).
 
-Each adapter joins through a factory in ``ADAPTERS`` that returns a ``Rig``: a connected driver
-for an omni or a differential robot, an ``advance(seconds)`` that moves time on the robot's side,
-and a ``close``. Everything here is what the agent relies on.
+Each adapter (the sim driver on both backends, MAVLink, and the remote sim driver of the shared
+``fleet world`` process) joins through a factory in ``ADAPTERS`` that returns a ``Rig``: a
+connected driver for an omni or a differential robot, an ``advance(seconds)`` that moves time
+on the robot's side, and a ``close``. Everything here is what the agent relies on.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -54,6 +56,60 @@ def _sim_rig(backend: str, kind: str) -> Rig:
     return Rig(drv, advance, world.close, lambda: SimDriver(hub, "nobody", caps))
 
 
+def _remote_rig(backend: str, kind: str) -> Rig:
+    """The shared world process's adapter: the world's side (``WorldServer``) on a listening
+    zenoh session, the ``RemoteSimDriver`` on a client session, over loopback. ``advance`` is a
+    lockstep: the world takes every command sent, steps, publishes, and the driver holds every
+    sample before it returns (handshakes with deadlines, no sleeps)."""
+    from controller.io.bus import Bus
+    from controller.runtime.world import WorldServer
+    from drivers.remote_sim import RemoteSimDriver
+    from sim_backend.factory import make_world
+    from tests.support.wait import wait_for
+
+    cfg = make_config(
+        {
+            "object": {"motion": {"kind": "static"}, "start": [8.0, 8.0, 0.0]},
+            "sim": {"backend": backend},
+        }
+    )
+    world = make_world(cfg)
+    hub = SimHub(
+        world, {r.id: PerfectSensor(50) for r in cfg.robots}, PerfectSensor(50), cfg.sim.timestep
+    )
+    world_bus = Bus(cfg.zenoh, cfg.fleet.name)
+    agent_bus = Bus(
+        cfg.zenoh, cfg.fleet.name, mode="client", listen=[], connect=list(cfg.zenoh.listen)
+    )
+    server = WorldServer(world_bus, hub, 0.0, 0.0, 0.0)
+    rid = "r1" if kind == "omni" else "r3"
+    r = cfg.robot(rid)
+    caps = Capabilities(r.kind, r.kind == "omni", r.max_speed, r.max_yaw_rate, r.radius)
+
+    def driver(robot_id: str) -> RemoteSimDriver:
+        return RemoteSimDriver(agent_bus, robot_id, caps, clock=lambda: hub.t)
+
+    drv = driver(rid)
+    wait_for(lambda: server.serving(rid), 10, "the driver's subscription at the world")
+    server.publish_samples()  # the t = 0 samples: the driver's connect handshake
+    drv.connect(timeout=5.0)
+
+    def advance(dt: float) -> None:
+        wait_for(lambda: server.commands_seen() >= drv.sent, 5, "the commands at the world")
+        server.apply_commands(time.monotonic())
+        hub.advance_to(hub.t + dt)
+        server.publish_samples()
+        wait_for(lambda: drv.samples_seen() >= server.published(rid), 5, "the samples")
+
+    def close() -> None:
+        drv.close()
+        agent_bus.close()
+        world_bus.close()
+        world.close()
+
+    return Rig(drv, advance, close, lambda: driver("nobody"))
+
+
 def _mavlink_rig(kind: str) -> Rig:
     """An emulated MAVLink rover on loopback UDP: px4 (holonomic) for omni, ardurover for diff."""
     from drivers.mavlink.driver import MavlinkDriver
@@ -84,6 +140,7 @@ ADAPTERS: dict[str, Callable[[str], Rig]] = {
     "ideal": lambda kind: _sim_rig("ideal", kind),
     "pybullet": lambda kind: _sim_rig("pybullet", kind),
     "mavlink": _mavlink_rig,
+    "remote-ideal": lambda kind: _remote_rig("ideal", kind),
 }
 
 

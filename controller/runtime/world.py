@@ -1,0 +1,214 @@
+"""``fleet world``: the shared stand-in world as its own process, for a lab rehearsal.
+
+One world (``sim.backend``: pybullet or ideal) with every ``sim`` robot of the config and the
+object, paced on the wall clock (real time). On the bus it plays what a lab's hardware would:
+
+- the motion-capture system: the object's measured pose on ``object/pose`` (the sensors' noise,
+  dropouts and outliers at ``sim.object_pose_rate_hz``, stamped in the lab's clock domain: wall
+  time, like the daemon's and the agents' stamps);
+- every ``sim`` robot: it takes the command the robot's agent applies on
+  ``sim/world/<id>/cmd`` (the agent's ``RemoteSimDriver``; the agent keeps its watchdog, e-stop
+  and command gate) and puts the robot's measured pose back on ``sim/world/<id>/pose``; a robot
+  whose command stream is silent for the command's ``ttl`` is stopped (the vehicle's own
+  setpoint timeout);
+- ground truth on ``sim/truth/**`` at ``fleet.rate_hz`` (scoring and logs only).
+
+The world listens to nothing else: the object obeys its ``[object] motion`` and give-up rule
+and physics decides contacts, whatever the controller says. Its session joins a ``fleet hub``
+(or a listening daemon) on ``zenoh.listen``, or listens there itself when nobody does, so the
+agents and a restarted daemon keep meeting through it. It declares ``alive/world/main``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import sys
+import threading
+import time
+
+from controller import wire
+from controller.config import FleetConfig
+from controller.io.ratekeeper import Ratekeeper
+from controller.runtime.daemon import open_daemon_bus
+from controller.runtime.wiring import make_hub
+from sim_backend.hub import SimHub
+
+log = logging.getLogger(__name__)
+
+MIN_LOOP_HZ = 50.0  # the world's I/O loop: commands in, samples out, at least this often
+HELD_UP = 0.25  # s: a loop iteration later than this is reported (samples went out late)
+
+
+class WorldServer:
+    """The world's side of the bus: applied commands in, sensor samples and truth out.
+
+    Time is passed in: ``time_offset`` (s) is added to sim time in every stamp (the wall-clock
+    instant of sim time 0), ``mono`` (s, monotonic) times the vehicles' setpoint timeouts."""
+
+    def __init__(self, bus, hub: SimHub, time_offset: float, sigma_xy: float, sigma_theta: float):
+        self.bus = bus
+        self.hub = hub
+        self.offset = time_offset
+        self.sigma = (sigma_xy, sigma_theta)
+        ids = tuple(hub.robot_sensors)
+        self.robot_ids = ids
+        self._cmds = bus.subscribe_topic("world_cmd")  # every robot's: the id is in the key
+        self._poses = {rid: bus.publisher("world_pose", id=rid) for rid in ids}
+        self._object = bus.publisher("object_pose")
+        self._truth_robot = {rid: bus.publisher("truth_robot", id=rid) for rid in ids}
+        self._truth_object = bus.publisher("truth_object")
+        self._expires: dict[str, float | None] = dict.fromkeys(ids)
+        self._seq = dict.fromkeys(ids, 0)
+        self._object_seq = 0
+        self._truth_seq = 0
+        self.commands = 0  # command samples received
+        self.failsafe_stops = 0  # robots stopped by their setpoint timeout
+        self.samples = 0  # pose samples published (robots and object)
+
+    def commands_seen(self) -> int:
+        """Command samples received so far, applied or still queued (a lockstep handshake)."""
+        return self.commands + self._cmds.qsize()
+
+    def published(self, robot_id: str) -> int:
+        """Pose samples of ``robot_id`` published so far."""
+        return self._seq[robot_id]
+
+    def serving(self, robot_id: str) -> bool:
+        """Whether some agent listens to ``robot_id``'s samples (the publisher matches)."""
+        return self._poses[robot_id].matching()
+
+    def apply_commands(self, mono: float) -> None:
+        """Each robot's latest applied command; a silent stream past its ttl stops the robot."""
+        latest: dict[str, wire.Twist2D] = {}
+        for item in self._cmds.drain():
+            parsed = wire.parse_key(item.key)
+            if parsed is not None and parsed.id in self._expires:
+                latest[parsed.id] = item.msg
+                self.commands += 1
+        w = self.hub.world
+        for rid, cmd in latest.items():
+            w.set_command(rid, cmd.vx, cmd.vy, cmd.wz)
+            moving = cmd.vx != 0.0 or cmd.vy != 0.0 or cmd.wz != 0.0
+            # a stopped robot has nothing to time out
+            self._expires[rid] = (mono + cmd.ttl if cmd.ttl > 0 else math.inf) if moving else None
+        for rid, due in self._expires.items():
+            if rid not in latest and due is not None and mono > due:
+                w.set_command(rid, 0.0, 0.0, 0.0)
+                self._expires[rid] = None
+                self.failsafe_stops += 1
+                log.warning("robot %s: no command from its agent: stopped (setpoint timeout)", rid)
+
+    def _pose(self, t: float, seq: int, x: float, y: float, th: float) -> wire.PoseMeasurement:
+        return wire.PoseMeasurement(
+            t=t + self.offset,
+            seq=seq,
+            x=x,
+            y=y,
+            theta=th,
+            sigma_xy=self.sigma[0],
+            sigma_theta=self.sigma[1],
+            source="sim",
+        )
+
+    def publish_samples(self) -> int:
+        """Every sensor sample taken since the last call; returns how many."""
+        n = 0
+        for rid, pub in self._poses.items():
+            for t, x, y, th in self.hub.take_robot(rid):
+                self._seq[rid] += 1
+                pub.put(self._pose(t, self._seq[rid], x, y, th))
+                n += 1
+        for t, x, y, th in self.hub.take_object():
+            self._object_seq += 1
+            self._object.put(self._pose(t, self._object_seq, x, y, th))
+            n += 1
+        self.samples += n
+        return n
+
+    def publish_truth(self) -> None:
+        """Ground truth of every robot and the object at the world's time."""
+        w = self.hub.world
+        self._truth_seq += 1
+        t = self.hub.t + self.offset
+
+        def truth(pose) -> wire.PoseMeasurement:
+            x, y, th = (float(v) for v in pose)
+            return wire.PoseMeasurement(
+                t=t, seq=self._truth_seq, x=x, y=y, theta=th, sigma_xy=0.0, sigma_theta=0.0,
+                source="truth",
+            )  # fmt: skip
+
+        for rid, pub in self._truth_robot.items():
+            pub.put(truth(w.robot_pose(rid)))
+        self._truth_object.put(truth(w.object_pose()))
+
+
+def world_config(cfg: FleetConfig) -> FleetConfig:
+    """The config of the shared world: its ``sim`` robots (a MAVLink robot is a real vehicle,
+    not a body of the stand-in world)."""
+    return dataclasses.replace(cfg, robots=tuple(r for r in cfg.robots if r.driver == "sim"))
+
+
+def run_world(cfg: FleetConfig, stop: threading.Event, duration: float = 0.0) -> int:
+    """Serve the world until ``stop`` (or ``duration`` s of wall time). Exit 0."""
+    hub = make_hub(world_config(cfg))
+    try:
+        bus, how = open_daemon_bus(cfg)
+        with bus:
+            bus.declare_alive("world", "main")
+            mono0, wall0 = time.monotonic(), time.time()
+            noise = cfg.sim.pose_noise
+            server = WorldServer(bus, hub, wall0 - hub.t, noise.xy, noise.theta)
+            print(
+                f"fleet world: fleet {cfg.fleet.name!r}, {cfg.sim.backend} backend, robots "
+                f"{list(server.robot_ids)}, on {list(cfg.zenoh.listen)} ({how})",
+                file=sys.stderr,
+                flush=True,
+            )
+            stats = _serve(cfg, server, stop, duration, mono0)
+    finally:
+        hub.world.close()
+    wall, busy = stats
+    rtf, load = hub.t / max(wall, 1e-9), busy / max(wall, 1e-9)
+    print(
+        f"fleet world: stopped at sim time {hub.t:.2f} s after {wall:.2f} s of wall time "
+        f"(real-time factor {rtf:.3f}; stepping took {load:.1%} of the wall time); "
+        f"{server.commands} commands, {server.samples} samples, "
+        f"{server.failsafe_stops} setpoint-timeout stops",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def _serve(
+    cfg: FleetConfig, server: WorldServer, stop: threading.Event, duration: float, mono0: float
+) -> tuple[float, float]:
+    """The real-time loop. Returns (wall seconds served, seconds spent stepping physics)."""
+    hub = server.hub
+    t_start = hub.t
+    rk = Ratekeeper(max(MIN_LOOP_HZ, cfg.sim.pose_rate_hz, cfg.sim.object_pose_rate_hz))
+    truth_period = 1.0 / cfg.fleet.rate_hz
+    next_truth = 0.0
+    busy = 0.0
+    last = time.monotonic()
+    while not stop.is_set():
+        rk.keep_time()
+        mono = time.monotonic()
+        if mono - last > HELD_UP:
+            log.warning(
+                "the world's loop was held up %.2f s (the machine is overloaded?)", mono - last
+            )
+        last = mono
+        server.apply_commands(mono)
+        b0 = time.perf_counter()
+        hub.advance_to(t_start + mono - mono0)
+        busy += time.perf_counter() - b0
+        server.publish_samples()
+        if mono - mono0 >= next_truth:
+            server.publish_truth()
+            next_truth += truth_period
+        if duration and mono - mono0 >= duration:
+            break
+    return time.monotonic() - mono0, busy
