@@ -60,7 +60,8 @@ def test_garbage_payloads_are_counted_and_dropped(port):
     ):
         inbox = b.subscribe_topic("robot_cmd")  # wildcard over robots
         key = a.key("robot_cmd", id="r1")
-        pub = a.session.declare_publisher(key)
+        # BLOCK: under load a DROP publisher may drop the good sample the test waits for
+        pub = a.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         wait_for(lambda: pub.matching_status.matching, 10.0, "the subscriber to match")
         garbage = [
             b"",
