@@ -7,6 +7,8 @@ import subprocess
 import sys
 import threading
 
+import zenoh
+
 from controller import wire
 from controller.config import ZenohSection
 from controller.io.bus import Bus
