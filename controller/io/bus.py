@@ -549,6 +549,18 @@ class Bus:
         """The key expression of every holder's latched e-stop."""
         return wire.TOPICS["estop_state"].wildcard(self.fleet)
 
+    def alive_ids_async(self, role: str, sink: list[str], timeout: float = 1.0) -> None:
+        """Ask for the ``role`` liveliness tokens without waiting: each ident is appended to
+        ``sink`` as its reply comes (on zenoh's thread; read it as ``sink[:]``, an atomic
+        copy). A hung peer that never finalises the query then delays nobody."""
+        prefix = wire.alive_key(self.fleet, role, "")
+
+        def cb(reply: zenoh.Reply) -> None:
+            if reply.ok is not None:
+                sink.append(str(reply.ok.key_expr)[len(prefix) :])
+
+        self.session.liveliness().get(wire.alive_key(self.fleet, role, "*"), cb, timeout=timeout)
+
     def alive_ids(self, role: str, timeout: float = 1.0) -> list[str]:
         """The idents of the ``role`` liveliness tokens on the bus now."""
         prefix = wire.alive_key(self.fleet, role, "")

@@ -28,12 +28,15 @@ def put_estop(
     t0 = time.monotonic()
     deadline = t0 + timeout
     pub = bus.publisher("estop")
+    tokens: list[str] = []  # robot liveliness tokens, appended as the replies come
+    bus.alive_ids_async("robot", tokens, timeout=min(1.0, timeout))
     while not pub.matching() and time.monotonic() < deadline:
         time.sleep(0.005)  # polling for the subscribers' declarations (a handshake)
     pub.put(msg)
     sent = time.monotonic()
-    known = set(cfg.robot_ids) | set(bus.alive_ids("robot", timeout=min(1.0, timeout)))
-    agents, holders, elapsed = _confirmations(bus, msg, known, deadline, pub, t0)
+    known = set(cfg.robot_ids)
+    agents, holders, elapsed = _confirmations(bus, msg, known, tokens, deadline, pub, t0)
+    known |= set(tokens[:])
     status = None
     for _, st in bus.query_replies(bus.key("status"), wire.FleetStatus, timeout=0.3):
         status = st
@@ -54,14 +57,18 @@ def put_estop(
     }
 
 
-def _confirmations(bus, msg: wire.EStop, known: set[str], deadline: float, pub, t0: float):
-    """Ask every latch holder until every known agent holds ``msg``'s state (stamped no older)
-    or the deadline. Returns (agents that confirmed, roles of the other holders that did,
-    seconds from ``t0`` to the last agent's confirmation or None)."""
+def _confirmations(
+    bus, msg: wire.EStop, config: set[str], tokens: list[str], deadline: float, pub, t0: float
+):
+    """Ask every latch holder until every known agent (the ``config``'s robots and the robot
+    ``tokens`` seen so far, which the liveliness look-up fills meanwhile) holds ``msg``'s state
+    (stamped no older) or the deadline. Returns (agents that confirmed, roles of the other
+    holders that did, seconds from ``t0`` to the last agent's confirmation or None)."""
     agents: set[str] = set()
     holders: set[str] = set()
     elapsed = None
     next_put = time.monotonic() + REPUT
+    known = config | set(tokens[:])
     while time.monotonic() < deadline and not known <= agents:
         left = deadline - time.monotonic()
         for key, st in bus.query_replies(bus.estop_wildcard(), wire.EStop, min(0.3, left)):
@@ -72,9 +79,11 @@ def _confirmations(bus, msg: wire.EStop, known: set[str], deadline: float, pub, 
                 agents.add(parsed.id)
             else:
                 holders.add(parsed.parts.get("role", ""))
+            known = config | set(tokens[:])
             if known <= agents:
                 elapsed = time.monotonic() - t0
                 break
+        known = config | set(tokens[:])
         if not known <= agents and time.monotonic() >= next_put:
             pub.put(msg)
             next_put = time.monotonic() + REPUT
