@@ -490,3 +490,30 @@ def test_make_sensors_per_robot_streams_reproducible():
     a1, b1, a2 = _run(s1.robots["a"], 1.0), _run(s1.robots["b"], 1.0), _run(s2.robots["a"], 1.0)
     assert a1 == a2
     assert a1 != b1
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize(
+    "heading, obstacle",
+    [
+        (0.785, None),  # into the room's north-east corner (default bounds 12.8 m)
+        (0.0, [[7.0, 4.0], [7.4, 4.0], [7.4, 7.0], [7.0, 7.0]]),  # into a wall-like obstacle
+    ],
+)
+def test_a_driven_object_stops_at_walls_and_obstacles(worlds, backend, heading, obstacle):
+    """The scripted object is solid in both worlds: driven at a wall or an obstacle it stops
+    there (it never passes through or leaves the room), and the check says how close it is."""
+    motion = {"kind": "line", "speed": 0.4, "heading": heading, "give_up_after": 0.0}
+    obstacles = [obstacle] if obstacle else []
+    cfg = config(
+        polygon=BOX, start=(5.0, 5.0, 0.0), motion=motion, backend=backend, obstacles=obstacles
+    )
+    w = worlds(cfg)
+    w.step(30.0)  # 12 m of script: far beyond the wall
+    chk = w.check()
+    assert chk.object_clearance > -0.01  # touching at most, never through
+    assert chk.object_clearance < 0.05  # it got there and stays pressed against it
+    poly = geometry.transform(geometry.ensure_ccw(BOX), w.object_pose())
+    assert poly.min() > -0.01 and poly.max() < 12.81  # inside the room
+    if obstacle:
+        assert poly[:, 0].max() < 7.01
