@@ -44,6 +44,14 @@ SCENARIOS = [
         "obstacle-beside-route", L_SHAPE, (1.5, 1.0, 0.0), (5.5, 1.5, 0.0), obstacles=(PILLAR,)
     ),
     Scenario("doorway", L_SHAPE, (1.5, 2.5, 0.0), (5.5, 2.5, 0.0), obstacles=WALL_WITH_DOOR),
+    Scenario(  # the same door with real contacts: force-limited pushes through a 1.8 m gap
+        "doorway-pybullet",
+        L_SHAPE,
+        (1.5, 2.5, 0.0),
+        (5.5, 2.5, 0.0),
+        obstacles=WALL_WITH_DOOR,
+        backend="pybullet",
+    ),
     Scenario(
         "moving-when-captured",
         L_SHAPE,
