@@ -22,3 +22,19 @@ def require_log_target(cfg, out, explicit: bool) -> None:
     if explicit:
         raise InputError(f"--out {out}: {problem}")
     raise ConfigError(cfg.source, "log.dir", problem)
+
+
+def serve_until_signalled(args, serve) -> int:
+    """Run a long-lived service (``fleet hub``, ``fleet world``): ``serve(cfg, stop, duration)``
+    until SIGINT/SIGTERM sets ``stop`` or ``--duration`` s pass. A BusError maps to exit 1
+    (cli.exit_code)."""
+    import signal
+    import threading
+
+    from controller.config import load_config
+
+    cfg = load_config(args.config)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    return serve(cfg, stop, args.duration)

@@ -8,10 +8,7 @@ are taken.
 
 from __future__ import annotations
 
-import signal
-import threading
-
-from controller.commands import add_config_argument
+from controller.commands import add_config_argument, serve_until_signalled
 
 
 def add_arguments(parser, word: str) -> None:
@@ -20,11 +17,6 @@ def add_arguments(parser, word: str) -> None:
 
 
 def run(args) -> int:
-    from controller.config import load_config
     from controller.runtime.hub import run_hub
 
-    cfg = load_config(args.config)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    return run_hub(cfg, stop, args.duration)  # BusError: exit 1 (cli.exit_code)
+    return serve_until_signalled(args, run_hub)

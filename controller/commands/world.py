@@ -9,10 +9,7 @@ on bad config, 1 when its session cannot open.
 
 from __future__ import annotations
 
-import signal
-import threading
-
-from controller.commands import add_config_argument
+from controller.commands import add_config_argument, serve_until_signalled
 
 
 def add_arguments(parser, word: str) -> None:
@@ -21,11 +18,6 @@ def add_arguments(parser, word: str) -> None:
 
 
 def run(args) -> int:
-    from controller.config import load_config
     from controller.runtime.world import run_world
 
-    cfg = load_config(args.config)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    return run_world(cfg, stop, args.duration)  # BusError: exit 1 (cli.exit_code)
+    return serve_until_signalled(args, run_world)
