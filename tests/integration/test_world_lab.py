@@ -209,3 +209,57 @@ def test_world_daemon_drivers_arrest_kill_restart(tmp_path, port):
     assert "real-time factor" in tail(world)
     print(tail(world, 400), file=sys.stderr)
     print(f"rehearsal test: {time.monotonic() - t_start:.1f} s", file=sys.stderr)
+
+
+def test_a_driver_killed_mid_approach_is_lost_replanned_and_the_rest_arrest(tmp_path, port):
+    """Six robots on the rehearsal world; the agent of a robot holding a capture point is
+    killed (SIGKILL) during the approach: the daemon sees it gone within 0.5 s (its liveliness
+    token goes with its TCP link), re-plans the capture with the five left, and they arrest."""
+    cfg_path, _ = rehearsal_config(tmp_path, port)
+    import tomllib
+
+    data = tomllib.loads(cfg_path.read_text())
+    six = base_config_dict()["robots"][:6]
+    ring = [(3.3, 1.6, 1.57), (4.7, 3.2, 3.14), (3.3, 4.6, -1.57), (1.7, 3.2, 0.0),
+            (4.6, 1.8, 2.36), (1.8, 4.5, -0.79)]  # fmt: skip
+    for r, s in zip(six, ring, strict=True):
+        r["start"] = list(s)
+    data["robots"] = six
+    c = str(write_toml(tmp_path / "six.toml", data))
+    ids = [r["id"] for r in six]
+    world = spawn(tmp_path / "world.txt", "world", "--config", c)
+    procs = [world]
+    try:
+        with _connect(port) as bus:
+            plans = bus.subscribe_topic("plan", what="*")
+            truth = Truth(bus)
+            wait_for(lambda: truth.take() > 0, 20, "the world's truth")
+            procs.append(spawn(tmp_path / "d.txt", "daemon", "--config", c, "--mission",
+                               "capture", "--out", str(tmp_path / "d.mcap")))  # fmt: skip
+            agents = {r: spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ids}
+            procs += list(agents.values())
+            events: list = []
+
+            def seen(kind: str) -> list:
+                events.extend(plans.drain())
+                return [e for e in events if wire.parse_key(e.key).parts.get("what") == kind]
+
+            wait_for(lambda: seen("capture"), 30, "the capture plan")
+            victim = seen("capture")[0].msg.data["robots"][0]
+            wait_for(lambda: any(e.msg.data.get("phase") == "approach" for e in seen("phase")),
+                     20, "the approach")  # fmt: skip
+            t_kill = time.time()
+            agents[victim].kill()
+            wait_for(lambda: seen("robot_lost"), 5, "the lost robot reported")
+            lost = seen("robot_lost")[0]
+            assert lost.msg.data["robot"] == victim
+            assert lost.recv_time - t_kill <= 0.5, lost.recv_time - t_kill
+            wait_for(lambda: len(seen("capture")) >= 2, 5, "the re-planned capture")
+            replanned = seen("capture")[-1].msg.data
+            assert victim not in replanned["robots"], replanned
+            wait_for(lambda: any(e.msg.data.get("phase") == "arrested" for e in seen("phase")),
+                     60, "the arrest by the robots left")  # fmt: skip
+            print(f"\nlost after {lost.recv_time - t_kill:.3f} s; re-planned with "
+                  f"{replanned['robots']}", file=sys.stderr)  # fmt: skip
+    finally:
+        stop_all(procs)
