@@ -7,9 +7,15 @@ from __future__ import annotations
 
 import signal
 
-from controller.config import ZenohSection
-from controller.io.bus import Bus
-from tests.support.lab import fleet_json, lab_config, latch_states, spawn, stop_all, tail
+from tests.support.lab import (
+    connect_client,
+    fleet_json,
+    lab_config,
+    latch_states,
+    spawn,
+    stop_all,
+    tail,
+)
 from tests.support.wait import wait_for
 
 
@@ -33,7 +39,7 @@ def test_estop_reaches_agents_with_daemon_alive_hung_dead_and_stays_latched(tmp_
     hub = spawn(tmp_path / "hub.txt", "hub", "--config", c)
     procs = [hub]
     try:
-        bus = _connect(port)
+        bus = connect_client(port, "the hub")
         with bus:
             daemon_args = ("daemon", "--config", c, "--mission", "hold", "--out")
             daemon = spawn(tmp_path / "daemon.txt", *daemon_args, str(tmp_path / "d1.mcap"))
@@ -102,26 +108,3 @@ def test_estop_reaches_agents_with_daemon_alive_hung_dead_and_stays_latched(tmp_
     finally:
         codes = stop_all(procs)
     assert all(code in (0, -9) for code in codes), (codes, [tail(p) for p in procs])
-
-
-def _connect(port: int) -> Bus:
-    """A test-side client of the hub, retried until the hub listens (the handshake)."""
-    box: list[Bus] = []
-
-    def opened() -> bool:
-        try:
-            box.append(
-                Bus(
-                    ZenohSection(),
-                    "lab",
-                    mode="client",
-                    listen=[],
-                    connect=[f"tcp/127.0.0.1:{port}"],
-                )
-            )
-        except Exception:  # noqa: BLE001 - not listening yet
-            return False
-        return True
-
-    wait_for(opened, 20, "the hub listening")
-    return box[0]

@@ -3,41 +3,13 @@
 from __future__ import annotations
 
 import json
-import os
-import signal
-import subprocess
-import sys
 import time
 
 import pytest
 
 from controller.io.recorder import read_log
-from tests.support.config import ROOT, base_config_dict, write_toml
-
-
-def fleet(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "controller.cli", *args],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        env=dict(os.environ, PYTHONPATH=str(ROOT)),
-    )
-
-
-def spawn(log_path, *args: str) -> subprocess.Popen:
-    """A fleet process writing to a file, so a chatty child never blocks on a full pipe."""
-    with open(log_path, "w") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "controller.cli", *args],
-            cwd=ROOT,
-            env=dict(os.environ, PYTHONPATH=str(ROOT)),
-            stdout=out,
-            stderr=out,
-        )
-    proc.log_path = log_path  # type: ignore[attr-defined]
-    return proc
+from tests.support.config import base_config_dict, write_toml
+from tests.support.lab import fleet, spawn, status, stop_all
 
 
 @pytest.fixture
@@ -49,11 +21,6 @@ def lab_config(tmp_path, port):
     cfg["sim"]["backend"] = "ideal"
     cfg["log"] = {"dir": str(tmp_path / "runs")}
     return write_toml(tmp_path / "lab.toml", cfg)
-
-
-def status(cfg) -> dict:
-    proc = fleet("status", "--config", str(cfg), "--json", "--timeout", "2")
-    return json.loads(proc.stdout) if proc.stdout.strip() else {"ok": False}
 
 
 def test_daemon_agent_status_estop_resume(lab_config, tmp_path):
@@ -94,15 +61,7 @@ def test_daemon_agent_status_estop_resume(lab_config, tmp_path):
         assert res.returncode == 0 and json.loads(res.stdout)["confirmed"] is True
         assert status(lab_config)["estop"] is False
     finally:
-        for p in (agent, daemon):
-            p.send_signal(signal.SIGTERM)
-        codes = []
-        for p in (agent, daemon):
-            try:
-                codes.append(p.wait(timeout=30))
-            except subprocess.TimeoutExpired:
-                p.kill()  # never leave a process behind
-                codes.append(p.wait())
+        codes = stop_all([agent, daemon])  # never leave a process behind
     assert codes == [0, 0], [open(p.log_path).read()[-2000:] for p in (agent, daemon)]
     topics = {r.topic for r in read_log(log)}
     assert "fleet/lab/robot/r1/pose" in topics and "fleet/lab/estop" in topics

@@ -4,12 +4,10 @@ ACL), robot r1's agent under its own identity, and the tools as an operator and 
 from __future__ import annotations
 
 import json
-import signal
-import subprocess
 import time
 
-from tests.integration.test_lab import fleet, spawn, status
 from tests.support.config import base_config_dict, write_toml
+from tests.support.lab import fleet, spawn, status, stop_all
 
 USERS = ["controller", "operator", "r1", "r2", "r3", "r4", "r5", "r6"]
 
@@ -59,13 +57,5 @@ def test_operator_stops_and_resumes_a_robot_cannot(tmp_path, port):
         res = fleet("resume", "--config", str(conf), "--json", *as_op)
         assert res.returncode == 0 and json.loads(res.stdout)["confirmed"] is True
     finally:
-        for p in (agent, daemon):
-            p.send_signal(signal.SIGTERM)
-        codes = []
-        for p in (agent, daemon):
-            try:
-                codes.append(p.wait(timeout=30))
-            except subprocess.TimeoutExpired:
-                p.kill()
-                codes.append(p.wait())
+        codes = stop_all([agent, daemon])
     assert codes == [0, 0], [open(p.log_path).read()[-2000:] for p in (agent, daemon)]

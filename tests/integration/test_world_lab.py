@@ -12,10 +12,9 @@ import sys
 import time
 
 from controller import wire
-from controller.config import ZenohSection
 from controller.io.bus import Bus
 from tests.support.config import base_config_dict, write_toml
-from tests.support.lab import fleet_json, spawn, stop_all, tail
+from tests.support.lab import connect_client, fleet_json, spawn, stop_all, tail
 from tests.support.wait import wait_for
 
 ROBOTS = ("r1", "r2", "r3", "r4")
@@ -75,29 +74,6 @@ class Truth:
         """How far (m) the robot went between t0 and t1."""
         pts = [(x, y) for t, x, y, _ in self.tracks[rid] if t0 <= t <= t1]
         return sum(math.dist(p, q) for p, q in zip(pts, pts[1:], strict=False))
-
-
-def _connect(port: int) -> Bus:
-    """A test-side client of the world's endpoint, retried until it listens (the handshake)."""
-    box: list[Bus] = []
-
-    def opened() -> bool:
-        try:
-            box.append(
-                Bus(
-                    ZenohSection(),
-                    "lab",
-                    mode="client",
-                    listen=[],
-                    connect=[f"tcp/127.0.0.1:{port}"],
-                )
-            )
-        except Exception:  # noqa: BLE001 - not listening yet
-            return False
-        return True
-
-    wait_for(opened, 20, "the world listening")
-    return box[0]
 
 
 def _status(cfg) -> dict:
@@ -171,7 +147,7 @@ def test_world_daemon_drivers_arrest_kill_restart(tmp_path, port):
         return p
 
     try:
-        bus = _connect(port)
+        bus = connect_client(port, "the world")
         with bus:
             truth = Truth(bus)
             phases = bus.subscribe_topic("plan", what="phase")
@@ -230,7 +206,7 @@ def test_a_driver_killed_mid_approach_is_lost_replanned_and_the_rest_arrest(tmp_
     world = spawn(tmp_path / "world.txt", "world", "--config", c)
     procs = [world]
     try:
-        with _connect(port) as bus:
+        with connect_client(port, "the world") as bus:
             plans = bus.subscribe_topic("plan", what="*")
             truth = Truth(bus)
             wait_for(lambda: truth.take() > 0, 20, "the world's truth")

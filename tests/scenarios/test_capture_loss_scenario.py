@@ -11,7 +11,7 @@ from typing import Any
 from controller.mission.factory import build_mission
 from controller.runtime import dry_run
 from controller.runtime.dry_run import DryRun, judge
-from tests.scenarios.test_capture_scenarios import SCENARIOS, scenario
+from tests.support.capture_scenarios import SCENARIOS, scenario
 
 CUT_AFTER = 3.0  # s into the approach
 

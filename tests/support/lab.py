@@ -91,3 +91,37 @@ def latch_states(bus, timeout: float = 1.0) -> dict[str, wire.EStop]:
         if parsed is not None:
             out[f"{parsed.parts['role']}/{parsed.id}"] = msg
     return out
+
+
+def status(cfg, timeout: float = 2.0) -> dict:
+    """``fleet status --json`` of a running daemon ({"ok": False} when none answers)."""
+    proc = fleet("status", "--config", str(cfg), "--json", "--timeout", str(timeout))
+    return json.loads(proc.stdout) if proc.stdout.strip() else {"ok": False}
+
+
+def connect_client(port: int, what: str, fleet_name: str = "lab"):
+    """A test-side zenoh client of the endpoint on 127.0.0.1:``port``, retried until something
+    listens there (the handshake: the hub, the world, a daemon)."""
+    from controller.config import ZenohSection
+    from controller.io.bus import Bus
+    from tests.support.wait import wait_for
+
+    box: list[Bus] = []
+
+    def opened() -> bool:
+        try:
+            box.append(
+                Bus(
+                    ZenohSection(),
+                    fleet_name,
+                    mode="client",
+                    listen=[],
+                    connect=[f"tcp/127.0.0.1:{port}"],
+                )
+            )
+        except Exception:  # noqa: BLE001 - not listening yet
+            return False
+        return True
+
+    wait_for(opened, 20, f"{what} listening")
+    return box[0]
