@@ -98,6 +98,7 @@ def host(data_path: str, ids: list[str], out_path: str, limit_s: float) -> None:
     """Run the agents of ``ids`` on one ideal world until SIGTERM (or ``limit_s``); write the
     latencies to ``out_path``."""
     from controller.io.ratekeeper import Ratekeeper
+    from controller.runtime.agent_runner import robot_bus
     from controller.runtime.wiring import make_hub
     from drivers.agent import Agent, AgentParams
     from drivers.base import capabilities_of
@@ -116,14 +117,7 @@ def host(data_path: str, ids: list[str], out_path: str, limit_s: float) -> None:
             robot = cfg.robot(rid)
             driver = SimDriver(hub, rid, capabilities_of(robot), time_offset=wall0)
             driver.connect(timeout=1.0)
-            bus = Bus(
-                cfg.zenoh,
-                cfg.fleet.name,
-                mode="client",
-                listen=[],
-                connect=list(cfg.zenoh.listen),
-                lease_s=cfg.fleet.liveliness_lease,
-            )
+            bus = robot_bus(cfg, rid)
             buses.append(bus)
             params = AgentParams(rid, cfg.fleet.name, cfg.fleet.cmd_ttl, cfg.fleet.max_clock_skew)
             agent = Agent(bus, driver, params)

@@ -21,6 +21,20 @@ LATCH_WAIT = 2.0  # s an agent waits at start for a holder of the latched e-stop
 LATCH_EVERY = 2.0  # s between the agent's later latch queries
 
 
+def robot_bus(cfg: FleetConfig, who: str) -> Bus:
+    """Robot ``who``'s session: a client of the daemon's (or hub's) endpoints, with the short
+    liveliness lease and the robot's own zenoh identity. Raises BusError if it cannot open."""
+    return Bus(
+        cfg.zenoh,
+        cfg.fleet.name,
+        mode="client",  # through the hub only: no peer links around its ACL
+        listen=[],
+        connect=list(cfg.zenoh.listen),
+        lease_s=cfg.fleet.liveliness_lease,
+        identity=cfg.zenoh_identity(who),
+    )
+
+
 def _open_until(stop: threading.Event, cfg: FleetConfig, who: str) -> Bus | None:
     """A robot-side session to the daemon's endpoints as robot ``who``'s own zenoh identity,
     retried until it opens or ``stop`` (a wrong password is refused like an absent hub)."""
@@ -29,15 +43,7 @@ def _open_until(stop: threading.Event, cfg: FleetConfig, who: str) -> Bus | None
     logged = False
     while not stop.is_set():
         try:
-            return Bus(
-                cfg.zenoh,
-                cfg.fleet.name,
-                mode="client",  # through the hub only: no peer links around its ACL
-                listen=[],
-                connect=list(cfg.zenoh.listen),
-                lease_s=cfg.fleet.liveliness_lease,
-                identity=cfg.zenoh_identity(who),
-            )
+            return robot_bus(cfg, who)
         except BusError as exc:
             if not logged:
                 log.warning("%s: waiting for the bus: %s", who, exc)
