@@ -33,7 +33,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench.transport import closed_loop  # noqa: E402
-from controller.mission.factory import build_mission  # noqa: E402
 from controller.runtime.dry_run import DryRun, judge  # noqa: E402
 from tests.support.transport_scenarios import CRATE, L_SHAPE, Scenario, scenario_config  # noqa: E402
 
@@ -144,7 +143,7 @@ def run_one(sc: Scenario, strategy: str) -> dict:
     cfg = scenario_config(sc)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp, PlanTimer() as timer:
-        res = DryRun(cfg, build_mission(cfg, "transport"), Path(tmp) / "run.mcap").run()
+        res = DryRun.of(cfg, "transport", Path(tmp) / "run.mcap").run()
     wall = time.perf_counter() - t0
     clean = judge(res) == []
     ok = bool(res.get("transported")) and res.get("status") == "ok" and clean

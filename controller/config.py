@@ -48,6 +48,9 @@ SIM_BACKENDS = ("pybullet", "ideal")
 # where a `fleet driver` of a `sim` robot finds its world: "solo" (a world of its own, that robot
 # alone) or "process" (the shared `fleet world` process, over the bus)
 SIM_WORLDS = ("solo", "process")
+# the dry run's bus: "private" a free 127.0.0.1 port of its own (two runs side by side), or
+# "config" the [zenoh] endpoints as written (tools attach to the run there)
+SIM_BUSES = ("private", "config")
 FILTERS = ("ekf", "ukf")
 ZENOH_MODES = ("peer", "client", "router")
 # access-control profiles generated from the config (controller/acl.py); else zenoh.acl is a file
@@ -108,6 +111,41 @@ class FleetSection:
     # s: a pose or command stamped further than this from the receiver's clock (same domain:
     # wall time in the lab, sim time in the dry run) is dropped and counted
     max_clock_skew: float = _rule(1.0, gt=0, max=3600)
+    # s the control tick (sample, estimate, execute the plan, safety, publish) may take; 0: 40 %
+    # of the period. A tick over it is counted (``over_budget``) and logged
+    tick_budget: float = _rule(0.0, min=0, max=10)
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.rate_hz
+
+    @property
+    def budget(self) -> float:
+        """The tick budget, s (``tick_budget``, or 40 % of the period)."""
+        return self.tick_budget or 0.4 * self.period
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlannerSection:
+    """The planner worker (``controller.runtime.planner``): each planner's latency budget in
+    control ticks — the dry run applies a plan asked for at sim time t at t + that many ticks
+    (reproducible whatever the machine's load); the lab daemon applies it when it is computed
+    and counts it ``late`` past the budget — and ``timeout`` (s) after which a lab plan is
+    given up (the robots hold). Defaults from ``bench/loop.py``'s measured p99 at 20 Hz."""
+
+    transport_latency_ticks: int = _rule(6, min=0, max=10_000)
+    route_latency_ticks: int = _rule(10, min=0, max=10_000)
+    rearrange_latency_ticks: int = _rule(4, min=0, max=10_000)
+    capture_latency_ticks: int = _rule(10, min=0, max=10_000)
+    timeout: float = _rule(10.0, gt=0, max=3600)
+
+    def latency_ticks(self) -> dict[str, int]:
+        return {
+            "transport": self.transport_latency_ticks,
+            "route": self.route_latency_ticks,
+            "rearrange": self.rearrange_latency_ticks,
+            "capture": self.capture_latency_ticks,
+        }
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -340,6 +378,7 @@ class PoseNoise:
 class SimSection:
     backend: str = _rule("pybullet", choices=SIM_BACKENDS)
     world: str = _rule("solo", choices=SIM_WORLDS)  # what `fleet driver` attaches a sim robot to
+    bus: str = _rule("private", choices=SIM_BUSES)  # fleet run's bus (see SIM_BUSES)
     timestep: float = _rule(1.0 / 240.0, gt=0, max=1)
     seed: int = _rule(0, min=0)
     pose_noise: PoseNoise = _rule(PoseNoise())
@@ -408,6 +447,7 @@ class FleetConfig:
     transport: TransportSection = TransportSection()
     estimation: EstimationSection = EstimationSection()
     sim: SimSection = SimSection()
+    planner: PlannerSection = PlannerSection()
     source: str = ""
     notes: tuple[str, ...] = ()  # what the loader changed (e.g. merged polygon vertices)
 

@@ -139,6 +139,9 @@ class FleetStatus(Message):
     estop: bool = False
     robots: list[dict[str, Any]] = field(default_factory=list)
     counters: dict[str, Any] = field(default_factory=dict)
+    # per planner (transport, route, rearrange, capture): wall latency p50/p99/max s, late...
+    plan_latency_s: dict[str, Any] = field(default_factory=dict)
+    tick_ms: dict[str, Any] = field(default_factory=dict)  # the tick's p50/p99/max, ms
 
     TYPE: ClassVar[str] = "fleet.FleetStatus"
 

@@ -37,6 +37,7 @@ def run(args) -> int:
     from controller.io.recorder import default_log_path
     from controller.mission.factory import build_mission
     from controller.runtime.daemon import run_daemon
+    from controller.runtime.planner import PlannerWorker
 
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name, "daemon")
@@ -44,5 +45,8 @@ def run(args) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    mission = build_mission(cfg, args.mission)  # MissionError: exit 1 (cli.exit_code)
-    return run_daemon(cfg, mission, args.mission, out, stop, args.duration, viz=args.viz)
+    planners = PlannerWorker.for_config(cfg, lockstep=False)  # the slow plans off the loop
+    mission = build_mission(cfg, args.mission, planners=planners)  # MissionError: exit 1
+    return run_daemon(
+        cfg, mission, args.mission, out, stop, args.duration, viz=args.viz, planners=planners
+    )

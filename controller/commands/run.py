@@ -15,6 +15,33 @@ from pathlib import Path
 from controller.commands import add_config_argument, require_log_target
 from controller.config import MISSION_KINDS, SIM_BACKENDS
 
+# what the plain (not --json) summary prints: the capture, the transport, the loop's health
+SUMMARY_FIELDS = (
+    "status",
+    "phase",
+    "arrested",
+    "failure",
+    "arrest_time_s",
+    "hold_displacement_m",
+    "contact_gaps_at_arrest_m",
+    "arrival_spread_s",
+    "transported",
+    "goal_error_m",
+    "goal_error_deg",
+    "transport_time_s",
+    "rearrangements",
+    "relocations",
+    "sim_time_s",
+    "wall_time_s",
+    "missed_ticks",
+    "watchdog_stops",
+    "plan_latency_s",
+    "min_clearance_m",
+    "max_object_penetration_m",
+    "obstacle_contacts",
+    "log",
+)
+
 
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)
@@ -47,8 +74,13 @@ def run(args) -> int:
     from controller.io.recorder import default_log_path
     from controller.mission.factory import build_mission
     from controller.runtime.dry_run import DryRun
+    from controller.runtime.planner import PlannerWorker
 
     cfg = load_config(args.config)
+    if cfg.sim.bus == "private" and cfg.sim.world == "solo":
+        from controller.runtime.sweep import on_free_port
+
+        cfg = on_free_port(cfg)  # a run beside another never finds its port taken
     if args.backend:
         cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, backend=args.backend))
     if args.gui:
@@ -59,28 +91,24 @@ def run(args) -> int:
             raise InputError(f"--gui: {problem}")
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name)
     require_log_target(cfg, out, bool(args.out))  # exit 2 before anything starts
-    mission = build_mission(cfg, args.mission)  # MissionError: exit 1 (cli.exit_code)
+    # the slow plans off the tick, applied after their modelled latency in sim time
+    planners = PlannerWorker.for_config(cfg, lockstep=True)
+    mission = build_mission(cfg, args.mission, planners=planners)  # MissionError: exit 1
     print(f"fleet run: {cfg.source}, backend {cfg.sim.backend}, log {out}", file=sys.stderr)
-    summary = DryRun(cfg, mission, out, gui=args.gui, max_time=args.max_time, viz=args.viz).run()
+    summary = DryRun(
+        cfg,
+        mission,
+        out,
+        gui=args.gui,
+        max_time=args.max_time,
+        viz=args.viz,
+        planners=planners,
+    ).run()
     ok = summary["status"] == "ok"
     if args.json:
         emit_json(summary)
     else:
-        for k in (
-            "status",
-            "phase",
-            "arrested",
-            "failure",
-            "arrest_time_s",
-            "hold_displacement_m",
-            "contact_gaps_at_arrest_m",
-            "arrival_spread_s",
-            "sim_time_s",
-            "wall_time_s",
-            "min_clearance_m",
-            "max_object_penetration_m",
-            "obstacle_contacts",
-            "log",
-        ):
-            print(f"{k:>26}: {summary.get(k)}")
+        for k in SUMMARY_FIELDS:
+            if k in summary:
+                print(f"{k:>26}: {summary.get(k)}")
     return 0 if ok else 1

@@ -8,6 +8,7 @@ from controller import geometry
 from controller.config import MISSION_KINDS, FleetConfig
 from controller.mission.basic import GotoMission, HoldMission
 from controller.mission.job import CaptureJob, MissionError
+from controller.mission.planners import Planners
 from controller.mission.tracking import RobotLimits
 
 
@@ -26,6 +27,7 @@ def build_mission(
     kind: str = "capture",
     capture: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     rng: np.random.Generator | None = None,
+    planners: Planners | None = None,
 ):
     """The mission a config runs: ``capture`` (the whole job: GA plan, assignment, approach,
     arrest), ``stage`` (drive to a ring of staging points around the object) or ``hold``
@@ -33,7 +35,8 @@ def build_mission(
 
     ``capture`` = (points (M, 2), outward normals (M, 2), both in the object frame, robot index
     per point (M,)) replaces the GA plan and the assignment (hand-made capture sets). ``rng``
-    defaults to one seeded from ``capture.seed``."""
+    defaults to one seeded from ``capture.seed``; ``planners``: the port the slow plans are
+    asked of off the tick (None: computed at once, the same tick)."""
     if kind not in MISSION_KINDS:
         raise MissionError(f"unknown mission {kind!r}; expected one of {MISSION_KINDS}")
     if kind == "hold":
@@ -42,7 +45,7 @@ def build_mission(
         from controller.mission.transport import transport_from_start
 
         gen = rng if rng is not None else np.random.default_rng(cfg.transport.seed)
-        return transport_from_start(cfg, gen)
+        return transport_from_start(cfg, gen, planners=planners)
     if kind == "stage":
         return GotoMission(staging_targets(cfg), RobotLimits.from_config(cfg.robots))
     gen = rng if rng is not None else np.random.default_rng(cfg.capture.seed)
@@ -51,4 +54,4 @@ def build_mission(
 
         points, normals, assignment = capture
         return CaptureMission(points, normals, assignment, cfg, gen)
-    return CaptureJob(cfg, gen)
+    return CaptureJob(cfg, gen, planners)

@@ -3,14 +3,14 @@ are in, then the approach-and-arrest mission (pure, per tick).
 
 The plan is the GA's (Sharma Eq. 3, ``controller.planning.capture``), reinforced until the
 contacts can hold the object's push (``capture.hold_force``) with the robots' force limits
-(``controller.planning.hold``): form closure alone can need several times the push at a contact.
+(``controller.planning.capture_set``): form closure alone can need several times the push at a
+contact. Re-plans (robot loss, walls, a start without robots never seen) run off the tick.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -18,8 +18,18 @@ from scipy.optimize import linear_sum_assignment
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spawn_rng
 from controller.mission.types import FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.approach import envelope, interception_times
+from controller.planning.capture_set import (  # noqa: F401 - re-exported: the job's planning
+    TOKEN_LOAD,
+    WALL_TOLERANCE,
+    CapturePlanError,
+    CaptureSet,
+    plan_capture_set,
+    replan_for_robots,
+    replan_pinned,
+)
 
 
 class MissionError(RuntimeError):
@@ -27,97 +37,6 @@ class MissionError(RuntimeError):
     gives the planner's reason)."""
 
 
-@dataclass(frozen=True)
-class CaptureSet:
-    """Contact points and their outward normals (M, 2), object frame, and what was checked;
-    ``candidates``/``candidate_normals`` (K, 2) are the GA's nodes, ``chosen`` (M,) indices."""
-
-    points: np.ndarray
-    normals: np.ndarray
-    objective: float
-    form_closure: bool
-    hold_capacity: float | None  # share of capture.hold_force the contacts resist (≥ 1 holds)
-    reinforced: int  # points added to the GA's set so that it holds
-    candidates: np.ndarray
-    candidate_normals: np.ndarray
-    chosen: np.ndarray
-    walls: int = 0  # wall contacts the set counts on (an object pinned against a wall)
-
-
-def plan_capture_set(
-    cfg: FleetConfig, rng: np.random.Generator, max_robots: int | None = None
-) -> CaptureSet:
-    """The GA's capture points, reinforced to hold ``capture.hold_force`` (MissionError when the
-    GA finds no feasible plan, with its reason, or the fleet is too small to hold the object);
-    ``max_robots``: the robots available (None: the fleet)."""
-    from controller.planning.capture import plan_for_fleet
-
-    plan = plan_for_fleet(cfg, rng, max_robots)
-    if not plan.feasible:
-        raise MissionError(f"no feasible capture plan: {plan.reason}")
-    chosen = np.asarray(plan.chosen, int)
-    capacity, added = None, 0
-    if cfg.capture.hold_force > 0:
-        res = _reinforce(cfg, plan.candidates, plan.normals, chosen, robots=max_robots)
-        if not res.holds:
-            raise MissionError(_cannot_hold(cfg, res))
-        chosen, capacity, added = res.chosen, res.capacity, res.added
-    return CaptureSet(
-        plan.candidates[chosen],
-        plan.normals[chosen],
-        float(plan.objective),
-        bool(plan.form_closure),
-        capacity,
-        added,
-        plan.candidates,
-        plan.normals,
-        chosen,
-    )
-
-
-def _cannot_hold(cfg: FleetConfig, res) -> str:
-    weakest = min(rb.max_force for rb in cfg.robots)
-    return (
-        f"the fleet cannot hold the object: {len(res.chosen)} robots of max_force "
-        f"{weakest:g} N resist {100 * res.capacity:.0f} % of capture.hold_force = "
-        f"{cfg.capture.hold_force:g} N in the worst direction (more robots, stronger robots, "
-        "or a lower hold_force)"
-    )
-
-
-def _reinforce(
-    cfg: FleetConfig,
-    cand: np.ndarray,
-    nrm: np.ndarray,
-    chosen: np.ndarray,
-    allowed: np.ndarray | None = None,
-    fixed: np.ndarray | None = None,
-    robots: int | None = None,
-):
-    """The GA's set reinforced to hold ``capture.hold_force`` (a set that only has to close the
-    object, ``hold_force`` 0, is held to a token load), with at most ``robots`` points (None:
-    the fleet)."""
-    from controller.planning.hold import disturbances, reinforce
-
-    poly = geometry.ensure_ccw(cfg.object_polygon())
-    c = geometry.centroid(poly)
-    r = cfg.max_robot_radius
-    centres = cand + r * nrm
-    d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
-    conflict = d < 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)  # as the GA
-    np.fill_diagonal(conflict, False)
-    force = cfg.capture.hold_force or TOKEN_LOAD
-    load = disturbances(force, force * np.sqrt(geometry.polar_moment_per_mass(poly)))
-    weakest = min(rb.max_force for rb in cfg.robots)
-    ok = np.ones(len(cand), bool) if allowed is None else allowed
-    n = len(cfg.robots) if robots is None else robots
-    return reinforce(cand, nrm, c, chosen, ok, conflict, weakest, load, n, fixed=fixed)
-
-
-TOKEN_LOAD = 0.05  # N: the load a closure-only set (capture.hold_force 0) must hold
-# m: an object vertex this close to a wall or an obstacle touches it (an object turned a degree
-# or two in a corner keeps both walls; the hold allows 5 cm)
-WALL_TOLERANCE = 0.04
 REASSIGN_PERIOD = 2.0  # s between looks at a better assignment during the approach
 REASSIGN_GAIN = 0.25  # the share of the total interception time a new assignment must save
 REASSIGN_MIN_S = 5.0  # s of total interception time it must save at least
@@ -130,123 +49,6 @@ STUCK_S = 8.0  # s a robot may come no closer to its station (object at rest) be
 STUCK_PROGRESS = 0.05  # m  ... is taken for out of reach and the capture re-planned without it
 STUCK_POCKET = 0.3  # m around a stuck point whose nodes are excluded with it
 STUCK_OBJECT_MOVE = 0.1  # m the object may move (estimate) and still count as at rest
-
-
-def replan_pinned(
-    cfg: FleetConfig,
-    capture: CaptureSet,
-    pose: np.ndarray,
-    exclude: frozenset[int] = frozenset(),
-    robots: int | None = None,
-) -> CaptureSet | None:
-    """The capture re-planned for an object pressed against walls or obstacles at ``pose``:
-    capture points a robot disc cannot reach there are dropped, the walls count as fixed
-    frictionless contacts, and points are added or moved until the set holds. ``exclude``:
-    candidate nodes (indices) a robot could not get to; ``robots``: the robots available (None:
-    the fleet). None: no set holds with them (the object is ``pinned`` out of reach)."""
-    from controller.planning.hold import push_wrenches, wall_contacts
-
-    poly = geometry.ensure_ccw(cfg.object_polygon())
-    r = cfg.max_robot_radius
-    bounds = cfg.bounds_array() if cfg.world.walls else None
-    obstacles = cfg.obstacle_polygons()
-    centres = geometry.transform(
-        capture.candidates + (r + cfg.capture.clearance) * capture.candidate_normals, pose
-    )
-    # a robot can stand there only with the safety filter's margin to the wall or obstacle
-    reach = r + cfg.approach.safety_margin
-    allowed = ~geometry.discs_touch_static(centres, reach, obstacles, bounds, slack=0.0)
-    allowed[list(exclude)] = False  # nodes robots were seen not to reach (a closed pocket)
-    world = geometry.transform(poly, pose)
-    pts, pushes = wall_contacts(world, obstacles, bounds, WALL_TOLERANCE)
-    local = geometry.inverse_transform(pts, pose) if len(pts) else pts
-    local_push = pushes @ geometry.rot(float(pose[2])) if len(pushes) else pushes
-    fixed = push_wrenches(local, local_push, geometry.centroid(poly))
-    chosen = np.array([i for i in capture.chosen if allowed[i]], int)
-    res = _reinforce(
-        cfg, capture.candidates, capture.candidate_normals, chosen, allowed, fixed, robots
-    )
-    if not res.holds or len(res.chosen) == 0 or (robots is not None and len(res.chosen) > robots):
-        return None
-    return CaptureSet(
-        capture.candidates[res.chosen],
-        capture.candidate_normals[res.chosen],
-        capture.objective,
-        capture.form_closure,
-        res.capacity if cfg.capture.hold_force > 0 else None,
-        res.added,
-        capture.candidates,
-        capture.candidate_normals,
-        res.chosen,
-        walls=len(pts),
-    )
-
-
-def replan_for_robots(
-    cfg: FleetConfig,
-    capture: CaptureSet,
-    keep: np.ndarray,
-    robots: int,
-    rng: np.random.Generator,
-    pose: np.ndarray | None = None,
-    exclude: frozenset[int] = frozenset(),
-) -> CaptureSet | None:
-    """The capture re-planned for the ``robots`` left after some were lost: the points of
-    ``capture`` a robot still holds (``keep``, (M,) bool) stay and candidate nodes are added
-    until the set holds again, with the first plan's certificates (first-order form closure,
-    ``capture.hold_force`` held); when no such set exists, the GA once more, limited to
-    ``robots``. A set that counts on walls (``capture.walls``) is re-planned against them at
-    ``pose`` (``replan_pinned``). ``exclude``: nodes robots could not get to. None: no set
-    closes the object with ``robots`` robots."""
-    if robots < 1:
-        return None
-    keep = np.asarray(keep, bool)
-    kept = dataclasses.replace(
-        capture,
-        points=capture.points[keep],
-        normals=capture.normals[keep],
-        chosen=capture.chosen[keep],
-    )
-    if capture.walls and pose is not None:
-        return replan_pinned(cfg, kept, pose, exclude, robots)
-    new = _repair(cfg, kept, robots, exclude) if len(kept.chosen) <= robots else None
-    if new is not None:
-        return new
-    try:
-        return plan_capture_set(cfg, rng, max_robots=robots)
-    except MissionError:
-        return None
-
-
-def _repair(
-    cfg: FleetConfig, kept: CaptureSet, robots: int, exclude: frozenset[int]
-) -> CaptureSet | None:
-    """``kept``'s points reinforced to hold with at most ``robots`` points, in form closure
-    (None: they cannot). Its objective stays the first GA set's."""
-    from controller.planning.capture import certify_form_closure
-
-    allowed = np.ones(len(kept.candidates), bool)
-    allowed[list(exclude)] = False
-    res = _reinforce(
-        cfg, kept.candidates, kept.candidate_normals, kept.chosen, allowed, robots=robots
-    )
-    if not res.holds or len(res.chosen) > robots:
-        return None
-    pts, nrm = kept.candidates[res.chosen], kept.candidate_normals[res.chosen]
-    centroid = geometry.centroid(geometry.ensure_ccw(cfg.object_polygon()))
-    if not certify_form_closure(pts, nrm, centroid):
-        return None
-    return CaptureSet(
-        pts,
-        nrm,
-        kept.objective,
-        True,
-        res.capacity if cfg.capture.hold_force > 0 else None,
-        kept.reinforced + res.added,
-        kept.candidates,
-        kept.candidate_normals,
-        res.chosen,
-    )
 
 
 # s a robot's estimate may stay stale (no pose for fleet.stale_after) before the capture takes
@@ -276,11 +78,23 @@ class CaptureJob:
     later re-plan or re-assignment may pick it; it never gets its old point back by itself.
     """
 
-    def __init__(self, cfg: FleetConfig, rng: np.random.Generator | None = None) -> None:
+    def __init__(
+        self,
+        cfg: FleetConfig,
+        rng: np.random.Generator | None = None,
+        planners: Planners | None = None,
+    ) -> None:
+        """``planners``: the port slow plans are asked of, off the tick (None: at once)."""
         self.cfg = cfg
+        self.planners = planners
         self.rng = rng if rng is not None else np.random.default_rng(cfg.capture.seed)
         self.n = len(cfg.robots)
-        self.capture = plan_capture_set(cfg, self.rng)
+        try:
+            self.capture = plan_capture_set(cfg, self.rng)
+        except CapturePlanError as exc:
+            raise MissionError(str(exc)) from None
+        self._replan_job = PlanSlot(planners or InlinePlanners(), "capture")
+        self._replan_why = ""  # what the pending capture re-plan is for: lost, pinned, start
         self.assignment: np.ndarray | None = None
         self.inner: Any = None
         self.blocked_ticks = 0
@@ -379,12 +193,19 @@ class CaptureJob:
             lost, replan = self._losses(view, gone)
             events += lost
             if replan:
-                return self._replan_lost(view, events)
+                self._ask_replan_lost(view)
+        if self._replan_job.pending and self._replan_why == "lost":
+            return self._await_lost(view, events)
         events += self._reassign(view)
         intent = self.inner.plan(view)
         intent.events[:0] = events
-        if self._blocked(view):
-            return self._replan(view, intent)
+        if not self._replan_job.pending and self._blocked(view):
+            self.blocked_ticks = 0
+            pose = np.asarray(view.object_pose, float)
+            k = int(self.available.sum())
+            self._ask_replan("pinned", view, replan_pinned, pose, frozenset(self.unreachable), k)
+        if self._replan_job.pending:
+            return self._await_pinned(view, intent)
         if intent.arrest:
             self.arrest_t = view.t
         wait = self.cfg.transport.start_after
@@ -405,6 +226,7 @@ class CaptureJob:
             self.capture.points,
             self.capture.normals,
             route_planner=self.route_planner,
+            planners=self.planners,
         )
 
     # --- robot loss and join ---------------------------------------------------------------
@@ -442,16 +264,31 @@ class CaptureJob:
                 return still
             k = int(ready.sum())
             if k < len(self.capture.points):
-                if k == self.start_tried:
-                    return still  # planned for this many already: wait for another robot
-                self.start_tried = k
-                keep = np.zeros(len(self.capture.points), bool)
-                new = replan_for_robots(self.cfg, self.capture, keep, k, self.rng)
-                if new is None:
-                    return still
-                self.capture = new
+                return self._start_with(view, ready, k, still)
         self.available = ready
         return self._start(view, pinned=False)
+
+    def _start_with(self, view: FleetView, ready: np.ndarray, k: int, still: Intent) -> Intent:
+        """Start with the ``k`` robots seen: the capture re-planned for them (off the tick;
+        every robot still meanwhile), or wait for another robot when none closes it."""
+        if not self._replan_job.pending:
+            if k == self.start_tried:
+                return still  # planned for this many already: wait for another robot
+            self.start_tried = k
+            keep = np.zeros(len(self.capture.points), bool)
+            self._ask_replan("start", view, replan_for_robots, keep, k, spawn_rng(self.rng))
+        got = self._replan_job.take(view.t)
+        if got is None or not got.ok or got.value is None or self.start_tried != k:
+            return still
+        self.capture = got.value
+        self.available = ready
+        return self._start(view, pinned=False)
+
+    def _ask_replan(self, why: str, view: FleetView, fn, *args) -> None:
+        """A capture re-plan off the tick (``why``: start, lost or pinned), with its own
+        generator drawn from the job's."""
+        self._replan_why = why
+        self._replan_job.request(view.t, fn, self.cfg, self.capture, *args)
 
     def _joins(self, view: FleetView, gone: np.ndarray) -> list:
         """Robots present with a fresh estimate again (or seen at last) are available again."""
@@ -472,21 +309,33 @@ class CaptureJob:
         ]
         return events, any(int(i) in assigned for i in new)
 
-    def _replan_lost(self, view: FleetView, events: list) -> Intent:
-        """An assigned robot is lost: the capture re-planned for the robots left and re-assigned
-        (the approach starts over), or the job fails with ``robots_lost``."""
+    def _ask_replan_lost(self, view: FleetView) -> None:
+        """An assigned robot is lost: the capture re-planned for the robots left (off the
+        tick; a pending re-plan is asked again with the robots left now)."""
         keep = self.available[self.assignment]
         k = int(self.available.sum())
         pose = np.asarray(view.object_pose, float)
-        new = replan_for_robots(
-            self.cfg, self.capture, keep, k, self.rng, pose, frozenset(self.unreachable)
+        rng = spawn_rng(self.rng)
+        self._ask_replan(
+            "lost", view, replan_for_robots, keep, k, rng, pose, frozenset(self.unreachable)
         )
+
+    def _await_lost(self, view: FleetView, events: list) -> Intent:
+        """Every robot holds until the re-plan comes; then it is re-assigned (the approach
+        starts over), or the job fails with ``robots_lost``."""
+        got = self._replan_job.take(view.t)
+        if got is None:
+            return Intent(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
+        new = got.value if got.ok else None
         if new is None:
+            k = int(self.available.sum())
             lost = ", ".join(view.ids[i] for i in self.lost)
             detail = (
                 f"robots lost ({lost}): the {k} robots left cannot close the object "
                 f"(the capture needs {len(self.capture.points)})"
             )
+            if not got.ok:
+                detail += f"; the re-plan failed: {got.error}"
             return self._fail(view, Reason.ROBOTS_LOST, detail, events)
         self.loss_replans += 1
         self.lost_t = view.t
@@ -595,13 +444,14 @@ class CaptureJob:
         self.blocked_ticks = self.blocked_ticks + 1 if hit.any() else 0
         return self.blocked_ticks >= PIN_TICKS
 
-    def _replan(self, view: FleetView, intent: Intent) -> Intent:
-        """The object is against a wall: capture it there (the wall a fixed contact), or fail
-        fast with ``pinned`` when no set of reachable points holds it."""
-        self.blocked_ticks = 0
-        pose = np.asarray(view.object_pose, float)
-        k = int(self.available.sum())
-        new = replan_pinned(self.cfg, self.capture, pose, frozenset(self.unreachable), k)
+    def _await_pinned(self, view: FleetView, intent: Intent) -> Intent:
+        """The object is against a wall and its capture is being re-planned there (the wall a
+        fixed contact; robots keep their stations meanwhile): the new set, or a standoff, or
+        ``pinned`` when no set of reachable points holds the object at rest."""
+        got = self._replan_job.take(view.t)
+        if got is None:
+            return intent
+        new = got.value if got.ok else None
         if new is None:
             # a standoff first: an object still sliding along a wall or into a corner may
             # come to rest where the walls help (robots keep their stations meanwhile)
@@ -610,7 +460,7 @@ class CaptureJob:
             moving = ovel is not None and float(np.hypot(ovel[0], ovel[1])) > PIN_STILL_SPEED
             if moving or self.pin_fails < PIN_RETRIES:
                 return intent
-            x, y, th = (float(v) for v in pose)
+            x, y, th = (float(v) for v in np.asarray(view.object_pose, float))
             detail = (
                 "the object is against a wall or an obstacle and no set of capture points a "
                 f"robot can reach there holds it with {self.n} robots (object at "

@@ -37,8 +37,10 @@ from scipy.optimize import linear_sum_assignment
 from controller import geometry
 from controller.config import FleetConfig
 from controller.mission.guard import SafetyStage
+from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spawn_rng
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
-from controller.planning.contact_lp import ContactForceLP, required_wrench
+from controller.planning.arrangement import Arrangement, can_push, plan_arrangement
+from controller.planning.contact_lp import ContactForceLP
 from controller.planning.transport import TransportPlanner
 from controller.planning.transport_model import ObjectModel, relocation_path
 from controller.planning.transport_types import (
@@ -119,7 +121,10 @@ class TransportMission:
         points: np.ndarray,
         normals: np.ndarray,
         route_planner: Any = None,
+        planners: Planners | None = None,
     ) -> None:
+        """``planners``: the port the route, the re-arrangement set and the local plans are
+        asked of (off the tick; None: computed at once, ready the same tick)."""
         self.cfg = cfg
         # the route planner toward object.goal (its C-space and cost-to-go table take a second:
         # the job builds it before the loop starts; built here on the first route otherwise)
@@ -136,7 +141,13 @@ class TransportMission:
             cfg.object_polygon(), o.mass, o.floor_friction, o.contact_friction, cfg.max_robot_radius
         )
         self.params = TransportParams.from_config(cfg.transport)
-        self.planner = TransportPlanner(self.params)
+        self.planner = TransportPlanner(self.params)  # touched only by its jobs
+        self.planners = planners if planners is not None else InlinePlanners()
+        self._route_job = PlanSlot(self.planners, "route")
+        self._set_job = PlanSlot(self.planners, "rearrange")
+        self._plan_job = PlanSlot(self.planners, "transport")
+        self._reset_planner = False  # the next local plan starts afresh (a new segment)
+        self.plan_waits = 0  # ticks a phase waited for a plan with the robots held
         self.lp = ContactForceLP(max(len(self.robots), 1), friction=o.contact_friction > 0)
         self.contacts: dict[int, Contact | None] = {int(i): None for i in self.robots}
         for i, p, nv in zip(np.asarray(robots, int), points, normals, strict=True):
@@ -224,11 +235,26 @@ class TransportMission:
         zero = np.zeros((self.n, 2))
         return Intent(zero, self.phase, events, stop=True, failed=True, reason=reason)
 
+    def _held(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+        """A plan is on its way: every robot holds where it is (those in contact keep it)."""
+        self.plan_waits += 1
+        touch = np.array([self.contacts[int(i)] is not None for i in self.robots])
+        zero = np.zeros((self.n, 2))
+        return self._intent(zero, events, pose, touch, np.ones(self.n, bool))
+
     # --- route --------------------------------------------------------------------------------
     def _route(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
-        if self.route_planner is None:
-            self.route_planner = route_planner_for(self.cfg)
-        res = self.route_planner.plan(pose)
+        """Ask for the route from the object's pose (off the tick), hold until it comes."""
+        if not self._route_job.pending:
+            self._route_job.request(view.t, _plan_route, self.route_planner, self.cfg, pose)
+        got = self._route_job.take(view.t)
+        if got is None:
+            return self._held(view, pose, events)
+        if not got.ok:
+            return self._fail(
+                Reason.NO_ROUTE, f"the route planner failed: {got.error}", view, events
+            )
+        self.route_planner, res = got.value
         if not res.ok:
             return self._fail(Reason.NO_ROUTE, res.reason, view, events)
         self.route = res
@@ -257,8 +283,7 @@ class TransportMission:
         hair's turn from the start)."""
         while self._subgoal_reached(pose):
             self.subgoal += 1
-        self.planner.reset()
-        self.last_plan = None
+        self._forget_plan()
         if self._can_push(pose):
             self._go(Phase.TRANSPORT, view.t, events)
             return self._transport(view, pose, events)
@@ -282,26 +307,18 @@ class TransportMission:
         local = geometry.rot(float(pose[2])).T @ d[:2]
         return np.r_[local, d[2] / self.model.mean_radius]
 
+    def _forget_plan(self) -> None:
+        """A new segment or arrangement: the local plan starts afresh (the planner's warm
+        start is reset by the next plan's job: only jobs touch the planner)."""
+        self._plan_job.cancel()
+        self._reset_planner = True
+        self.last_plan = None
+        self.plan_t = None
+
     def _can_push(self, pose: np.ndarray) -> bool:
         """Whether the robots in contact can push the object along the segment (the LP)."""
         twist = self._direction(pose) * self.params.speed
-        return self._pushes(twist, *self._contact_arrays())
-
-    def _pushes(self, twist: np.ndarray, pts: np.ndarray, nrm: np.ndarray, fmax: np.ndarray):
-        """Whether contacts (object-frame points, inward normals, force limits) can move the
-        object with ``twist`` (the contact-force LP)."""
-        if not np.any(twist):
-            return True
-        if len(pts) == 0:
-            return False
-        w = required_wrench(
-            twist, self.model.mass, self.model.floor_friction, self.model.mean_radius
-        )
-        res = self.lp.solve(
-            pts - self.model.centroid, nrm, fmax, np.ones(len(pts), bool), w,
-            self.model.contact_friction, self.model.mean_radius,
-        )  # fmt: skip
-        return res.status == "optimal"
+        return can_push(self.lp, self.model, twist, *self._contact_arrays())
 
     def _contact_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         pts, nrm, fmax = [], [], []
@@ -314,26 +331,40 @@ class TransportMission:
 
     # --- rearrange ----------------------------------------------------------------------------
     def _start_rearrangement(self, view: FleetView, pose: np.ndarray, events: list[Event]):
-        """New contacts for the segment (:meth:`_new_set`); the robots nearest to them move
-        there, the others keep their contacts (one too close to a new contact lets go)."""
+        """Ask for new contacts for the segment (``planning.arrangement``, off the tick); the
+        robots hold until they come (:meth:`_arrange`)."""
         self._go(Phase.REARRANGE, view.t, events)
         self.rearrangements += 1
         self.futile += 1
         self.rearrange_t = view.t
-        twist = self._direction(pose)
-        d = twist[:2]
-        if not np.any(d):
-            d = np.array([1.0, 0.0])
+        self.targets.clear()
+        self.moves.clear()
+        active = self._active()
+        weakest = min(self.cfg.robots[i].max_force for i in active)
+        self._set_job.request(
+            view.t,
+            plan_arrangement,
+            self.cfg,
+            self.model,
+            self._direction(pose),
+            self.params.speed,
+            weakest,
+            len(active),
+            self.s.turn_margin,
+            spawn_rng(self.rng),
+        )
+
+    def _arrange(self, view: FleetView, pose: np.ndarray, new: Arrangement, events: list[Event]):
+        """The new contacts have come: the robots nearest to them move there, the others keep
+        their contacts (one too close to a new contact lets go)."""
+        self.rearrange_t = view.t  # its timeout counts from the set's arrival
         cfg = self.cfg
         r = cfg.max_robot_radius
-        # a segment that turns the object more than a little: Eq. 5 knows no torque
-        new_pts, new_nrm, value, n_push, basis = self._new_set(twist, d)
+        new_pts, new_nrm = new.points, new.normals
         ids = self._active()
         here = geometry.inverse_transform(view.poses[ids, :2], pose)
         cost = np.linalg.norm(here[:, None] - (new_pts + r * new_nrm)[None], axis=-1)
         rows, cols = linear_sum_assignment(cost)
-        self.targets.clear()
-        self.moves.clear()
         chosen = set()
         for row, col in zip(rows, cols, strict=True):
             i = ids[row]
@@ -352,15 +383,16 @@ class TransportMission:
             mine = c.point - r * c.inward
             if np.any(np.linalg.norm(centres - mine, axis=1) < 2 * r + cfg.capture.clearance):
                 self.contacts[i] = None  # in the way of a new contact: it lets go
+        d = self._direction(pose)[:2]
         events.append(
             (
                 "rearrange",
                 {
                     "t": view.t,
-                    "direction": np.round(d, 4).tolist(),
-                    "pushers": n_push,
-                    "basis": basis,
-                    "eq5_value": float(value),
+                    "direction": np.round(d if np.any(d) else np.array([1.0, 0.0]), 4).tolist(),
+                    "pushers": new.pushers,
+                    "basis": new.basis,
+                    "eq5_value": float(new.value),
                     "moving": [view.ids[i] for i in self.moves],
                     "contacts": {
                         view.ids[i]: np.round(c.point, 4).tolist() for i, c in self.targets.items()
@@ -368,76 +400,6 @@ class TransportMission:
                 },
             )
         )
-
-    def _new_set(self, twist: np.ndarray, d: np.ndarray):
-        """The contact set for a segment: Sharma's Eq. 5 along D with the fewest pushers that
-        overcome the floor friction (plus one for the torque), then one more, each confirmed by
-        the contact-force LP at the weakest robot's force limit; a segment that mostly turns
-        the object, or one no Eq. 5 set can push, gets the least-force set of the LP over all
-        candidate nodes (:meth:`_wrench_set`). Returns (points, outward normals, value,
-        pushers, basis)."""
-        cfg, m = self.cfg, self.model
-        weakest = min(cfg.robots[i].max_force for i in self._active())
-        twist_v = twist * self.params.speed
-        if abs(twist[2]) * m.mean_radius <= 0.3:  # the turn's share of the unit twist
-            friction = m.floor_friction * m.mass * 9.81
-            fleet = len(self._active())
-            first = int(min(fleet, math.ceil(friction / weakest) + 1))
-            for n in range(first, min(first + 1, fleet) + 1):
-                pts, nrm, value = self._pushing_set(d, n)
-                if self._pushes(twist_v, pts, -nrm, np.full(len(pts), weakest)):
-                    return pts, nrm, value, n, "eq5"
-        pts, nrm, value, n = self._wrench_set(twist)
-        return pts, nrm, value, n, "lp_capacity"
-
-    def _pushing_set(self, d: np.ndarray, n_push: int) -> tuple[np.ndarray, np.ndarray, float]:
-        """Sharma Eq. 5 along D: the ``n_push`` candidate nodes pushing hardest along D."""
-        from controller.planning.capture import (
-            CaptureParams,
-            candidate_nodes,
-            plan_push_arrangement,
-        )
-
-        cfg = self.cfg
-        r = cfg.max_robot_radius
-        poly = geometry.ensure_ccw(cfg.object_polygon())
-        params = CaptureParams.from_config(cfg.capture)
-        idx, value = plan_push_arrangement(poly, r, d, n_push, params, self.rng)
-        cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
-        return cand.points[idx], cand.normals[idx], float(value)
-
-    def _wrench_set(self, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
-        """The support of the least-force LP for the wrench the segment needs (with a margin:
-        ``turn_margin``) over every candidate node, reinforced (``planning.hold``) until it can
-        produce that wrench within ``max_force``; the value reported is that capacity (≥ 1: the
-        set can move the object as asked)."""
-        from controller.planning.capture import candidate_nodes
-        from controller.planning.hold import least_force_set, reinforce
-
-        cfg, m = self.cfg, self.model
-        r = cfg.max_robot_radius
-        poly = geometry.ensure_ccw(cfg.object_polygon())
-        cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
-        centres = cand.points + r * cand.normals
-        gap = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
-        conflict = gap < 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)
-        np.fill_diagonal(conflict, False)
-        need = required_wrench(twist * self.params.speed, m.mass, m.floor_friction, m.mean_radius)
-        weakest = min(cfg.robots[i].max_force for i in self._active())
-        load = self.s.turn_margin * need
-        start = least_force_set(cand.points, cand.normals, m.centroid, load, weakest, conflict)
-        res = reinforce(
-            cand.points,
-            cand.normals,
-            m.centroid,
-            start[: len(self._active())],
-            np.ones(len(cand.points), bool),
-            conflict,
-            weakest,
-            -load[None],
-            len(self._active()),
-        )
-        return cand.points[res.chosen], cand.normals[res.chosen], res.capacity, len(res.chosen)
 
     def _rearrange(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         """Movers follow their path around the object; the others hold still. (The stall clock
@@ -448,6 +410,14 @@ class TransportMission:
         if self._at(pose, goal, k * self.s.tolerance, k * self.s.heading_tolerance):
             return self._deliver(view, pose, events)
         self.progress_t = view.t
+        if self._set_job.pending:
+            got = self._set_job.take(view.t)
+            if got is None:
+                return self._held(view, pose, events)
+            if not got.ok:
+                detail = f"the re-arrangement planner failed: {got.error}"
+                return self._fail(Reason.STALLED, detail, view, events)
+            self._arrange(view, pose, got.value, events)
         vel = np.zeros((self.n, 2))
         hold = np.ones(self.n, bool)
         for i in self.moves:
@@ -526,14 +496,27 @@ class TransportMission:
             return self._begin_segment(view, pose, events)
         if self.stuck >= self.s.stuck_plans:  # the contacts cannot push as the route asks
             self.stuck = 0
-            self.planner.reset()
-            self.last_plan = None
+            self._forget_plan()
             self._start_rearrangement(view, pose, events)
             return self._rearrange(view, pose, events)
-        due = self.plan_t is None or self.last_plan is None
-        due = due or view.t - self.plan_t >= self.last_plan.interval - 1e-9
-        if due:
-            self._local_plan(view, pose, events)
+        return self._plan_and_execute(view, pose, events)
+
+    def _plan_and_execute(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+        """Ask for a local plan every interval; execute the latest one that has come, closed on
+        the current estimate (hold while the segment's first plan is on its way)."""
+        due = self.plan_t is None or (
+            self.last_plan is not None and view.t - self.plan_t >= self.last_plan.interval - 1e-9
+        )
+        if due and not self._plan_job.pending:
+            self._request_plan(view, pose)
+        got = self._plan_job.take(view.t)
+        if got is not None:
+            if not got.ok:
+                detail = f"the local planner failed: {got.error}"
+                return self._fail(Reason.STALLED, detail, view, events)
+            self._apply_plan(view, pose, got.value, events)
+        if self.last_plan is None:
+            return self._held(view, pose, events)
         return self._execute(view, pose, events)
 
     def _deliver(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
@@ -633,7 +616,10 @@ class TransportMission:
         t = self.targets.get(i) if i in self.moves else None
         return None if t is None else (t.point, t.inward)
 
-    def _local_plan(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> None:
+    def _request_plan(self, view: FleetView, pose: np.ndarray) -> None:
+        """Ask for a local plan from the current estimate (off the tick); the robots execute
+        the previous one meanwhile. ``plan_t`` is the state's time: the next plan is due one
+        interval after it, however long this one takes to come."""
         cfg = self.cfg
         state = TransportState(
             self.model,
@@ -644,8 +630,16 @@ class TransportMission:
             cfg.bounds_array(),
         )
         elapsed = 0.0 if self.plan_t is None else view.t - self.plan_t
-        plan = self.planner.plan(state, self.rng, elapsed)
+        reset, self._reset_planner = self._reset_planner, False
+        self._plan_job.request(
+            view.t, _plan_local, self.planner, state, spawn_rng(self.rng), elapsed, reset
+        )
         self.plan_t = view.t
+
+    def _apply_plan(
+        self, view: FleetView, pose: np.ndarray, plan: LocalPlan, events: list[Event]
+    ) -> None:
+        """A local plan has come: its first interval's contacts, relocations and actions."""
         self.last_plan = plan
         self.plans += 1
         first_ok = plan.lp_status[0] == "optimal" if plan.lp_status else True
@@ -676,8 +670,18 @@ class TransportMission:
             for i, p in self.moves.items()
         }
         ids = [view.ids[int(i)] for i in self.robots]  # the plan's rows (the scene's pushers)
+        lag = view.t - self.plan_t  # the state it was planned from is this old
         events.append(
-            ("transport", {"t": view.t, "robots": ids, **plan.to_dict(), "relocating": moving})
+            (
+                "transport",
+                {
+                    "t": view.t,
+                    "robots": ids,
+                    **plan.to_dict(),
+                    "relocating": moving,
+                    "plan_age_s": round(lag, 6),
+                },
+            )
         )
 
     def _commit_relocation(self, i: int, target: Contact, view: FleetView, pose: np.ndarray):
@@ -776,7 +780,9 @@ class TransportMission:
             hold=hold,
             progress={
                 "phase": str(self.phase),
-                "to_goal_m": self._remaining(pose),
+                "to_goal_m": self._remaining(pose)
+                if self.route is not None
+                else float(np.linalg.norm(pose[:2] - np.asarray(self.cfg.object.goal)[:2])),
                 "subgoal": float(self.subgoal),
             },
             object_push=None if twist is None else np.asarray(twist, float),
@@ -823,6 +829,28 @@ class _Ready:
         return {} if self.inner is None else self.inner.summary()
 
 
+def _plan_route(planner: Any, cfg: FleetConfig, pose: np.ndarray) -> tuple[Any, Any]:
+    """Job ``route``: the route from ``pose`` (the planner built first when there is none);
+    returns (planner, result)."""
+    if planner is None:
+        planner = route_planner_for(cfg)
+    return planner, planner.plan(pose)
+
+
+def _plan_local(
+    planner: TransportPlanner,
+    state: TransportState,
+    rng: np.random.Generator,
+    elapsed: float,
+    reset: bool,
+) -> LocalPlan:
+    """Job ``transport``: one local plan (the planner's warm start reset first on a new
+    segment). Only these jobs touch ``planner``, one at a time."""
+    if reset:
+        planner.reset()
+    return planner.plan(state, rng, elapsed)
+
+
 def route_planner_for(cfg: FleetConfig) -> Any:
     """The object's route planner toward ``object.goal`` (C-space and cost-to-go table built)."""
     from controller.planning.route import RoutePlanner
@@ -830,7 +858,12 @@ def route_planner_for(cfg: FleetConfig) -> Any:
     return RoutePlanner.from_config(cfg)
 
 
-def transport_from_start(cfg: FleetConfig, rng: np.random.Generator, reach: float = 0.03):
+def transport_from_start(
+    cfg: FleetConfig,
+    rng: np.random.Generator,
+    reach: float = 0.03,
+    planners: Planners | None = None,
+):
     """``fleet run/daemon --mission transport``: carry an object the robots already hold. The
     robots whose discs are within ``reach`` m of the object's surface at the first estimates
     hold their nearest boundary point; the others are free."""
@@ -850,7 +883,14 @@ def transport_from_start(cfg: FleetConfig, rng: np.random.Generator, reach: floa
         held = np.flatnonzero(gap < reach)
         normals = geometry.outward_normals(poly)[j]
         return TransportMission(
-            cfg, rng, SafetyStage(cfg), held, near[held], normals[held], route_planner=planner
+            cfg,
+            rng,
+            SafetyStage(cfg),
+            held,
+            near[held],
+            normals[held],
+            route_planner=planner,
+            planners=planners,
         )
 
     return _Ready(cfg, make)

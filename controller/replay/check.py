@@ -34,6 +34,7 @@ from controller.config import ConfigError, FleetConfig, InputError, parse_config
 from controller.estimation.fleet import FleetEstimator
 from controller.io.recorder import drop_none, read_log, read_metadata
 from controller.mission.factory import build_mission
+from controller.mission.planners import DeferredPlanners
 from controller.replay.membus import MemoryBus
 from controller.runtime.node import ControllerNode
 
@@ -148,7 +149,10 @@ def check_log(
     run = load_logged_run(path)
     kind = mission or mission_kind(run.mode)
     bus = MemoryBus(run.cfg.fleet.name)
-    node = ControllerNode(run.cfg, bus, build_mission(run.cfg, kind), _estimator(run.cfg))
+    # the plans after the latency the dry run modelled (the same jobs, in the same order)
+    planners = DeferredPlanners.for_config(run.cfg)
+    mission = build_mission(run.cfg, kind, planners=planners)
+    node = ControllerNode(run.cfg, bus, mission, _estimator(run.cfg))
     for rid in run.cfg.robot_ids:
         bus.alive_cb["robot"](rid, True)  # liveliness is not logged: every robot present
     margin = 0.5 * run.cfg.sim.timestep

@@ -26,6 +26,7 @@ from controller.io.bus import Bus, BusError
 from controller.io.ratekeeper import Ratekeeper
 from controller.mission.types import Mission
 from controller.runtime.node import ControllerNode
+from controller.runtime.planner import PlannerWorker
 from controller.runtime.recording import open_recorder
 from controller.runtime.wiring import make_estimator
 
@@ -80,6 +81,29 @@ class LatchWatch:
             self.next_query = mono + LATCH_RETRY
 
 
+class TickBudget:
+    """Counts the ticks that took longer than ``fleet.tick_budget`` (the node's own stage
+    timings: sample to publish) and logs when it starts and every 100th time."""
+
+    def __init__(self, budget: float) -> None:
+        self.budget = budget
+        self.over = 0
+
+    def check(self, node: ControllerNode) -> None:
+        took = node.last_tick_s
+        if took is None or took <= self.budget:
+            return
+        self.over += 1
+        node.counters.over_budget = self.over
+        if self.over == 1 or self.over % 100 == 0:
+            log.warning(
+                "a control tick took %.1f ms, over its %.1f ms budget (%d so far)",
+                took * 1e3,
+                self.budget * 1e3,
+                self.over,
+            )
+
+
 def run_daemon(
     cfg: FleetConfig,
     mission: Mission,
@@ -88,9 +112,11 @@ def run_daemon(
     stop: threading.Event,
     duration: float = 0.0,
     viz: bool = False,
+    planners: PlannerWorker | None = None,
 ) -> int:
     """The lab loop. Exit status: 0 stopped or done, 1 the mission failed. ``viz``: serve the
-    recorded messages live to Foxglove on 127.0.0.1."""
+    recorded messages live to Foxglove on 127.0.0.1. ``planners``: the worker ``mission``
+    plans through, off the loop (closed at the end)."""
     recorder = open_recorder(cfg, out, f"daemon/{mission_kind}", viz=viz, who="fleet daemon")
     status = 0
     try:
@@ -104,6 +130,7 @@ def run_daemon(
                 make_estimator(cfg),
                 extra_drops=recorder.drops,
                 clock=time.monotonic,
+                planners=planners,
             )
             latch = LatchWatch(node)
             latch.start(time.monotonic(), LATCH_WAIT_AT_START)
@@ -114,6 +141,7 @@ def run_daemon(
                 file=sys.stderr,
             )
             t0 = time.time()
+            budget = TickBudget(cfg.fleet.budget)
             lag_reported = 0
             last = time.monotonic()
             while not stop.is_set():
@@ -126,6 +154,7 @@ def run_daemon(
                 latch.poll(mono)
                 now = time.time()  # wall clock: pose stamps come from other computers
                 result = node.tick(now)
+                budget.check(node)
                 if rk.lagged > lag_reported:
                     lag_reported = rk.lagged
                     log.warning(
@@ -144,6 +173,8 @@ def run_daemon(
             node.hold(time.time())
     finally:
         recorder.close()
+        if planners is not None:
+            planners.close()
     print(
         f"fleet daemon: stopped; {recorder.written} messages in {recorder.location}",
         file=sys.stderr,

@@ -22,6 +22,7 @@ from controller.io.bus import Bus
 from controller.mission.types import Mission
 from controller.runtime.lockstep import ControllerLockstep, LockstepCoordinator
 from controller.runtime.node import ControllerNode
+from controller.runtime.planner import PlannerWorker
 from controller.runtime.recording import open_recorder
 from controller.runtime.wiring import make_estimator, make_hub, make_sim_drivers
 from drivers.agent import Agent, AgentParams
@@ -279,8 +280,12 @@ class DryRun:
         gui: bool = False,
         max_time: float | None = None,
         viz: bool = False,
+        planners: PlannerWorker | None = None,
     ) -> None:
+        """``planners``: the lockstep planner worker ``mission`` was built with (it plans off
+        the tick; its plans come after their modelled latency); closed when the run ends."""
         self.cfg = cfg
+        self.planners = planners
         self.viz = viz
         self.mission = mission
         self.out = out
@@ -316,7 +321,23 @@ class DryRun:
         finally:
             hub.world.close()
             recorder.close()
+            if self.planners is not None:
+                self.planners.close()
         return self._finish(result, recorder, wall0)
+
+    @classmethod
+    def of(cls, cfg: FleetConfig, kind: str, out: Path, **kw: Any) -> DryRun:
+        """The dry run of mission ``kind`` the way ``fleet run`` runs it: the mission built
+        with a lockstep planner worker (its plans after their modelled latency)."""
+        from controller.mission.factory import build_mission
+
+        planners = PlannerWorker.for_config(cfg, lockstep=True)
+        try:
+            mission = build_mission(cfg, kind, planners=planners)
+        except BaseException:
+            planners.close()
+            raise
+        return cls(cfg, mission, out, planners=planners, **kw)
 
     def _run(self, hub, recorder, ctl_bus: Bus, robot_bus: Bus, wall0: float) -> dict[str, Any]:
         cfg = self.cfg
@@ -342,7 +363,13 @@ class DryRun:
             for r, drv in zip(cfg.robots, drivers, strict=True)
         ]
         coord = LockstepCoordinator(
-            robot_bus, hub, agents, 1.0 / cfg.fleet.rate_hz, cfg.sim.tick_timeout, commands_arrived
+            robot_bus,
+            hub,
+            agents,
+            1.0 / cfg.fleet.rate_hz,
+            cfg.sim.tick_timeout,
+            commands_arrived,
+            planning=None if self.planners is None else lambda: self.planners.waiting,
         )
         ctl = ControllerLockstep(node, ctl_bus, wait_inputs=cfg.sim.tick_timeout)
         self._handshake(node, agents, coord)
@@ -418,6 +445,7 @@ class DryRun:
             "final_object_pose": [float(v) for v in world.object_pose()],
             "rearrangements": mission.get("rearrangements"),
             "relocations": mission.get("relocations"),
+            "plan_latency_s": {} if self.planners is None else self.planners.summary(),
             **self.carry.figures(world),
             "mission": mission,
         }

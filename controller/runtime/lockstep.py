@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from controller import wire
@@ -52,8 +53,12 @@ class LockstepCoordinator:
         control_dt: float,
         tick_timeout: float,
         commands_arrived: threading.Condition,
+        planning: Callable[[], bool] | None = None,
     ) -> None:
-        """``commands_arrived`` is the condition the agents' command inboxes notify."""
+        """``commands_arrived`` is the condition the agents' command inboxes notify;
+        ``planning`` tells whether the controller is waiting for a plan due at this tick (its
+        modelled latency is up): the tick's timeout does not run meanwhile."""
+        self.planning = planning
         self.commands_arrived = commands_arrived
         self.bus = bus
         self.hub = hub
@@ -125,11 +130,14 @@ class LockstepCoordinator:
         deadline = time.monotonic() + self.tick_timeout
         while True:
             left = deadline - time.monotonic()
+            if left <= 0 and self.planning is not None and self.planning():
+                deadline = time.monotonic() + self.tick_timeout  # a modelled plan latency
+                continue
             if left <= 0:
                 return False
-            item = self._done.get(timeout=left)
+            item = self._done.get(timeout=min(left, 0.1))
             if item is None:
-                return False
+                continue
             self._answered = max(self._answered, item.msg.step)
             self._commands_due = max(self._commands_due, item.msg.commands)
             if self._answered >= step:

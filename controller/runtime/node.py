@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -34,7 +35,8 @@ from controller.mission.types import FleetView, Mission, MissionOutput
 
 log = logging.getLogger(__name__)
 
-STAGES = ("sample", "plan", "safety", "publish")  # timed: sample+estimate, plan, safety, publish
+STAGES = ("sample", "plan", "safety", "publish")
+TIMINGS = 200_000  # ticks of stage timings kept (the run summary's; about 3 h at 20 Hz)
 
 
 class Estimator(Protocol):
@@ -59,6 +61,7 @@ class NodeCounters:
     link_events: int = 0
     link_restored: int = 0
     skewed: int = 0  # poses stamped further than fleet.max_clock_skew from the tick time
+    over_budget: int = 0  # lab ticks that took longer than fleet.tick_budget
 
 
 class ControllerNode:
@@ -73,11 +76,17 @@ class ControllerNode:
         lossless_commands: bool = False,
         extra_drops: Callable[[], dict[str, int]] | None = None,
         clock: Callable[[], float] | None = None,
+        planners: Any = None,
     ) -> None:
         """``clock`` (s, monotonic) only times the stages; ``extra_drops`` adds drop counters
-        of other parts (the recorder) to ``fleet status``."""
+        of other parts (the recorder) to ``fleet status``; ``planners`` (the planner worker)
+        adds its plan latencies (``plan_latency_s``)."""
         self.clock = clock
-        self.timings: dict[str, list[float]] = {k: [] for k in STAGES}
+        self.planners = planners
+        self.last_tick_s: float | None = None  # the last tick's duration (with a clock)
+        # the last TIMINGS ticks' stage durations (s), and the whole ticks' for fleet status
+        self.timings: dict[str, deque[float]] = {k: deque(maxlen=TIMINGS) for k in STAGES}
+        self.tick_totals: deque[float] = deque(maxlen=1000)
         self.cfg = cfg
         self.bus = bus
         self.extra_drops = extra_drops
@@ -277,6 +286,8 @@ class ControllerNode:
         if self.clock is not None:
             for name, a, b in zip(STAGES, marks[:-1], marks[1:], strict=True):
                 self.timings[name].append(b - a)
+            self.last_tick_s = marks[-1] - marks[0]
+            self.tick_totals.append(self.last_tick_s)
         return out
 
     def _now(self) -> float:
@@ -403,7 +414,20 @@ class ControllerNode:
             estop=self.estop,
             robots=robots,
             counters={**vars(self.counters), **self.drops()},
+            plan_latency_s={} if self.planners is None else self.planners.summary(),
+            tick_ms=self._tick_percentiles(),
         )
+
+    def _tick_percentiles(self) -> dict[str, float]:
+        """The whole tick's p50/p99/max over the last 1 000 ticks, ms (with a clock)."""
+        if not self.tick_totals:
+            return {}
+        total = np.asarray(self.tick_totals)
+        return {
+            "p50": float(np.median(total) * 1e3),
+            "p99": float(np.percentile(total, 99) * 1e3),
+            "max": float(total.max() * 1e3),
+        }
 
 
 def _known(estimate: Any) -> Any:

@@ -36,9 +36,12 @@ def free_port() -> int:
 
 
 def on_free_port(cfg: FleetConfig) -> FleetConfig:
-    """The config with its bus on a free loopback port (and nothing to connect to)."""
+    """The config with its bus on a free loopback port (and nothing to connect to), in the
+    protocol of its first listen endpoint (a TLS-only config stays TLS)."""
+    first = cfg.zenoh.listen[0] if cfg.zenoh.listen else "tcp/"
+    proto = first.split("/", 1)[0] if first.split("/", 1)[0] in ("tcp", "tls") else "tcp"
     zenoh = dataclasses.replace(
-        cfg.zenoh, listen=(f"tcp/127.0.0.1:{free_port()}",), connect=(), mode="peer"
+        cfg.zenoh, listen=(f"{proto}/127.0.0.1:{free_port()}",), connect=(), mode="peer"
     )
     return dataclasses.replace(cfg, zenoh=zenoh)
 
@@ -50,14 +53,13 @@ def load_all(paths: list[str]) -> list[FleetConfig]:
 
 def run_one(cfg: FleetConfig, out: Path, max_time: float | None) -> dict[str, Any]:
     """One dry run as a sweep row (a run that cannot start is a row with status ``error``)."""
-    from controller.mission.factory import build_mission
     from controller.mission.job import MissionError
     from controller.runtime.dry_run import DryRun
 
     row: dict[str, Any] = {"config": cfg.source, "log": str(out), "backend": cfg.sim.backend}
     t0 = time.monotonic()
     try:
-        summary = DryRun(on_free_port(cfg), build_mission(cfg), out, max_time=max_time).run()
+        summary = DryRun.of(on_free_port(cfg), "capture", out, max_time=max_time).run()
     except MissionError as exc:
         return {**row, "status": "error", "phase": None, "reason": "mission", "detail": str(exc)}
     except Exception as exc:  # noqa: BLE001 - one broken run must not end the sweep

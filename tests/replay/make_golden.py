@@ -24,7 +24,6 @@ import tempfile
 from pathlib import Path
 
 from controller.config import load_config
-from controller.mission.factory import build_mission
 from controller.replay.check import check_log
 from controller.runtime.dry_run import DryRun
 from controller.runtime.sweep import on_free_port
@@ -40,7 +39,7 @@ def make(name: str, force: bool = False) -> dict:
     cfg = on_free_port(load_config(DATA / f"{name}.toml"))
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / f"{name}.mcap"
-        summary = DryRun(cfg, build_mission(cfg, MISSIONS[name]), out).run()
+        summary = DryRun.of(cfg, MISSIONS[name], out).run()
         if summary["status"] != "ok" and not force:
             raise SystemExit(f"{name}: the run failed ({summary['failure']}); not written")
         size = out.stat().st_size

@@ -19,7 +19,6 @@ import json
 import pytest
 
 from controller.cli import main
-from controller.mission.factory import build_mission
 from controller.runtime.dry_run import DryRun, judge
 from tests.support.transport_scenarios import CRATE, L_SHAPE, Scenario, scenario_config
 
@@ -91,7 +90,7 @@ UNREACHABLE = Scenario(
 def run(sc: Scenario, tmp_path):
     cfg = scenario_config(sc)
     kind = "capture" if sc.whole_job else "transport"
-    return DryRun(cfg, build_mission(cfg, kind), tmp_path / f"{sc.name}.mcap").run()
+    return DryRun.of(cfg, kind, tmp_path / f"{sc.name}.mcap").run()
 
 
 @pytest.fixture(scope="module")

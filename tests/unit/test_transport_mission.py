@@ -12,6 +12,7 @@ from controller import geometry
 from controller.mission.guard import SafetyStage
 from controller.mission.transport import TransportMission
 from controller.mission.types import FleetView, Phase
+from controller.planning.arrangement import plan_arrangement
 from controller.planning.contact_lp import ContactForceLP, required_wrench
 from controller.planning.hold import contact_wrenches
 from tests.support.transport_scenarios import CRATE, Scenario, scenario_config
@@ -118,16 +119,31 @@ def _lp_ok(m, pts, nrm, twist, fmax):
     return res.status == "optimal"
 
 
+def _arrangement(m, cfg, twist):
+    """The re-arrangement set the mission would ask for (``planning.arrangement``)."""
+    a = plan_arrangement(
+        cfg,
+        m.model,
+        twist,
+        m.params.speed,
+        min(r.max_force for r in cfg.robots),
+        len(cfg.robots),
+        m.s.turn_margin,
+        np.random.default_rng(0),
+    )
+    return a.points, a.normals, a.value, a.pushers, a.basis
+
+
 def test_a_pushing_set_is_confirmed_by_the_lp_and_a_turning_set_turns():
     m, cfg, _ = mission(OPEN)
     fmax = min(r.max_force for r in cfg.robots)
     push = np.array([1.0, 0.0, 0.0])
-    pts, nrm, value, n, basis = m._new_set(push, push[:2])
+    pts, nrm, value, n, basis = _arrangement(m, cfg, push)
     assert basis == "eq5" and n == len(pts) >= 2
     assert _lp_ok(m, pts, nrm, push * m.params.speed, fmax)
     assert np.all(nrm @ [-1.0, 0.0] > -1e-9)  # nobody pulls: the pushers face +x
     turn = np.array([0.0, 0.0, 1.0 / m.model.mean_radius])
-    pts, nrm, value, n, basis = m._new_set(turn, np.zeros(2))
+    pts, nrm, value, n, basis = _arrangement(m, cfg, turn)
     assert basis == "lp_capacity" and value >= 1.0
     assert _lp_ok(m, pts, nrm, turn * m.params.speed, fmax)
     assert contact_wrenches(pts, nrm, m.model.centroid)[2].max() > 0  # a push turns it CCW
@@ -143,7 +159,7 @@ def test_a_heavy_object_recruits_free_robots():
     )  # fmt: skip
     m, cfg, _ = mission(sc)
     push = np.array([1.0, 0.0, 0.0])
-    pts, nrm, value, n, basis = m._new_set(push, push[:2])
+    pts, nrm, value, n, basis = _arrangement(m, cfg, push)
     held = sum(c is not None for c in m.contacts.values())
     assert n >= 4 and len(pts) >= 4 and n > 0
     assert len(m.robots) == len(cfg.robots) > held  # the free ones take part

@@ -1,0 +1,53 @@
+"""The dry run is reproducible with planning off the tick: two ``fleet run --json`` of the
+top-level fleet.toml, the second with a CPU hog on every core beside it, give the same outcome
+(the plans come after their modelled latency in sim time, whatever the wall clock did)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from tests.support.config import ROOT
+
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
+
+FIELDS = ("phase", "status", "arrest_time_s", "transport_time_s", "rearrangements", "relocations")
+CLOSE = ("goal_error_m", "goal_error_deg", "sim_time_s")
+HOG = "import time\nend = time.monotonic() + 600\nwhile time.monotonic() < end:\n    pass\n"
+
+
+def fleet_run(tmp_path, name: str) -> dict:
+    out = subprocess.run(
+        [sys.executable, "-m", "controller.cli", "run", "--config", str(ROOT / "fleet.toml")]
+        + ["--json", "--out", str(tmp_path / f"{name}.mcap")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=900,
+    )
+    assert out.returncode in (0, 1), out.stderr[-2000:]
+    return json.loads(out.stdout)
+
+
+def test_the_default_dry_run_gives_the_same_outcome_idle_and_loaded(tmp_path):
+    first = fleet_run(tmp_path, "idle")
+    hogs = [
+        subprocess.Popen([sys.executable, "-c", HOG]) for _ in range(max(2, os.cpu_count() or 2))
+    ]
+    try:
+        second = fleet_run(tmp_path, "loaded")
+    finally:
+        for h in hogs:
+            h.kill()
+            h.wait()
+    assert first["status"] == "ok" and first["transported"] is True, first["failure"]
+    for k in FIELDS:
+        assert first[k] == second[k], k
+    for k in CLOSE:
+        assert abs(first[k] - second[k]) <= 1e-9, k
+    assert first["plan_latency_s"]["transport"]["n"] == second["plan_latency_s"]["transport"]["n"]
+    assert first["missed_ticks"] == second["missed_ticks"] == 0
