@@ -1,0 +1,176 @@
+"""Planning off the tick: the mission asks, holds or executes its last plan meanwhile, and picks
+the plan up when it is due (lockstep: exactly ``latency_ticks`` later, whatever the wall clock);
+the lab worker hands a plan over when computed, gives a hung planner up, and a failing planner
+leaves the robots stopped, never drifting."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from controller.mission.guard import SafetyStage
+from controller.mission.planners import DeferredPlanners, InlinePlanners, PlanSlot
+from controller.mission.transport import TransportMission
+from controller.mission.types import Phase
+from controller.runtime.planner import PlannerWorker
+from tests.support.transport_scenarios import CRATE, Scenario, scenario_config
+from tests.unit.test_transport_mission import holders, view
+
+DT = 0.05
+OPEN = Scenario("open", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0))
+LIGHT = Scenario("light", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0), mass=1.0, floor_friction=0.05)
+
+
+def transport(planners, sc: Scenario = OPEN):
+    cfg = scenario_config(sc)
+    held, pts, nrm = holders(cfg)
+    m = TransportMission(
+        cfg, np.random.default_rng(0), SafetyStage(cfg), held, pts, nrm, planners=planners
+    )
+    return m, cfg, np.array([r.start for r in cfg.robots])
+
+
+def test_the_robots_hold_while_the_route_is_on_its_way_and_take_it_when_due():
+    ticks = {"route": 4, "rearrange": 3, "transport": 2, "capture": 1}
+    m, cfg, poses = transport(DeferredPlanners(ticks, DT))
+    kinds = []
+    for k in range(4):
+        out = m.plan(view(cfg, k * DT, poses, cfg.object.start))
+        kinds += [e for e, _ in out.events]
+        assert m.phase == Phase.ROUTE and out.hold is not None and out.hold.all()
+        assert not np.any(out.velocities)
+    assert "route" not in kinds
+    out = m.plan(view(cfg, 4 * DT, poses, cfg.object.start))
+    assert "route" in [e for e, _ in out.events]  # due at t + 4 ticks, not before
+    assert m.phase in (Phase.TRANSPORT, Phase.REARRANGE)
+
+
+def test_the_same_plans_come_inline_and_deferred_only_later():
+    """A deferred plan is the plan computed from the state it was asked with: the same route
+    as at once, only ``latency_ticks`` ticks later."""
+    a, cfg, poses = transport(InlinePlanners())
+    b, _, _ = transport(DeferredPlanners({"route": 3}, DT))
+    a.plan(view(cfg, 0.0, poses, cfg.object.start))
+    for k in range(4):
+        b.plan(view(cfg, k * DT, poses, cfg.object.start))
+    assert np.array_equal(a.route.waypoints, b.route.waypoints)
+
+
+def test_the_last_plan_is_executed_while_the_next_one_is_computed():
+    ticks = {"route": 0, "rearrange": 0, "transport": 6, "capture": 0}
+    m, cfg, poses = transport(DeferredPlanners(ticks, DT), LIGHT)  # the holders can push it
+    t = 0.0
+    while m.last_plan is None and t < 2.0:  # the segment's first plan: held meanwhile
+        out = m.plan(view(cfg, t, poses, cfg.object.start))
+        if m.phase == Phase.TRANSPORT and m.last_plan is None:
+            assert out.hold.all() and not np.any(out.velocities)
+        t += DT
+    assert m.phase == Phase.TRANSPORT and m.last_plan is not None
+    first, plans = m.last_plan, m.plans
+    waited = 0
+    while True:  # the next plan is asked one interval on and comes 6 ticks after that
+        out = m.plan(view(cfg, t, poses, cfg.object.start))
+        t += DT
+        waited += 1
+        if m.plans > plans:
+            break
+        assert m.last_plan is first and np.any(out.velocities)  # the robots push meanwhile
+    # one plan per interval, as before; each one planned from a state 6 ticks old
+    assert waited == round(first.interval / DT)
+    age = dict(out.events)["transport"]["plan_age_s"]
+    assert age == pytest.approx(6 * DT)
+
+
+def test_a_failing_planner_stops_the_robots_with_the_reason():
+    m, cfg, poses = transport(InlinePlanners())
+    m.route_planner = _Broken()
+    out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
+    assert out.failed and out.stop and m.phase == Phase.FAILED
+    failure = dict(out.events)["failure"]
+    assert failure["reason"] == "no_route" and "planner exploded" in failure["detail"]
+
+
+class _Broken:
+    def plan(self, pose):
+        raise RuntimeError("planner exploded")
+
+
+def test_the_lockstep_worker_hands_a_plan_over_exactly_when_due():
+    w = PlannerWorker({"route": 3}, DT, lockstep=True)
+    gate = threading.Event()
+    try:
+        slot = PlanSlot(w, "route")
+        slot.request(1.0, lambda: gate.wait(5) and 42)
+        gate.set()
+        w._pool.submit(lambda: None).result()  # the job has finished by now
+        assert slot.take(1.0 + 2 * DT) is None  # computed, but not due
+        got = slot.take(1.0 + 3 * DT)
+        assert got is not None and got.ok and got.value == 42
+        s = w.summary()["route"]
+        assert s["n"] == 1 and s["p50"] >= 0 and s["failed"] == 0
+    finally:
+        gate.set()
+        w.close()
+
+
+def test_the_lockstep_worker_waits_for_a_due_plan_and_says_so():
+    w = PlannerWorker({"route": 1}, DT, lockstep=True)
+    gate = threading.Event()
+    seen = []
+    try:
+        slot = PlanSlot(w, "route")
+        slot.request(0.0, lambda: gate.wait(5) and "late")
+        waiter = threading.Thread(target=lambda: seen.append(slot.take(DT)))
+        waiter.start()
+        while not w.waiting and waiter.is_alive():
+            waiter.join(0.01)
+        assert w.waiting  # the tick waits for the due plan: the sim side is told
+        gate.set()
+        waiter.join(5)
+        assert seen and seen[0].value == "late" and not w.waiting
+    finally:
+        gate.set()
+        w.close()
+
+
+def test_the_lab_worker_hands_a_plan_over_when_computed_and_gives_a_hung_one_up():
+    now = [0.0]
+    w = PlannerWorker({"route": 2}, DT, lockstep=False, timeout=1.0, clock=lambda: now[0])
+    gate = threading.Event()
+    try:
+        fast = PlanSlot(w, "rearrange")
+        fast.request(0.0, lambda: 7)
+        w._pool.submit(lambda: None).result()
+        got = fast.take(0.0)  # ready as soon as computed, whatever the tick time
+        assert got is not None and got.value == 7
+        hung = PlanSlot(w, "route")
+        hung.request(0.0, lambda: gate.wait(10))
+        assert hung.take(0.0) is None
+        now[0] = 1.5
+        got = hung.take(0.0)
+        assert got is not None and not got.ok and "timeout" in got.error
+        assert w.summary()["route"]["timeouts"] == 1
+    finally:
+        gate.set()
+        w.close()
+
+
+@pytest.mark.parametrize("lockstep", [True, False])
+def test_a_job_that_raises_is_a_failed_plan_not_a_dead_worker(lockstep):
+    w = PlannerWorker({"route": 0}, DT, lockstep=lockstep)
+    try:
+        slot = PlanSlot(w, "route")
+        slot.request(0.0, lambda: 1 / 0)
+        got = None
+        while got is None:
+            got = slot.take(0.0)
+        assert not got.ok and "ZeroDivisionError" in got.error
+        slot.request(0.0, lambda: "next")
+        got = None
+        while got is None:
+            got = slot.take(0.0)
+        assert got.ok and got.value == "next"
+    finally:
+        w.close()
