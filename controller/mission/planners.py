@@ -29,6 +29,15 @@ import numpy as np
 PLANNER_KINDS = ("transport", "route", "rearrange", "capture")
 
 
+class JobOwned:
+    """A box for state that only jobs touch (a planner's warm start, its caches): the mission
+    hands the box to its jobs and never reads or writes ``value`` itself. A worker in another
+    process keeps its own copy, sent once, so the state lives where the jobs run."""
+
+    def __init__(self, value: Any = None) -> None:
+        self.value = value
+
+
 @dataclass(frozen=True)
 class PlanResult:
     """A finished job: ``ok`` with its ``value``, or not with the ``error`` (an exception's

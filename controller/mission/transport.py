@@ -37,7 +37,13 @@ from scipy.optimize import linear_sum_assignment
 from controller import geometry
 from controller.config import FleetConfig
 from controller.mission.guard import SafetyStage
-from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spawn_rng
+from controller.mission.planners import (
+    InlinePlanners,
+    JobOwned,
+    Planners,
+    PlanSlot,
+    spawn_rng,
+)
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.arrangement import Arrangement, can_push, plan_arrangement
 from controller.planning.contact_lp import ContactForceLP
@@ -126,9 +132,6 @@ class TransportMission:
         """``planners``: the port the route, the re-arrangement set and the local plans are
         asked of (off the tick; None: computed at once, ready the same tick)."""
         self.cfg = cfg
-        # the route planner toward object.goal (its C-space and cost-to-go table take a second:
-        # the job builds it before the loop starts; built here on the first route otherwise)
-        self.route_planner = route_planner
         self.rng = rng
         self.guard = guard
         self.s = TransportSettings.from_config(cfg)
@@ -141,7 +144,10 @@ class TransportMission:
             cfg.object_polygon(), o.mass, o.floor_friction, o.contact_friction, cfg.max_robot_radius
         )
         self.params = TransportParams.from_config(cfg.transport)
-        self.planner = TransportPlanner(self.params)  # touched only by its jobs
+        self.planner = JobOwned(TransportPlanner(self.params))  # touched only by its jobs
+        # the route planner toward object.goal (its C-space and cost-to-go table take a second:
+        # the job builds it before the loop starts; the first route job builds it otherwise)
+        self._route_box = JobOwned(route_planner)
         self.planners = planners if planners is not None else InlinePlanners()
         self._route_job = PlanSlot(self.planners, "route")
         self._set_job = PlanSlot(self.planners, "rearrange")
@@ -246,7 +252,7 @@ class TransportMission:
     def _route(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         """Ask for the route from the object's pose (off the tick), hold until it comes."""
         if not self._route_job.pending:
-            self._route_job.request(view.t, _plan_route, self.route_planner, self.cfg, pose)
+            self._route_job.request(view.t, _plan_route, self._route_box, self.cfg, pose)
         got = self._route_job.take(view.t)
         if got is None:
             return self._held(view, pose, events)
@@ -254,7 +260,7 @@ class TransportMission:
             return self._fail(
                 Reason.NO_ROUTE, f"the route planner failed: {got.error}", view, events
             )
-        self.route_planner, res = got.value
+        res = got.value
         if not res.ok:
             return self._fail(Reason.NO_ROUTE, res.reason, view, events)
         self.route = res
@@ -829,26 +835,26 @@ class _Ready:
         return {} if self.inner is None else self.inner.summary()
 
 
-def _plan_route(planner: Any, cfg: FleetConfig, pose: np.ndarray) -> tuple[Any, Any]:
-    """Job ``route``: the route from ``pose`` (the planner built first when there is none);
-    returns (planner, result)."""
-    if planner is None:
-        planner = route_planner_for(cfg)
-    return planner, planner.plan(pose)
+def _plan_route(box: JobOwned, cfg: FleetConfig, pose: np.ndarray) -> Any:
+    """Job ``route``: the route from ``pose`` (the planner, kept in ``box``, built first when
+    there is none)."""
+    if box.value is None:
+        box.value = route_planner_for(cfg)
+    return box.value.plan(pose)
 
 
 def _plan_local(
-    planner: TransportPlanner,
+    box: JobOwned,
     state: TransportState,
     rng: np.random.Generator,
     elapsed: float,
     reset: bool,
 ) -> LocalPlan:
-    """Job ``transport``: one local plan (the planner's warm start reset first on a new
-    segment). Only these jobs touch ``planner``, one at a time."""
+    """Job ``transport``: one local plan by the ``TransportPlanner`` in ``box`` (its warm
+    start reset first on a new segment). Only these jobs touch it, one at a time."""
     if reset:
-        planner.reset()
-    return planner.plan(state, rng, elapsed)
+        box.value.reset()
+    return box.value.plan(state, rng, elapsed)
 
 
 def route_planner_for(cfg: FleetConfig) -> Any:

@@ -12,8 +12,13 @@ its generator) is never touched by two at once, and the tick never waits on a pl
   tick that picks the plan up waits for it if it is not done yet, and ``waiting`` tells the sim
   side so). The same seed gives the same run on an idle or a loaded machine.
 
-Thread, not process: the jobs share the mission's planner objects (warm starts, caches) without
-a copy, and the GIL's cost to the tick is measured by ``bench/loop.py`` (``planner_busy``).
+A process, not a thread (``process=True``, the default): a planner in a thread of the daemon
+holds the GIL for most of its run, and the control tick, which needs it too, came out late by
+50-165 ms at 20 Hz during every transport plan in the lab rehearsal (``bench/loop.py`` measures
+both). The state only jobs touch (``JobOwned``: a planner's warm start, the route planner's
+tables) is sent to the worker process once and lives there; each job sends its inputs (a few
+kB) and gets its plan back. Jobs are pure functions of those, in submission order: the worker
+computes what an in-process run would (``DeferredPlanners`` replays a dry run's log exactly).
 Latencies (wall s from submit to result) are kept per kind for ``fleet status`` and the run
 summary (``plan_latency_s``).
 """
@@ -21,18 +26,50 @@ summary (``plan_latency_s``).
 from __future__ import annotations
 
 import logging
+import multiprocessing
 import threading
 import time
 from collections.abc import Callable, Mapping
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from controller.mission.planners import PLANNER_KINDS, PlanResult, run_job
+from controller.mission.planners import PLANNER_KINDS, JobOwned, PlanResult, run_job
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class _Ref:
+    """A ``JobOwned`` box as a job's argument: its token, and the box itself the first time."""
+
+    token: int
+    box: JobOwned | None
+
+
+_OWNED: dict[int, JobOwned] = {}  # in the worker process: the boxes sent so far, by token
+
+
+def _run_owned(fn: Callable[..., Any], args: tuple[Any, ...]) -> PlanResult:
+    """A job in the worker process, its boxes resolved to the worker's own copies."""
+    real = []
+    for a in args:
+        if isinstance(a, _Ref):
+            if a.box is not None:
+                _OWNED[a.token] = a.box
+            if a.token not in _OWNED:
+                return PlanResult(False, error="the planner worker lost its state (restarted?)")
+            a = _OWNED[a.token]
+        real.append(a)
+    return run_job(fn, tuple(real))
+
+
+def _warm() -> None:
+    """Import the planners in the worker before the first job needs them."""
+    import controller.mission.job  # noqa: F401
+    import controller.mission.transport  # noqa: F401
 
 
 @dataclass
@@ -79,13 +116,22 @@ class PlannerWorker:
         lockstep: bool,
         timeout: float = 10.0,
         clock: Callable[[], float] = time.perf_counter,
+        process: bool = True,
     ) -> None:
         self.latency_ticks = dict(latency_ticks)
         self.dt = dt
         self.lockstep = lockstep
         self.timeout = timeout
         self.clock = clock
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
+        self.process = process
+        self._pool: Executor
+        if process:
+            ctx = multiprocessing.get_context("spawn")  # never fork a process with threads
+            self._pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
+            self._pool.submit(_warm)
+        else:
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
+        self._tokens: dict[int, tuple[int, JobOwned]] = {}  # id(box) -> (token, box)
         self._jobs: dict[int, _Job] = {}
         self._next = 0
         self._lock = threading.Lock()
@@ -107,14 +153,24 @@ class PlannerWorker:
             ticket = self._next
         due = t + self.latency_ticks.get(kind, 0) * self.dt - 1e-9
         job = _Job(kind, t, due, self.clock(), Future())
-        job.future = self._pool.submit(self._run, job, fn, args)
+        if self.process:
+            job.future = self._pool.submit(_run_owned, fn, tuple(self._ref(a) for a in args))
+        else:
+            job.future = self._pool.submit(run_job, fn, args)
+        job.future.add_done_callback(lambda _: setattr(job, "done_wall", self.clock()))
         self._jobs[ticket] = job
         return ticket
 
-    def _run(self, job: _Job, fn: Callable[..., Any], args: tuple[Any, ...]) -> PlanResult:
-        res = run_job(fn, args)
-        job.done_wall = self.clock()
-        return res
+    def _ref(self, arg: Any) -> Any:
+        """A box as its token (sent whole the first time); any other argument as it is."""
+        if not isinstance(arg, JobOwned):
+            return arg
+        known = self._tokens.get(id(arg))
+        if known is not None and known[1] is arg:
+            return _Ref(known[0], None)
+        token = len(self._tokens) + 1
+        self._tokens[id(arg)] = (token, arg)  # (the box is kept: its id is never reused)
+        return _Ref(token, arg)
 
     def poll(self, ticket: int, t: float) -> PlanResult | None:
         job = self._jobs.get(ticket)
@@ -125,7 +181,7 @@ class PlannerWorker:
                 return None
             res = self._wait(job)
         elif job.future.done():
-            res = job.future.result()
+            res = self._result(job)
         elif self.clock() - job.wall > self.timeout:
             self.stats.setdefault(job.kind, KindStats()).timeouts += 1
             del self._jobs[ticket]
@@ -139,14 +195,21 @@ class PlannerWorker:
 
     def _wait(self, job: _Job) -> PlanResult:
         if job.future.done():
-            return job.future.result()
+            return self._result(job)
         start = self.clock()
         self._waiting.set()
         try:
-            return job.future.result()
+            return self._result(job)
         finally:
             self._waiting.clear()
             self.stats.setdefault(job.kind, KindStats()).waited_s += self.clock() - start
+
+    @staticmethod
+    def _result(job: _Job) -> PlanResult:
+        try:
+            return job.future.result()
+        except Exception as exc:  # noqa: BLE001 - the worker process died, a pickling error
+            return PlanResult(False, error=f"the planner worker failed: {exc!r}")
 
     def _account(self, job: _Job, res: PlanResult) -> None:
         s = self.stats.setdefault(job.kind, KindStats())
@@ -175,13 +238,14 @@ class PlannerWorker:
         return {k: s.summary() for k, s in self.stats.items() if s.latencies or s.timeouts}
 
     @classmethod
-    def for_config(cls, cfg, lockstep: bool) -> PlannerWorker:
+    def for_config(cls, cfg, lockstep: bool, process: bool = True) -> PlannerWorker:
         """The worker of a config (``[planner]``, ``fleet.rate_hz``): lockstep for the dry run."""
         return cls(
             cfg.planner.latency_ticks(),
             cfg.fleet.period,
             lockstep=lockstep,
             timeout=cfg.planner.timeout,
+            process=process,
         )
 
     def close(self) -> None:

@@ -85,7 +85,7 @@ def test_the_last_plan_is_executed_while_the_next_one_is_computed():
 
 def test_a_failing_planner_stops_the_robots_with_the_reason():
     m, cfg, poses = transport(InlinePlanners())
-    m.route_planner = _Broken()
+    m._route_box.value = _Broken()
     out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
     assert out.failed and out.stop and m.phase == Phase.FAILED
     failure = dict(out.events)["failure"]
@@ -98,7 +98,7 @@ class _Broken:
 
 
 def test_the_lockstep_worker_hands_a_plan_over_exactly_when_due():
-    w = PlannerWorker({"route": 3}, DT, lockstep=True)
+    w = PlannerWorker({"route": 3}, DT, lockstep=True, process=False)
     gate = threading.Event()
     try:
         slot = PlanSlot(w, "route")
@@ -116,7 +116,7 @@ def test_the_lockstep_worker_hands_a_plan_over_exactly_when_due():
 
 
 def test_the_lockstep_worker_waits_for_a_due_plan_and_says_so():
-    w = PlannerWorker({"route": 1}, DT, lockstep=True)
+    w = PlannerWorker({"route": 1}, DT, lockstep=True, process=False)
     gate = threading.Event()
     seen = []
     try:
@@ -137,7 +137,9 @@ def test_the_lockstep_worker_waits_for_a_due_plan_and_says_so():
 
 def test_the_lab_worker_hands_a_plan_over_when_computed_and_gives_a_hung_one_up():
     now = [0.0]
-    w = PlannerWorker({"route": 2}, DT, lockstep=False, timeout=1.0, clock=lambda: now[0])
+    w = PlannerWorker(
+        {"route": 2}, DT, lockstep=False, timeout=1.0, clock=lambda: now[0], process=False
+    )
     gate = threading.Event()
     try:
         fast = PlanSlot(w, "rearrange")
@@ -159,7 +161,7 @@ def test_the_lab_worker_hands_a_plan_over_when_computed_and_gives_a_hung_one_up(
 
 @pytest.mark.parametrize("lockstep", [True, False])
 def test_a_job_that_raises_is_a_failed_plan_not_a_dead_worker(lockstep):
-    w = PlannerWorker({"route": 0}, DT, lockstep=lockstep)
+    w = PlannerWorker({"route": 0}, DT, lockstep=lockstep, process=False)
     try:
         slot = PlanSlot(w, "route")
         slot.request(0.0, lambda: 1 / 0)
@@ -172,5 +174,32 @@ def test_a_job_that_raises_is_a_failed_plan_not_a_dead_worker(lockstep):
         while got is None:
             got = slot.take(0.0)
         assert got.ok and got.value == "next"
+    finally:
+        w.close()
+
+
+def _count(box, k):
+    box.value = (box.value or 0) + k
+    return box.value
+
+
+def test_the_process_worker_keeps_job_owned_state_in_the_worker():
+    """A box is sent once and lives in the worker process: successive jobs see what earlier
+    ones left there, the mission's own box is never written (the tick and the worker share
+    nothing), and the plans come back as the in-process run computes them."""
+    from controller.mission.planners import JobOwned
+
+    w = PlannerWorker({"route": 0}, DT, lockstep=True, process=True)
+    box = JobOwned(10)
+    try:
+        slot = PlanSlot(w, "route")
+        values = []
+        for k in (1, 2, 3):
+            slot.request(0.0, _count, box, k)
+            values.append(slot.take(0.0).value)
+        assert values == [11, 13, 16]
+        assert box.value == 10
+        inline = JobOwned(10)
+        assert [_count(inline, k) for k in (1, 2, 3)] == values
     finally:
         w.close()

@@ -1,0 +1,83 @@
+"""The whole job in real time, the lab way: ``fleet world`` + ``fleet daemon --mission capture``
++ six ``fleet driver`` processes on 127.0.0.1 (the top-level fleet.toml's job, ``sim.world =
+"process"``). The daemon plans off its control loop, so the object is captured and delivered to
+``object.goal`` with no control-loop lag warning, no tick over its budget, and no watchdog stop
+of a robot while the controller drives it."""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+import time
+import tomllib
+
+import pytest
+
+from tests.support.config import ROOT, write_toml
+from tests.support.lab import spawn, stop_all, tail
+from tests.support.wait import wait_for
+
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
+
+JOB_S = 300.0  # s of wall time the job may take (the dry run: about 100 s of sim time)
+
+
+def lab_job_config(tmp_path, port: int):
+    data = tomllib.loads((ROOT / "fleet.toml").read_text())
+    data["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
+    data.setdefault("sim", {})["world"] = "process"
+    data["log"] = {"dir": str(tmp_path / "runs")}
+    return write_toml(tmp_path / "lab-job.toml", data), [r["id"] for r in data["robots"]]
+
+
+def _text(path) -> str:
+    return path.read_text(errors="replace") if path.exists() else ""
+
+
+def test_the_whole_job_delivers_in_real_time_under_world_daemon_and_drivers(tmp_path, port):
+    cfg, ids = lab_job_config(tmp_path, port)
+    c = str(cfg)
+    world = spawn(tmp_path / "world.txt", "world", "--config", c)
+    procs = [world]
+    dlog = tmp_path / "daemon.txt"
+    out = tmp_path / "daemon.mcap"
+    t0 = time.monotonic()
+    try:
+        wait_for(lambda: "fleet world: fleet" in _text(tmp_path / "world.txt"), 30, "the world")
+        daemon = spawn(dlog, "daemon", "--config", c, "--mission", "capture", "--out", str(out))
+        procs.append(daemon)
+        procs += [spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ids]
+        wait_for(lambda: daemon.poll() is not None, JOB_S, "the daemon's end of the job")
+        wall = time.monotonic() - t0
+    finally:
+        codes = stop_all(procs)
+    text = _text(dlog)
+    assert codes[1] == 0, tail(daemon, 3000)  # the mission done (1: failed)
+    done = re.search(r"^(\S+ \S+) INFO .*mission done in phase done", text, re.M)
+    assert done, text[-3000:]
+    end = done.group(1)
+    assert "control loop lag" not in text, re.findall(r".*control loop lag.*", text)[:5]
+    assert "over its" not in text, re.findall(r".*over its .* budget.*", text)[:5]
+    # a robot stopped by its watchdog while the daemon still drove it: its commands came late
+    # (after the job the daemon exits: the watchdogs stop the robots then, as they should)
+    for r in ids:
+        lines = _text(tmp_path / f"{r}.txt").splitlines()
+        stops = [ln for ln in lines if "watchdog stop" in ln and ln[:23] < end]
+        assert not stops, (r, stops[:3])
+    rep = _replay(out)
+    assert rep["transported"] is True, rep
+    print(f"\nlab job: {wall:.1f} s wall; {json.dumps(rep)}", file=sys.stderr)
+
+
+def _replay(path) -> dict:
+    """What the daemon's log says of the transport (truth is the world's: sim/truth)."""
+    import contextlib
+    import io
+
+    from controller.cli import main
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        main(["replay", str(path), "--json"])
+    return json.loads(buf.getvalue())
