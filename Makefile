@@ -1,12 +1,13 @@
 # Two commands on a fresh machine (only Python 3.11 and pip needed):
 #   make run    set up .venv and run the pybullet dry run of fleet.toml
 #   make test   set up .venv, lint, and run the whole test suite
+#   make test-fast   lint and the fast tier (no e2e: dry runs, processes, pybullet), ~1 min
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup run test lint bench clean
+.PHONY: setup run test test-fast lint bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +26,9 @@ lint: $(STAMP)
 
 test: lint
 	$(BIN)/python -m pytest -q
+
+test-fast: lint
+	$(BIN)/python -m pytest -q -m "not e2e"
 
 bench: $(STAMP)
 	for b in bench/*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

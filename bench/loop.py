@@ -1,7 +1,11 @@
 """Benchmark the lab loop: the daemon's tick, command latency and the time to notice a dead robot.
 Prints one JSON object.
 
-For 4, 20 and 50 robots (ideal sim backend, ``hold`` mission, zenoh on a free 127.0.0.1 port):
+For 6, 20 and 50 robots (ideal sim backend, zenoh on a free 127.0.0.1 port), with the ``hold``
+mission and with the ``transport`` mission (``--missions hold,transport``: the crate of
+fleet.toml with its goal, as a motion-capture system reports it standing still — the agents'
+worlds hold only their robots — so the route, the re-arrangement sets and a local plan every
+interval are asked of the planner worker, a process as in ``fleet daemon``, throughout):
 
 - the daemon's tick time (sample → estimate → plan → safety → publish), p50/p99 in ms, the
   daemon's node run in this process exactly as ``fleet daemon`` wires it (listening session,
@@ -10,14 +14,17 @@ For 4, 20 and 50 robots (ideal sim backend, ``hold`` mission, zenoh on a free 12
   tick's stages; the daemon then publishes the robots' commands one after the other) against
   the agent's receive time (``time.time()`` in zenoh's callback), same machine clock;
 - the time from a robot's disappearance (``kill -9`` of its agent process) to the daemon
-  reporting it not present (its liveliness token withdrawn).
+  reporting it not present (its liveliness token withdrawn);
+- transport: the planner worker's latency per planner (p50/p99 s) and the tick with the worker
+  as a thread instead (``--thread-too``: what the GIL does to the tick).
 
 Agents run as separate processes (this file with ``--host``): robot r1 alone in its own process
 (the one killed), the others up to ``--per-host`` per process, each with its own zenoh session
 and ``Agent``, sharing one ideal world per process (50 agent processes are too heavy for a
 2-core machine). The machine's load average is reported: the figures are noisy on a shared one.
 
-Usage: python bench/loop.py [--sizes 4,20,50] [--seconds 10] [--per-host 10]
+Usage: python bench/loop.py [--sizes 6,20,50] [--seconds 10] [--per-host 10]
+[--missions hold,transport] [--thread-too]
 """
 
 from __future__ import annotations
@@ -47,6 +54,10 @@ STARTUP_S = 60.0  # s: bound on waiting for every robot to be present
 DETECT_S = 15.0  # s: bound on waiting for a killed robot to be noticed
 
 
+def log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -68,7 +79,6 @@ def config_data(n: int, port: int) -> dict:
         )
         for i in range(n)
     ]
-    data["object"].pop("goal", None)
     data["sim"]["backend"] = "ideal"
     data["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
     data["log"] = {"dir": str(ROOT / "runs")}
@@ -151,9 +161,38 @@ def _percentiles(values, scale: float = 1e3) -> dict:
     }
 
 
-def run_size(n: int, seconds: float, per_host: int, workdir: Path) -> dict:
-    from controller.io.ratekeeper import Ratekeeper
+def _mission(kind: str, cfg: FleetConfig, thread: bool):
+    """(mission, planner worker or None) as ``fleet daemon`` builds them."""
     from controller.mission.basic import HoldMission
+    from controller.mission.factory import build_mission
+    from controller.runtime.planner import PlannerWorker
+
+    if kind == "hold":
+        return HoldMission(len(cfg.robots)), None
+    planners = PlannerWorker.for_config(cfg, lockstep=False, process=not thread)
+    return build_mission(cfg, "transport", planners=planners), planners
+
+
+def _object_pose(bus, cfg: FleetConfig):
+    """The crate at its start, as a motion-capture system would report it (30 Hz is plenty:
+    one per tick)."""
+    from controller import wire
+
+    pub = bus.publisher("object_pose")
+    x, y, th = cfg.object.start
+    seq = [0]
+
+    def put(now: float) -> None:
+        seq[0] += 1
+        pub.put(wire.PoseMeasurement(t=now, seq=seq[0], x=x, y=y, theta=th, source="mocap"))
+
+    return put
+
+
+def run_size(
+    n: int, seconds: float, per_host: int, workdir: Path, kind: str = "hold", thread=False
+) -> dict:
+    from controller.io.ratekeeper import Ratekeeper
     from controller.runtime.node import ControllerNode
     from controller.runtime.wiring import make_estimator
 
@@ -174,9 +213,15 @@ def run_size(n: int, seconds: float, per_host: int, workdir: Path) -> dict:
     groups = [ids[:1]] + [ids[i : i + per_host] for i in range(1, n, per_host)]
     procs: list[tuple[subprocess.Popen, Path]] = []
     ticks: list[float] = []
-    out: dict = {"robots": n, "agent_processes": len(groups)}
+    out: dict = {"robots": n, "mission": kind, "agent_processes": len(groups)}
+    if kind != "hold":
+        out["planner"] = "thread" if thread else "process"
+    mission, planners = _mission(kind, cfg, thread)
     with Bus(cfg.zenoh, cfg.fleet.name) as bus:
-        node = Node(cfg, bus, HoldMission(n), make_estimator(cfg), clock=time.perf_counter)
+        node = Node(
+            cfg, bus, mission, make_estimator(cfg), clock=time.perf_counter, planners=planners
+        )
+        mocap = _object_pose(bus, cfg)
         try:
             for g, members in enumerate(groups):
                 res = workdir / f"lat-{n}-{g}.json"
@@ -197,6 +242,7 @@ def run_size(n: int, seconds: float, per_host: int, workdir: Path) -> dict:
             while True:
                 rk.keep_time()
                 now = time.time()
+                mocap(now)
                 a = time.perf_counter()
                 node.tick(now)
                 b = time.perf_counter()
@@ -220,7 +266,11 @@ def run_size(n: int, seconds: float, per_host: int, workdir: Path) -> dict:
                     if "r1" in gone_at or mono - t_start > STARTUP_S + seconds + DETECT_S:
                         break
             out["late_ticks"] = rk.lagged
+            out["phase_at_end"] = node.phase
         finally:
+            if planners is not None:
+                out["plan_latency_s"] = planners.summary()
+                planners.close()
             for p, _ in procs:
                 if p.poll() is None:
                     p.send_signal(signal.SIGTERM)
@@ -244,7 +294,9 @@ def run_size(n: int, seconds: float, per_host: int, workdir: Path) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--sizes", default="4,20,50")
+    ap.add_argument("--sizes", default="6,20,50")
+    ap.add_argument("--missions", default="hold,transport")
+    ap.add_argument("--thread-too", action="store_true", help="transport with a thread worker")
     ap.add_argument(
         "--seconds", type=float, default=10.0, help="seconds of measured ticks per size"
     )
@@ -261,14 +313,18 @@ def main() -> None:
     load0 = os.getloadavg()
     results = []
     with tempfile.TemporaryDirectory(prefix="bench-loop-") as tmp:
-        for n in (int(s) for s in args.sizes.split(",")):
-            results.append(run_size(n, args.seconds, args.per_host, Path(tmp)))
+        for kind in args.missions.split(","):
+            for n in (int(s) for s in args.sizes.split(",")):
+                log(f"{kind} at {n} robots")
+                results.append(run_size(n, args.seconds, args.per_host, Path(tmp), kind))
+                if kind == "transport" and args.thread_too:
+                    results.append(run_size(n, args.seconds, args.per_host, Path(tmp), kind, True))
     print(
         json.dumps(
             {
                 "bench": "loop",
                 "rate_hz": 20.0,
-                "mission": "hold",
+                "missions": args.missions.split(","),
                 "backend": "ideal",
                 "cores": os.cpu_count(),
                 "load_avg_1_5_15_start": [round(x, 2) for x in load0],
@@ -278,10 +334,9 @@ def main() -> None:
                 "heavy for 2 shared cores)",
                 "latency": "command stamp t (tick time, before the stages) to the agent's "
                 "receive time, same clock",
-                "replan": "not measured here (the hold mission has nothing to re-plan): the "
-                "capture re-plans on the tick a robot is seen lost (robot_lost, then capture); "
-                "tests/scenarios/test_capture_loss_scenario.py: link cut at 3.00 s sim time, "
-                "re-planned at 3.05 s",
+                "plans": "transport: route, re-arrangement sets and local plans are asked of "
+                "the planner worker throughout (the crate stands still: nobody pushes it in "
+                "the agents' worlds); plan_latency_s per planner",
                 "sizes": results,
             }
         )

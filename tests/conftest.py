@@ -16,3 +16,16 @@ settings.load_profile("seeded")
 @pytest.fixture
 def port() -> int:
     return free_port()
+
+
+# the end-to-end folders: dry runs, processes, pybullet, zenoh sessions, golden-log replays.
+# Their tests carry the ``e2e`` marker, so ``pytest -m "not e2e"`` is the fast tier (the unit
+# tests, under a minute); ``make test`` runs everything.
+E2E_FOLDERS = ("integration", "scenarios", "replay", "contract")
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        parts = item.path.parts
+        if "tests" in parts and parts[parts.index("tests") + 1] in E2E_FOLDERS:
+            item.add_marker(pytest.mark.e2e)

@@ -18,7 +18,9 @@ from scipy.optimize import linear_sum_assignment
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.mission.capture import CaptureMission, CaptureSettings
 from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spawn_rng
+from controller.mission.transport import TransportMission, route_planner_for
 from controller.mission.types import FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.approach import envelope, interception_times
 from controller.planning.capture_set import (  # noqa: F401 - re-exported: the job's planning
@@ -117,8 +119,6 @@ class CaptureJob:
         self.arrest_t: float | None = None
         self.route_planner: Any = None
         if cfg.object.goal is not None:  # built before the loop: it takes a second
-            from controller.mission.transport import route_planner_for
-
             self.route_planner = route_planner_for(cfg)
 
     def _assign(self, view: FleetView) -> np.ndarray:
@@ -216,8 +216,6 @@ class CaptureJob:
 
     def _start_transport(self) -> None:
         """The object is arrested: from the next tick on, carry it to its goal."""
-        from controller.mission.transport import TransportMission
-
         self.transport = TransportMission(
             self.cfg,
             self.rng,
@@ -380,8 +378,6 @@ class CaptureJob:
         return intent
 
     def _mission(self, view: FleetView):
-        from controller.mission.capture import CaptureMission, CaptureSettings
-
         settings = CaptureSettings.from_config(self.cfg)
         if self.cfg.object.goal is not None:  # the arrested object is carried, not let go
             settings = dataclasses.replace(settings, settle_s=math.inf)

@@ -119,6 +119,7 @@ def run_daemon(
     plans through, off the loop (closed at the end)."""
     recorder = open_recorder(cfg, out, f"daemon/{mission_kind}", viz=viz, who="fleet daemon")
     status = 0
+    health = ""
     try:
         bus, how = open_daemon_bus(cfg)
         with bus:
@@ -171,12 +172,18 @@ def run_daemon(
                 if duration and now - t0 >= duration:
                     break
             node.hold(time.time())
+            ticks = node.status().tick_ms
+            health = (
+                f"; {node.counters.ticks} ticks, {rk.lagged} late, {budget.over} over the "
+                f"{cfg.fleet.budget * 1e3:.0f} ms budget (p50 {ticks.get('p50', 0):.1f} ms, "
+                f"p99 {ticks.get('p99', 0):.1f} ms)"
+            )
     finally:
         recorder.close()
         if planners is not None:
             planners.close()
     print(
-        f"fleet daemon: stopped; {recorder.written} messages in {recorder.location}",
+        f"fleet daemon: stopped; {recorder.written} messages in {recorder.location}{health}",
         file=sys.stderr,
     )
     return status
