@@ -114,6 +114,9 @@ class FleetSection:
     # s the control tick (sample, estimate, execute the plan, safety, publish) may take; 0: 40 %
     # of the period. A tick over it is counted (``over_budget``) and logged
     tick_budget: float = _rule(0.0, min=0, max=10)
+    # s a fleet-wide silence (two or more robots missing at once: a hub, world or network
+    # outage) may last before its missing robots count as lost; the mission pauses meanwhile
+    outage_grace: float = _rule(3.0, min=0, max=600)
 
     @property
     def period(self) -> float:

@@ -19,6 +19,7 @@ from scipy.optimize import linear_sum_assignment
 from controller import geometry
 from controller.config import FleetConfig
 from controller.mission.capture import CaptureMission, CaptureSettings
+from controller.mission.outage import OutageWatch
 from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spawn_rng
 from controller.mission.transport import TransportMission, route_planner_for
 from controller.mission.types import FleetView, Intent, MissionOutput, Phase, Reason
@@ -97,6 +98,7 @@ class CaptureJob:
             raise MissionError(str(exc)) from None
         self._replan_job = PlanSlot(planners or InlinePlanners(), "capture")
         self._replan_why = ""  # what the pending capture re-plan is for: lost, pinned, start
+        self.outage = OutageWatch(cfg.fleet.outage_grace)
         self.assignment: np.ndarray | None = None
         self.inner: Any = None
         self.blocked_ticks = 0
@@ -188,7 +190,10 @@ class CaptureJob:
         gone = self._gone(view)
         if self.inner is None:
             return self._wait(view)
-        events = self._joins(view, gone)
+        gone, pause, events = self.outage.filter(view.t, gone, self.available, view.ids)
+        if pause:  # one fleet-wide silence: every robot still until it ends or its grace runs out
+            return Intent(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
+        events += self._joins(view, gone)
         if self.inner.phase in WATCHED:
             lost, replan = self._losses(view, gone)
             events += lost
@@ -495,6 +500,7 @@ class CaptureJob:
             "wall_replans": self.replans,
             "unreachable_nodes": len(self.unreachable),
             "robots_lost": [self.cfg.robots[i].id for i in self.lost],
+            "outages": self.outage.outages,
             "loss_replans": self.loss_replans,
         }
         if self.inner is not None and hasattr(self.inner, "summary"):

@@ -37,6 +37,7 @@ from scipy.optimize import linear_sum_assignment
 from controller import geometry
 from controller.config import FleetConfig
 from controller.mission.guard import SafetyStage
+from controller.mission.outage import OutageWatch
 from controller.mission.planners import (
     InlinePlanners,
     JobOwned,
@@ -182,6 +183,8 @@ class TransportMission:
         self.plan_energy: list[float] = []
         self.forces: list[float] = []
         self.lost: set[int] = set()  # robots gone during the job
+        self.outage = OutageWatch(cfg.fleet.outage_grace)
+        self._last_t: float | None = None  # the last tick's time (an outage's pause)
 
     # --- the plan stage -----------------------------------------------------------------------
     def plan(self, view: FleetView) -> Intent:
@@ -192,8 +195,10 @@ class TransportMission:
         events: list[Event] = []
         if self.t0 is None:
             self.t0 = self.progress_t = view.t
-        if self.phase not in (Phase.DONE, Phase.FAILED):
-            self._drop_lost(view, events)
+        dt = 0.0 if self._last_t is None else view.t - self._last_t
+        self._last_t = view.t
+        if self.phase not in (Phase.DONE, Phase.FAILED) and self._drop_lost(view, events):
+            return self._paused(view, dt, events)
         handler = {
             Phase.ROUTE: self._route,
             Phase.REARRANGE: self._rearrange,
@@ -203,13 +208,19 @@ class TransportMission:
         }[self.phase]
         return handler(view, pose, events)
 
-    def _drop_lost(self, view: FleetView, events: list[Event]) -> None:
+    def _drop_lost(self, view: FleetView, events: list[Event]) -> bool:
         """A robot that is gone (its liveliness or its link lost) leaves the job: no contact, no
         path, no part in the next arrangement. The rest carry on; when they cannot push, the
-        job fails with ``robot_lost`` instead of ``stalled``."""
+        job fails with ``robot_lost`` instead of ``stalled``. Two or more gone at once are one
+        outage (``OutageWatch``): True while the mission pauses for it."""
+        relied = np.array([int(i) not in self.lost for i in self.robots])
+        gone, pause, ev = self.outage.filter(view.t, ~view.present, relied, view.ids)
+        events += ev
+        if pause:
+            return True  # one fleet-wide silence: paused until it ends or its grace runs out
         for i in self.robots:
             i = int(i)
-            if view.present[i] or i in self.lost:
+            if not gone[i] or i in self.lost:
                 continue
             self.lost.add(i)
             self.contacts[i] = None
@@ -217,6 +228,7 @@ class TransportMission:
             self.targets.pop(i, None)
             self.actions[i] = None
             events.append(("robot_lost", {"t": view.t, "robot": view.ids[i], "phase": self.phase}))
+        return False
 
     def _active(self) -> list[int]:
         return [int(i) for i in self.robots if int(i) not in self.lost]
@@ -240,6 +252,14 @@ class TransportMission:
         reason = self.failure["reason"] if self.failure else ""
         zero = np.zeros((self.n, 2))
         return Intent(zero, self.phase, events, stop=True, failed=True, reason=reason)
+
+    def _paused(self, view: FleetView, dt: float, events: list[Event]) -> Intent:
+        """An outage: every robot still; the stall clock and the re-arrangement's timeout do
+        not run while it lasts (``dt`` s since the last tick)."""
+        self.progress_t += dt
+        self.rearrange_t += dt
+        zero = np.zeros((self.n, 2))
+        return Intent(zero, self.phase, events, stop=True)
 
     def _held(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         """A plan is on its way: every robot holds where it is (those in contact keep it)."""

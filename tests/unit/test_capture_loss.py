@@ -113,10 +113,20 @@ def test_losing_a_spare_only_marks_it_unavailable():
 
 
 def test_losing_too_many_fails_safe_with_robots_lost():
+    """Three gone at once: one outage first (the job pauses, every robot still), then, still
+    gone after ``fleet.outage_grace``, they are lost and the robots left cannot close it."""
     j = job()
     t = started(j)
     gone = [int(i) for i in j.assignment[:3]]
+    grace = j.cfg.fleet.outage_grace
+    t_out = t
+    while t - t_out < grace - 1e-9:
+        out = step(j, view(j, t, present=without(j.n, *gone)))
+        assert not out.failed and np.all(out.commands == 0.0)
+        assert "robot_lost" not in kinds(out)
+        t += DT
     out = step(j, view(j, t, present=without(j.n, *gone)))
+    assert kinds(out)[0] == "outage_end"
     assert out.failed and out.reason == "robots_lost" and out.phase == Phase.FAILED
     assert np.all(out.commands == 0.0)
     detail = dict(out.events)["failure"]["detail"]
@@ -188,3 +198,43 @@ def test_start_wait_is_validated_with_its_key_path():
     with pytest.raises(ConfigError) as e:
         parse_config(data, "test")
     assert e.value.path == "fleet.start_wait"
+
+
+def test_a_fleet_wide_silence_is_one_outage_that_the_job_rides_out():
+    """Every robot's liveliness gone and its estimate stale for 1.5 s (a hub restart, a world
+    stall, a network cut): one outage, the job pauses with every robot stopped, nobody is lost,
+    nothing is re-planned; when they are back the approach carries on with the same points."""
+    j = job()
+    t = started(j)
+    points, assignment = j.capture.points.copy(), j.assignment.copy()
+    nobody = np.zeros(j.n, bool)
+    t_out = t
+    seen: list[str] = []
+    while t - t_out < 1.5:
+        out = step(j, view(j, t, present=nobody, stale=~nobody))
+        seen += kinds(out)
+        assert np.all(out.commands == 0.0) and not out.failed
+        t += DT
+    assert seen == ["outage"]
+    out = step(j, view(j, t))
+    assert kinds(out)[0] == "outage_end" and dict(out.events)["outage_end"]["lost"] == []
+    assert out.phase == Phase.APPROACH and np.any(out.commands != 0.0)
+    assert np.array_equal(j.capture.points, points) and np.array_equal(j.assignment, assignment)
+    assert j.summary()["robots_lost"] == [] and j.summary()["outages"] == 1
+
+
+def test_an_outage_loses_only_the_robots_still_missing_after_its_grace():
+    j = job()
+    t = started(j)
+    nobody = np.zeros(j.n, bool)
+    first = int(j.assignment[0])
+    grace = j.cfg.fleet.outage_grace
+    t_out = t
+    while t - t_out < grace - 1e-9:  # all gone, then all but one back within the grace
+        present = nobody if t - t_out < 1.0 else without(j.n, first)
+        step(j, view(j, t, present=present, stale=~present))
+        t += DT
+    out = step(j, view(j, t, present=without(j.n, first)))
+    assert kinds(out)[:3] == ["outage_end", "robot_lost", "capture"]
+    assert dict(out.events)["robot_lost"]["robot"] == j.cfg.robots[first].id
+    assert first not in j.assignment and j.summary()["loss_replans"] == 1

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from controller import geometry
 from controller.mission.guard import SafetyStage
@@ -195,3 +196,25 @@ def test_a_stall_with_a_robot_lost_fails_with_robot_lost():
     assert out is not None and out.failed
     assert out.reason == "robot_lost" and cfg.robots[0].id in m.failure["detail"]
     assert math.isclose(m.failure["t"], t)
+
+
+def test_a_fleet_wide_silence_pauses_the_transport_and_loses_nobody():
+    """Every robot gone for 1 s (one outage): every robot stopped, nobody dropped, the stall
+    clock does not run; back, the transport goes on with the same contacts."""
+    m, cfg, poses = mission(OPEN)
+    m.plan(view(cfg, 0.0, poses, cfg.object.start))
+    contacts = {i: c for i, c in m.contacts.items()}
+    stall0 = m.progress_t
+    nobody = np.zeros(len(cfg.robots), bool)
+    t = 0.05
+    seen = []
+    while t < 1.05:
+        out = m.plan(view(cfg, t, poses, cfg.object.start, nobody))
+        seen += [k for k, _ in out.events]
+        assert out.stop and not out.failed
+        t += 0.05
+    assert seen == ["outage"] and not m.lost
+    assert m.progress_t - stall0 == pytest.approx(1.0, abs=0.06)  # paused, not stalled
+    out = m.plan(view(cfg, t, poses, cfg.object.start))
+    assert [k for k, _ in out.events][0] == "outage_end" and not m.lost
+    assert m.contacts == contacts
