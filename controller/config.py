@@ -62,6 +62,10 @@ MISSION_KINDS = ("capture", "transport", "stage", "hold")
 # The capture planner's node budget: candidate nodes on the object's boundary at capture.spacing
 # (its per-problem tables grow linearly with the count, the GA's work per generation too).
 CAPTURE_NODE_BUDGET = 20_000
+#: s: the shortest physics step accepted (sim.timestep); the longest is one control tick
+MIN_TIMESTEP = 1e-4
+#: TOML tables and arrays nested deeper than this are refused (no key of ours is deeper than 4)
+MAX_TOML_DEPTH = 32
 
 Point = tuple[float, float]
 Pose = tuple[float, float, float]
@@ -340,7 +344,9 @@ class PoseNoise:
 class SimSection:
     backend: str = _rule("pybullet", choices=SIM_BACKENDS)
     world: str = _rule("solo", choices=SIM_WORLDS)  # what `fleet driver` attaches a sim robot to
-    timestep: float = _rule(1.0 / 240.0, gt=0, max=1)
+    # s per physics step: at least MIN_TIMESTEP (below it a second of sim takes hours) and at
+    # most one control tick (1 / fleet.rate_hz), checked after the walk
+    timestep: float = _rule(1.0 / 240.0, min=MIN_TIMESTEP, max=1)
     seed: int = _rule(0, min=0)
     pose_noise: PoseNoise = _rule(PoseNoise())
     pose_rate_hz: float = _rule(30.0, gt=0, max=1000)
@@ -769,6 +775,48 @@ def _check_zenoh(section: ZenohSection, src: str) -> None:
                 raise ConfigError(src, f"zenoh.{key}[{i}]", problem)
 
 
+def certificate_common_name(path: str) -> str | None:
+    """The subject common name of a PEM certificate, or None when the file cannot be read or
+    decoded here (stdlib only: the venv has no ``cryptography``)."""
+    import ssl
+
+    try:
+        decoded = ssl._ssl._test_decode_cert(path)  # type: ignore[attr-defined]
+    except (OSError, ssl.SSLError, AttributeError, ValueError):
+        return None
+    for rdn in decoded.get("subject", ()):
+        for key, value in rdn:
+            if key == "commonName":
+                return str(value)
+    return None
+
+
+def certificate_problem(cfg: FleetConfig) -> tuple[str, str] | None:
+    """(key path, why) when two identities' certificates that are readable here carry the same
+    common name (mutual TLS ACLs name subjects by it), else None. Reads files: ``fleet check``
+    runs it, not the loader (a robot's computer holds only its own certificate)."""
+    named: list[tuple[str, str]] = []
+    if cfg.zenoh.tls and cfg.zenoh.tls.certificate:
+        named.append(("zenoh.tls.certificate", cfg.zenoh.tls.certificate))
+    named += [
+        (f"robots[{i}].zenoh_certificate", r.zenoh_certificate)
+        for i, r in enumerate(cfg.robots)
+        if r.zenoh_certificate
+    ]
+    seen: dict[str, str] = {}
+    for key, path in named:
+        cn = certificate_common_name(path)
+        if cn is None:
+            continue
+        if cn in seen:
+            return key, (
+                f"certificate {path!r} has common name {cn!r}, as {seen[cn]}: one identity "
+                "per robot, distinct from the controller's"
+            )
+        seen[cn] = key
+    return None
+
+
 def log_dir_problem(directory: str | Path) -> str | None:
     """Why logs cannot be written in ``directory`` (created if missing), or None. Probes with a
     temporary file; creates nothing that stays."""
@@ -872,12 +920,25 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
         for i, o in enumerate(cfg.obstacles)
     )
     obj, notes = _object(cfg, src)
+    _check_timestep(cfg, src)
     _check_zenoh(cfg.zenoh, src)
     _validate_robots(cfg, obstacles, src)
     _check_object_poses(obj, obstacles, cfg.world.bounds, src)
     check_route_grid(cfg.world.bounds, cfg.route, src)
     cfg = _validate_zenoh(cfg, src)
     return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src, notes=notes)
+
+
+def _check_timestep(cfg: FleetConfig, src: str) -> None:
+    """One physics step is at most one control tick (else a command may never be applied)."""
+    tick = 1.0 / cfg.fleet.rate_hz
+    if cfg.sim.timestep > tick + 1e-12:
+        raise ConfigError(
+            src,
+            "sim.timestep",
+            f"{cfg.sim.timestep:g} s is longer than one control tick (1 / fleet.rate_hz = "
+            f"{tick:g} s): expected {MIN_TIMESTEP:g} <= sim.timestep <= {tick:g}",
+        )
 
 
 # --------------------------------------------------------------------------- zenoh security
@@ -907,6 +968,47 @@ def _check_identity(src: str, path: str, user: str, password: str, password_file
         raise ConfigError(src, u, f"a zenoh user name cannot contain ':', got {user!r}")
 
 
+def _check_identities(cfg: FleetConfig, src: str) -> None:
+    """One identity per robot: a robot's own zenoh user (or mTLS certificate) is no other
+    robot's, and neither the controller's (``zenoh.user``, ``zenoh.tls.certificate``) nor an
+    operator's; an operator is not the controller either. Otherwise the hub's ACL cannot tell
+    them apart (a robot could command another, or release the e-stop). Robots without their own
+    identity use the ``[zenoh]`` one (no ACL profile then): that is not checked here."""
+    z = cfg.zenoh
+    users: dict[str, str] = {}
+    if z.user:
+        users[z.user] = "zenoh.user (the controller)"
+    for j, op in enumerate(z.operators):
+        if op in users:
+            raise ConfigError(
+                src, f"zenoh.operators[{j}]", f"{op!r} is already {users[op]}: one identity each"
+            )
+        users[op] = f"zenoh.operators[{j}] (an operator)"
+    certs: dict[str, str] = {}
+    if z.tls and z.tls.certificate:
+        certs[_abspath(z.tls.certificate, src)] = "zenoh.tls.certificate (the controller)"
+    for i, r in enumerate(cfg.robots):
+        p = f"robots[{i}]."
+        if r.zenoh_user:
+            if r.zenoh_user in users:
+                raise ConfigError(
+                    src,
+                    p + "zenoh_user",
+                    f"robot {r.id!r}: {r.zenoh_user!r} is already {users[r.zenoh_user]}: "
+                    "one identity per robot",
+                )
+            users[r.zenoh_user] = f"{p}zenoh_user (robot {r.id!r})"
+        if r.zenoh_certificate:
+            if r.zenoh_certificate in certs:
+                raise ConfigError(
+                    src,
+                    p + "zenoh_certificate",
+                    f"robot {r.id!r}: {r.zenoh_certificate!r} is already "
+                    f"{certs[r.zenoh_certificate]}: one certificate (common name) per robot",
+                )
+            certs[r.zenoh_certificate] = f"{p}zenoh_certificate (robot {r.id!r})"
+
+
 def _zenoh_robots(cfg: FleetConfig, src: str) -> tuple[RobotConfig, ...]:
     robots = []
     for i, r in enumerate(cfg.robots):
@@ -927,9 +1029,26 @@ def _zenoh_robots(cfg: FleetConfig, src: str) -> tuple[RobotConfig, ...]:
     return tuple(robots)
 
 
+def _check_tls_endpoints_need_tls(z: ZenohSection, src: str) -> None:
+    """A tls/ endpoint needs the TLS files: zenoh.tls (a listening hub its certificate and key,
+    everyone the root CA), or, for an endpoint that carries its own TLS settings after '#',
+    those (zenoh's per-endpoint config)."""
+    for key in ("listen", "connect"):
+        for j, ep in enumerate(getattr(z, key)):
+            if ep.startswith("tls/") and "#" not in ep:
+                need = "certificate, private_key, root_ca" if key == "listen" else "root_ca"
+                raise ConfigError(
+                    src,
+                    f"zenoh.{key}[{j}]",
+                    f"{ep!r} is a TLS endpoint but zenoh.tls is not set: add "
+                    f"[zenoh.tls] with {need} (PEM files)",
+                )
+
+
 def _zenoh_tls(z: ZenohSection, src: str) -> TlsSection | None:
     tls = z.tls
     if tls is None:
+        _check_tls_endpoints_need_tls(z, src)
         return None
     if not tls.root_ca:
         raise ConfigError(src, "zenoh.tls.root_ca", "missing: the CA that signs the certificates")
@@ -1000,6 +1119,7 @@ def _validate_zenoh(cfg: FleetConfig, src: str) -> FleetConfig:
         if not op or ":" in op:
             raise ConfigError(src, f"zenoh.operators[{j}]", f"expected a user name, got {op!r}")
     cfg = dataclasses.replace(cfg, robots=_zenoh_robots(cfg, src))
+    _check_identities(cfg, src)
     acl, block = _zenoh_acl(cfg, src)
     zenoh = dataclasses.replace(
         z,
@@ -1109,6 +1229,9 @@ def validated_polygon(poly: Any, path: str, source: str = "") -> Polygon:
 
 def parse_config(data: dict[str, Any], source: str = "") -> FleetConfig:
     """Validate a parsed TOML document into a FleetConfig (raises ConfigError)."""
+    deep = nesting_error(data)
+    if deep:
+        raise ConfigError(source, *deep)
     cfg = _build(FleetConfig, data, "", source)
     return _validate(cfg, source)
 
@@ -1128,7 +1251,29 @@ def load_config(path: str | Path) -> FleetConfig:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(str(p), "", f"not valid TOML: {exc}") from exc
+    except RecursionError:  # tomllib recurses per nested array or inline table
+        raise ConfigError(
+            str(p), "", f"not a config: arrays or tables nested deeper than {MAX_TOML_DEPTH}"
+        ) from None
     return parse_config(data, str(p))
+
+
+def nesting_error(data: Any, limit: int = MAX_TOML_DEPTH) -> tuple[str, str] | None:
+    """(key path, message) when tables or arrays nest deeper than ``limit``, else None.
+    Iterative: a document of any depth is walked without recursion."""
+    stack: list[tuple[Any, str, int]] = [(data, "", 0)]
+    while stack:
+        value, path, depth = stack.pop()
+        if depth > limit:
+            top = re.split(r"[.\[]", path, maxsplit=1)[0] or path
+            return top, f"tables or arrays nested deeper than {limit} levels"
+        if isinstance(value, dict):
+            stack.extend(
+                (v, f"{path}.{k}" if path else str(k), depth + 1) for k, v in value.items()
+            )
+        elif isinstance(value, list):
+            stack.extend((v, f"{path}[{i}]", depth + 1) for i, v in enumerate(value))
+    return None
 
 
 # never written to logs or --json: passwords (a password_file is named, not read)
