@@ -85,11 +85,9 @@ def acl_for(config: FleetConfig) -> dict[str, Any]:
         )
     for r in config.robots:
         own_in, own_token, own_out = f"robot-{r.id}-in", f"robot-{r.id}-token", f"robot-{r.id}-out"
-        # a sim robot of the shared `fleet world` process: its agent puts the command it
-        # applies and is sent that robot's samples (only when the config rehearses that way)
-        remote = config.sim.world == "process" and r.driver == "sim"
-        world_in = [wire.key("world_cmd", fleet, id=r.id)] if remote else []
-        world_out = [wire.key("world_pose", fleet, id=r.id)] if remote else []
+        # what its driver needs beyond that (DriverSpec.acl): e.g. a sim robot of the shared
+        # `fleet world` process puts the command it applies and is sent its samples
+        world_in, world_out = r.spec.acl(config, r) if r.spec.acl else ([], [])
         rules += [
             _rule(
                 own_in,

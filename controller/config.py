@@ -31,8 +31,8 @@ import numpy as np
 from controller import geometry
 
 # Registries by name. Kept here (not in drivers/) so config validation needs no driver import.
+# Drivers: DRIVER_SPECS (below, with their sub-tables); their classes: controller/runtime/wiring.py
 ROBOT_KINDS = ("omni", "diff")
-DRIVERS = ("sim", "mavlink")
 MAVLINK_PROFILES = ("ardurover", "px4")
 MOTION_KINDS = ("line", "sine", "evade", "static", "inert")  # inert: no drive, limp from t = 0
 CLOSURE_MODES = ("exact", "paper")
@@ -364,18 +364,15 @@ class SimSection:
     object_com_offset: Point = _rule((0.0, 0.0))
 
 
+# --------------------------------------------------------------------------- drivers
+
+
 @dataclass(frozen=True, kw_only=True)
-class RobotConfig:
-    id: str = _rule(pattern=r"^[A-Za-z0-9_\-]+$")
-    kind: str = _rule(choices=ROBOT_KINDS)
-    radius: float = _rule(0.1, gt=0, max=5)
-    max_speed: float = _rule(0.5, gt=0, max=20)
-    max_yaw_rate: float = _rule(2.0, gt=0, max=50)
-    max_accel: float = _rule(1.0, gt=0, max=100)
-    max_force: float = _rule(20.0, gt=0, max=1e4)
-    mass: float = _rule(2.0, gt=0, max=1e4)
-    driver: str = _rule("sim", choices=DRIVERS)
-    start: Pose = _rule()
+class MavlinkSection:
+    """``[robots.mavlink]``: a MAVLink rover (drivers/mavlink/). Its keys are also accepted
+    flat in ``[[robots]]`` (as before the sub-table), except the newer ``heartbeat_hz`` and
+    ``fs_timeout``."""
+
     url: str = _rule("")
     system_id: int = _rule(1, min=1, max=255)
     profile: str = _rule("", choices=("",) + MAVLINK_PROFILES)
@@ -389,6 +386,126 @@ class RobotConfig:
     max_vehicle_timeout: float = _rule(1.0, gt=0, max=60)
     gcs_system_id: int = _rule(255, min=1, max=255)  # our MAVLink system id (the GCS failsafe's)
     telemetry_hz: float = _rule(50.0, min=30, max=1000)  # LOCAL_POSITION_NED/ATTITUDE rate asked
+    # Hz: our GCS HEARTBEAT to the vehicle (what its GCS failsafe counts)
+    heartbeat_hz: float = _rule(1.0, min=0.2, max=50)
+    # s: the vehicle's GCS failsafe timeout as set on it (ArduRover FS_TIMEOUT), for fleet check
+    # to compare with heartbeat_hz (0: not given)
+    fs_timeout: float = _rule(0.0, min=0, max=3600)
+
+
+#: an ArduRover's FS_TIMEOUT must span this many of our heartbeat periods (one lost or late
+#: heartbeat must not trip the failsafe: at 1 Hz, FS_TIMEOUT = 1 s flaps)
+FS_TIMEOUT_PERIODS = 3.0
+
+
+@dataclass(frozen=True)
+class DriverSpec:
+    """What the config knows of one driver (``robots[].driver``): its ``[robots.<name>]``
+    sub-table and how it is validated, and what its agent needs from the hub's ACL. The driver
+    classes themselves are registered in controller/runtime/wiring.py (the only importer of
+    drivers/), under the same names.
+
+    ``section``: the sub-table's dataclass (None: the driver has no settings); ``flat_keys``:
+    its keys also accepted directly in ``[[robots]]``; ``world_body``: the robot is a body of the
+    stand-in world (its pose from the world's sensors), not a vehicle of its own;
+    ``validate(cfg, i, src)``: cross-field rules of robot ``i``; ``acl(cfg, robot)``: extra
+    (keys its agent puts, keys it is sent) beyond every robot's own; ``notes(cfg, i)``: advice
+    for ``fleet check`` (the loader's notes)."""
+
+    name: str
+    section: type | None = None
+    flat_keys: tuple[str, ...] = ()
+    world_body: bool = False
+    validate: typing.Callable[[Any, int, str], None] | None = None
+    acl: typing.Callable[[Any, Any], tuple[list[str], list[str]]] | None = None
+    notes: typing.Callable[[Any, int], tuple[str, ...]] | None = None
+
+
+DRIVER_SPECS: dict[str, DriverSpec] = {}
+
+
+def register_driver(spec: DriverSpec) -> DriverSpec:
+    """Add a driver's config entry (its name becomes valid for ``robots[].driver``)."""
+    if spec.name in DRIVER_SPECS:
+        raise ValueError(f"driver {spec.name!r} is already registered")
+    DRIVER_SPECS[spec.name] = spec
+    return spec
+
+
+def driver_spec(name: str) -> DriverSpec:
+    """The registered driver ``name`` (KeyError naming the valid ones)."""
+    try:
+        return DRIVER_SPECS[name]
+    except KeyError:
+        raise KeyError(f"unknown driver {name!r}; expected one of {tuple(DRIVER_SPECS)}") from None
+
+
+def _sim_acl(cfg: Any, robot: Any) -> tuple[list[str], list[str]]:
+    """A sim robot of the shared ``fleet world`` process puts the command it applies and is
+    sent its samples (only when the config rehearses that way)."""
+    from controller import wire
+
+    if cfg.sim.world != "process":
+        return [], []
+    fleet = cfg.fleet.name
+    return [wire.key("world_cmd", fleet, id=robot.id)], [wire.key("world_pose", fleet, id=robot.id)]
+
+
+def _validate_mavlink_robot(cfg: Any, i: int, src: str) -> None:
+    _validate_mavlink(cfg, i, src)
+
+
+def _mavlink_robot_notes(cfg: Any, i: int) -> tuple[str, ...]:
+    return _mavlink_notes(cfg, i)
+
+
+register_driver(DriverSpec("sim", world_body=True, acl=_sim_acl))
+register_driver(
+    DriverSpec(
+        "mavlink",
+        section=MavlinkSection,
+        flat_keys=(
+            "url",
+            "system_id",
+            "profile",
+            "link_timeout",
+            "arm",
+            "hold_on_close",
+            "max_vehicle_timeout",
+            "gcs_system_id",
+            "telemetry_hz",
+        ),
+        validate=_validate_mavlink_robot,
+        notes=_mavlink_robot_notes,
+    )
+)
+DRIVERS = tuple(DRIVER_SPECS)
+
+
+def _flat(driver: str, key: str) -> property:
+    """A flat ``[[robots]]`` key read from the robot's ``[robots.<driver>]`` sub-table."""
+
+    def get(self: Any) -> Any:
+        return getattr(getattr(self, driver), key)
+
+    get.__doc__ = f"``{driver}.{key}`` (also accepted flat in [[robots]])"
+    return property(get)
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotConfig:
+    id: str = _rule(pattern=r"^[A-Za-z0-9_\-]+$")
+    kind: str = _rule(choices=ROBOT_KINDS)
+    radius: float = _rule(0.1, gt=0, max=5)
+    max_speed: float = _rule(0.5, gt=0, max=20)
+    max_yaw_rate: float = _rule(2.0, gt=0, max=50)
+    max_accel: float = _rule(1.0, gt=0, max=100)
+    max_force: float = _rule(20.0, gt=0, max=1e4)
+    mass: float = _rule(2.0, gt=0, max=1e4)
+    driver: str = _rule("sim", choices=DRIVERS)
+    start: Pose = _rule()
+    # per-driver sub-tables (DRIVER_SPECS): [robots.mavlink]; the flat keys merge into them
+    mavlink: MavlinkSection = _rule(MavlinkSection())
     # the robot agent's own zenoh identity (else the [zenoh] one): the lab ACL profile lets it
     # put only this robot's pose/event and receive only this robot's commands
     zenoh_user: str = _rule("")
@@ -396,6 +513,45 @@ class RobotConfig:
     zenoh_password_file: str = _rule("")
     zenoh_certificate: str = _rule("")  # mutual TLS: this robot's own certificate and key
     zenoh_private_key: str = _rule("")
+
+    # the flat keys, readable as before the sub-tables
+    url = _flat("mavlink", "url")
+    system_id = _flat("mavlink", "system_id")
+    profile = _flat("mavlink", "profile")
+    link_timeout = _flat("mavlink", "link_timeout")
+    arm = _flat("mavlink", "arm")
+    hold_on_close = _flat("mavlink", "hold_on_close")
+    max_vehicle_timeout = _flat("mavlink", "max_vehicle_timeout")
+    gcs_system_id = _flat("mavlink", "gcs_system_id")
+    telemetry_hz = _flat("mavlink", "telemetry_hz")
+
+    @property
+    def spec(self) -> DriverSpec:
+        """This robot's driver entry."""
+        return DRIVER_SPECS[self.driver]
+
+    @classmethod
+    def merge_table(cls, table: dict[str, Any], path: str, src: str) -> dict[str, Any]:
+        """The ``[[robots]]`` table with each driver's flat keys moved into its sub-table; a
+        key given both ways with different values is an error naming both paths."""
+        out = dict(table)
+        for name, spec in DRIVER_SPECS.items():
+            moved = {k: out.pop(k) for k in spec.flat_keys if k in out}
+            if not moved:
+                continue
+            sub = out.get(name, {})
+            if not isinstance(sub, dict):
+                continue  # the walker reports "expected a table"
+            for k, v in moved.items():
+                if k in sub and sub[k] != v:
+                    raise ConfigError(
+                        src,
+                        f"{path}.{name}.{k}",
+                        f"given as {path}.{k} = {v!r} and {path}.{name}.{k} = {sub[k]!r}: "
+                        "set it once (the sub-table is the newer form)",
+                    )
+            out[name] = {**moved, **sub}
+        return out
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -582,6 +738,9 @@ _NOT_KEYS = ("source", "notes")  # FleetConfig fields the loader fills, never TO
 
 
 def _build(cls: type, table: dict[str, Any], path: str, src: str) -> Any:
+    merge = getattr(cls, "merge_table", None)  # a section that takes some keys two ways
+    if merge is not None:
+        table = merge(table, path, src)
     hints = typing.get_type_hints(cls)
     fields = {
         f.name: f
@@ -652,6 +811,16 @@ def _validate_mavlink(cfg: FleetConfig, i: int, src: str) -> None:
                 f"{path}.system_id",
                 f"robots[{j}] uses system_id {r.system_id} on the same url {r.url!r}",
             )
+    m = r.mavlink
+    least = FS_TIMEOUT_PERIODS / m.heartbeat_hz
+    if r.profile == "ardurover" and 0 < m.fs_timeout < least - 1e-9:
+        raise ConfigError(
+            src,
+            f"{path}.mavlink.fs_timeout",
+            f"FS_TIMEOUT {m.fs_timeout:g} s is under {FS_TIMEOUT_PERIODS:g} periods of our "
+            f"{m.heartbeat_hz:g} Hz heartbeat: one late heartbeat would trip the GCS failsafe; "
+            f"set FS_TIMEOUT >= {least:g} s on the vehicle (or raise mavlink.heartbeat_hz)",
+        )
     if r.profile == "ardurover" and r.kind != "diff":
         raise ConfigError(
             src,
@@ -675,8 +844,8 @@ def _validate_robot(cfg: FleetConfig, i: int, obstacles: tuple[Obstacle, ...], s
             raise ConfigError(
                 src, f"{path}.start", f"robot {r.id!r} at ({x}, {y}) overlaps obstacles[{j}]"
             )
-    if r.driver == "mavlink":
-        _validate_mavlink(cfg, i, src)
+    if r.spec.validate is not None:
+        r.spec.validate(cfg, i, src)
 
 
 def _validate_robots(cfg: FleetConfig, obstacles: tuple[Obstacle, ...], src: str) -> None:
@@ -920,6 +1089,7 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
         for i, o in enumerate(cfg.obstacles)
     )
     obj, notes = _object(cfg, src)
+    notes += _driver_notes(cfg)
     _check_timestep(cfg, src)
     _check_zenoh(cfg.zenoh, src)
     _validate_robots(cfg, obstacles, src)
@@ -927,6 +1097,29 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
     check_route_grid(cfg.world.bounds, cfg.route, src)
     cfg = _validate_zenoh(cfg, src)
     return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src, notes=notes)
+
+
+def _mavlink_notes(cfg: FleetConfig, i: int) -> tuple[str, ...]:
+    """The GCS failsafe an ArduRover needs (README "In the lab") when its FS_TIMEOUT is not
+    given (``mavlink.fs_timeout``): at least FS_TIMEOUT_PERIODS of our heartbeat periods."""
+    r = cfg.robots[i]
+    if r.profile != "ardurover" or r.mavlink.fs_timeout:
+        return ()
+    hz = r.mavlink.heartbeat_hz
+    return (
+        f"robots[{i}] ({r.id!r}, ardurover): set FS_GCS_ENABLE = 1 and FS_TIMEOUT >= "
+        f"{FS_TIMEOUT_PERIODS / hz:g} s on the vehicle ({FS_TIMEOUT_PERIODS:g} periods of "
+        f"mavlink.heartbeat_hz = {hz:g}); give it as mavlink.fs_timeout to have it checked",
+    )
+
+
+def _driver_notes(cfg: FleetConfig) -> tuple[str, ...]:
+    """What each robot's driver entry has to say about the config (DriverSpec.notes)."""
+    out: tuple[str, ...] = ()
+    for i, r in enumerate(cfg.robots):
+        if r.spec.notes is not None:
+            out += r.spec.notes(cfg, i)
+    return out
 
 
 def _check_timestep(cfg: FleetConfig, src: str) -> None:
@@ -1302,4 +1495,8 @@ def config_to_dict(cfg: FleetConfig) -> dict[str, Any]:
             return [conv(x) for x in v]
         return v
 
-    return conv(cfg)
+    out = conv(cfg)
+    for robot, r in zip(out["robots"], cfg.robots, strict=True):
+        for name, spec in DRIVER_SPECS.items():  # the flat keys too: readers of older logs
+            robot.update({k: getattr(getattr(r, name), k) for k in spec.flat_keys})
+    return out
