@@ -268,3 +268,33 @@ def test_a_driver_class_needs_a_config_entry():
 
     with pytest.raises(ValueError, match="no config entry"):
         register_driver_class(DriverClass("ros2", lambda *a: None, lambda *a: (None, None)))
+
+
+# --------------------------------------------------------------------------- transport strategies
+
+
+def test_transport_strategy_names_are_one_registry():
+    """transport.strategy names (config) and their local planners (planning) are the same set;
+    an unknown name fails at load with the valid ones."""
+    from controller.config import TRANSPORT_STRATEGIES
+    from controller.planning.transport import LOCAL_PLANNERS
+    from controller.planning.transport_types import STRATEGIES
+
+    assert set(LOCAL_PLANNERS) == set(TRANSPORT_STRATEGIES) == set(STRATEGIES)
+    data = deep_update(base_config_dict(), {"transport": {"strategy": "greedy"}})
+    with pytest.raises(ConfigError) as err:
+        parse_config(data, "t.toml")
+    assert err.value.path == "transport.strategy"
+    assert "expected one of 'sa', 'serpentine', 'downhill', got 'greedy'" in str(err.value)
+
+
+@pytest.mark.parametrize("strategy", ["sa", "downhill", "serpentine"])
+def test_each_strategy_plans_through_the_registry(strategy):
+    from controller.planning.transport import plan_local
+    from controller.planning.transport_types import TransportParams
+    from tests.support.transport_cases import push_case
+
+    params = TransportParams(strategy=strategy, iterations=20)
+    plan = plan_local(push_case(), params, np.random.default_rng(0))
+    assert plan.strategy == strategy and plan.status == "ok"
+    assert plan.energy.total <= plan.start_energy.total + 1e-9  # never worse than its start
