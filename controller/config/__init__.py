@@ -34,6 +34,7 @@ from controller.config.load import (
     nesting_error,
     override,
     parse_table,
+    read_toml,
 )
 from controller.config.sections import (
     ACL_PROFILES,
@@ -165,6 +166,7 @@ __all__ = [
     "override",
     "parse_config",
     "parse_table",
+    "read_toml",
     "register_driver",
     "validated_polygon",
 ]

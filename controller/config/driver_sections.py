@@ -106,37 +106,6 @@ def _sim_acl(cfg: Any, robot: Any) -> tuple[list[str], list[str]]:
     return [wire.key("world_cmd", fleet, id=robot.id)], [wire.key("world_pose", fleet, id=robot.id)]
 
 
-def _validate_mavlink_robot(cfg: Any, i: int, src: str) -> None:
-    _validate_mavlink(cfg, i, src)
-
-
-def _mavlink_robot_notes(cfg: Any, i: int) -> tuple[str, ...]:
-    return _mavlink_notes(cfg, i)
-
-
-register_driver(DriverSpec("sim", world_body=True, acl=_sim_acl))
-register_driver(
-    DriverSpec(
-        "mavlink",
-        section=MavlinkSection,
-        flat_keys=(
-            "url",
-            "system_id",
-            "profile",
-            "link_timeout",
-            "arm",
-            "hold_on_close",
-            "max_vehicle_timeout",
-            "gcs_system_id",
-            "telemetry_hz",
-        ),
-        validate=_validate_mavlink_robot,
-        notes=_mavlink_robot_notes,
-    )
-)
-DRIVERS = tuple(DRIVER_SPECS)
-
-
 def _flat(driver: str, key: str) -> property:
     """A flat ``[[robots]]`` key read from the robot's ``[robots.<driver>]`` sub-table."""
 
@@ -199,3 +168,27 @@ def _mavlink_notes(cfg: FleetConfig, i: int) -> tuple[str, ...]:
         f"{FS_TIMEOUT_PERIODS / hz:g} s on the vehicle ({FS_TIMEOUT_PERIODS:g} periods of "
         f"mavlink.heartbeat_hz = {hz:g}); give it as mavlink.fs_timeout to have it checked",
     )
+
+
+# the built-in drivers (their classes: controller/runtime/wiring.py DRIVER_CLASSES)
+register_driver(DriverSpec("sim", world_body=True, acl=_sim_acl))
+register_driver(
+    DriverSpec(
+        "mavlink",
+        section=MavlinkSection,
+        flat_keys=(
+            "url",
+            "system_id",
+            "profile",
+            "link_timeout",
+            "arm",
+            "hold_on_close",
+            "max_vehicle_timeout",
+            "gcs_system_id",
+            "telemetry_hz",
+        ),
+        validate=_validate_mavlink,
+        notes=_mavlink_notes,
+    )
+)
+DRIVERS = tuple(DRIVER_SPECS)

@@ -13,9 +13,11 @@ import dataclasses
 import difflib
 import math
 import re
+import tomllib
 import types
 import typing
 from dataclasses import field
+from pathlib import Path
 from typing import Any
 
 #: TOML tables and arrays nested deeper than this are refused (no key of ours is deeper than 4)
@@ -209,3 +211,26 @@ def nesting_error(data: Any, limit: int = MAX_TOML_DEPTH) -> tuple[str, str] | N
         elif isinstance(value, list):
             stack.extend((v, f"{path}[{i}]", depth + 1) for i, v in enumerate(value))
     return None
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """A TOML file as data (ConfigError naming the file when it cannot be read, is not text, is
+    not TOML or nests too deep for the parser)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(str(p), "", f"cannot read: {exc.strerror or exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            str(p), "", f"not a text file (not UTF-8 at byte {exc.start}): expected TOML"
+        ) from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(str(p), "", f"not valid TOML: {exc}") from exc
+    except RecursionError:  # tomllib recurses per nested array or inline table
+        raise ConfigError(
+            str(p), "", f"not a config: arrays or tables nested deeper than {MAX_TOML_DEPTH}"
+        ) from None
+    return data

@@ -9,7 +9,6 @@ import dataclasses
 import math
 import os
 import tempfile
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -18,11 +17,11 @@ import numpy as np
 from controller import geometry
 from controller.config.driver_sections import DRIVER_SPECS
 from controller.config.load import (
-    MAX_TOML_DEPTH,
     ConfigError,
     _build,
     _convert,
     nesting_error,
+    read_toml,
 )
 from controller.config.sections import (
     CAPTURE_NODE_BUDGET,
@@ -332,24 +331,7 @@ def parse_config(data: dict[str, Any], source: str = "") -> FleetConfig:
 
 def load_config(path: str | Path) -> FleetConfig:
     """Read and validate a fleet.toml (raises ConfigError naming the file and key path)."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(str(p), "", f"cannot read: {exc.strerror or exc}") from exc
-    except UnicodeDecodeError as exc:
-        raise ConfigError(
-            str(p), "", f"not a text file (not UTF-8 at byte {exc.start}): expected TOML"
-        ) from exc
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(str(p), "", f"not valid TOML: {exc}") from exc
-    except RecursionError:  # tomllib recurses per nested array or inline table
-        raise ConfigError(
-            str(p), "", f"not a config: arrays or tables nested deeper than {MAX_TOML_DEPTH}"
-        ) from None
-    return parse_config(data, str(p))
+    return parse_config(read_toml(path), str(Path(path)))
 
 
 # never written to logs or --json: passwords (a password_file is named, not read)
