@@ -370,9 +370,19 @@ class RobotConfig:
     @classmethod
     def merge_table(cls, table: dict[str, Any], path: str, src: str) -> dict[str, Any]:
         """The ``[[robots]]`` table with each driver's flat keys moved into its sub-table; a
-        key given both ways with different values is an error naming both paths."""
+        key given both ways with different values is an error naming both paths, and so is a
+        sub-table of another driver than the robot's (a forgotten ``driver = "mavlink"`` would
+        otherwise run a vehicle's entry as a simulated robot)."""
         out = dict(table)
+        driver = table.get("driver", "sim")
         for name, spec in DRIVER_SPECS.items():
+            if spec.section is not None and name in table and driver != name:
+                raise ConfigError(
+                    src,
+                    f"{path}.{name}",
+                    f"a {name} sub-table on a robot with driver = {driver!r}: set "
+                    f'driver = "{name}" or remove the sub-table',
+                )
             moved = {k: out.pop(k) for k in spec.flat_keys if k in out}
             if not moved:
                 continue

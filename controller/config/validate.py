@@ -364,4 +364,6 @@ def config_to_dict(cfg: FleetConfig) -> dict[str, Any]:
     for robot, r in zip(out["robots"], cfg.robots, strict=True):
         for name, spec in DRIVER_SPECS.items():  # the flat keys too: readers of older logs
             robot.update({k: getattr(getattr(r, name), k) for k in spec.flat_keys})
+            if name != r.driver:  # only the robot's own driver's sub-table loads again
+                robot.pop(name, None)
     return out

@@ -97,15 +97,21 @@ CASES = {
     ),
     "subtable_unknown_key": (
         {},
-        lambda d: d["robots"][0].update(mavlink={"heartbeat": 2.0}),
+        lambda d: d["robots"][0].update(driver="mavlink", mavlink={"heartbeat": 2.0}),
         "robots[0].mavlink.heartbeat",
         "did you mean 'heartbeat_hz'",
     ),
     "heartbeat_hz_zero": (
         {},
-        lambda d: d["robots"][0].update(mavlink={"heartbeat_hz": 0.0}),
+        lambda d: d["robots"][0].update(driver="mavlink", mavlink={"heartbeat_hz": 0.0}),
         "robots[0].mavlink.heartbeat_hz",
         ">= 0.2",
+    ),
+    "subtable_of_another_driver": (
+        {},
+        lambda d: d["robots"][1].update(mavlink={"url": "udpin:127.0.0.1:14551"}),
+        "robots[1].mavlink",
+        "driver = 'sim': set driver = \"mavlink\"",
     ),
     "fs_timeout_flaps_against_the_heartbeat": (
         {},
@@ -249,6 +255,7 @@ def test_config_dict_keeps_flat_keys_and_loads_again(tmp_path):
     d = config_to_dict(cfg)
     assert d["robots"][2]["url"] == d["robots"][2]["mavlink"]["url"] == "udpin:127.0.0.1:14551"
     assert d["robots"][2]["mavlink"]["heartbeat_hz"] == 2.0
+    assert "mavlink" not in d["robots"][0] and d["robots"][0]["url"] == ""  # a sim robot
     d.pop("source")  # the loader's record of the file, not a key
     again = load_config(write_toml(tmp_path / "again.toml", d))
     assert again.robots == cfg.robots
