@@ -2,15 +2,17 @@
 
 Everything ``fleet run`` would fail on before it starts: an unreadable or binary file, bad TOML,
 unknown keys and values out of range, malformed zenoh endpoints, polygons, robots starting
-outside the room, on an obstacle or on each other, and a ``log.dir`` that cannot be written
-(the only check that touches the file system beyond the config: a temporary file, removed)."""
+outside the room, on an obstacle or on each other, identities shared between robots, the
+controller and operators, and a ``log.dir`` that cannot be written (a temporary file, removed).
+Beyond the loader it reads the certificates named in the config that exist here: two identities
+with the same common name are refused."""
 
 from __future__ import annotations
 
 import sys
 
 from controller.commands import add_config_argument
-from controller.config import ConfigError, load_config, log_dir_problem
+from controller.config import ConfigError, certificate_problem, load_config, log_dir_problem
 
 
 def add_arguments(parser, word: str) -> None:
@@ -26,6 +28,9 @@ def run(args) -> int:
         problem = log_dir_problem(cfg.log.dir)  # what `fleet run` would fail on at its start
         if problem:
             raise ConfigError(cfg.source, "log.dir", problem)
+        shared = certificate_problem(cfg)  # the certificates readable here, by common name
+        if shared:
+            raise ConfigError(cfg.source, *shared)
     except ConfigError as exc:
         if args.json:
             emit_json({"ok": False, "file": exc.source, "path": exc.path, "error": exc.message})

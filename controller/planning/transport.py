@@ -318,10 +318,32 @@ def plan_local(
         row = [IDLE if r.contact is None else FOLLOW for r in state.robots]
         trace = roll.run(np.tile(np.array(row, np.int64), (params.intervals, 1)))
         return make_plan(roll, trace, roll.energy(trace), "at_subgoal")
-    if params.strategy == "serpentine":
-        trace, group = serpentine(roll, state.serpentine_group)
-        e = roll.energy(trace)
-        return make_plan(roll, trace, e, "ok", group=group)
+    return LOCAL_PLANNERS[params.strategy](roll, state, params, rng, previous, shift)
+
+
+def _plan_serpentine(
+    roll: Rollout,
+    state: TransportState,
+    params: TransportParams,
+    rng: np.random.Generator,
+    previous: LocalPlan | None,
+    shift: int,
+) -> LocalPlan:
+    """``serpentine``: Sharma's two groups (module doc)."""
+    trace, group = serpentine(roll, state.serpentine_group)
+    e = roll.energy(trace)
+    return make_plan(roll, trace, e, "ok", group=group)
+
+
+def _plan_annealed(
+    roll: Rollout,
+    state: TransportState,
+    params: TransportParams,
+    rng: np.random.Generator,
+    previous: LocalPlan | None,
+    shift: int,
+) -> LocalPlan:
+    """``sa`` and ``downhill`` (only ΔE <= 0 accepted): annealing over the action matrix."""
     start = roll.run(initial_matrix(roll, rng, previous, shift))
     if previous is not None and params.initial_actions == "lp":
         # the previous plan shifted, or the least-force pushing set now: the better start
@@ -330,6 +352,16 @@ def plan_local(
             start = fresh
     best, accepted = anneal(roll, start, params, rng, downhill=params.strategy == "downhill")
     return make_plan(roll, best, roll.energy(start), "ok", params.iterations, accepted)
+
+
+#: ``transport.strategy`` name -> local planner (roll, state, params, rng, previous, shift).
+#: The valid names are ``controller.config.TRANSPORT_STRATEGIES`` (checked at config load;
+#: tests/unit/test_transport.py checks both name the same strategies).
+LOCAL_PLANNERS = {
+    "sa": _plan_annealed,
+    "downhill": _plan_annealed,
+    "serpentine": _plan_serpentine,
+}
 
 
 class TransportPlanner:

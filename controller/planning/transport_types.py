@@ -26,6 +26,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from controller.config import TRANSPORT_STRATEGIES
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
@@ -33,7 +35,9 @@ ACTIONS = ("push", "follow", "slide_left", "slide_right", "relocate", "idle")
 PUSH, FOLLOW, SLIDE_LEFT, SLIDE_RIGHT, RELOCATE, IDLE = range(len(ACTIONS))
 ATTACHED = (PUSH, FOLLOW, SLIDE_LEFT, SLIDE_RIGHT)  # actions that keep a contact
 
-STRATEGIES = ("sa", "downhill", "serpentine")
+# the transport.strategy names (one registry: controller.config; their planners:
+# controller.planning.transport.LOCAL_PLANNERS)
+STRATEGIES = TRANSPORT_STRATEGIES
 SCHEDULES = ("geometric", "logarithmic")
 
 

@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import threading
 import time
 
 from controller.config import FleetConfig
 from controller.io.bus import Bus
-from controller.runtime.wiring import make_hub
+from controller.runtime.wiring import driver_class
 from drivers.agent import Agent, AgentParams
-from drivers.base import capabilities_of
-from drivers.sim import SimDriver
 from sim_backend.hub import SimHub
 
 log = logging.getLogger(__name__)
@@ -52,26 +49,10 @@ def _open_until(stop: threading.Event, cfg: FleetConfig, who: str) -> Bus | None
     return None
 
 
-def _local_driver(cfg: FleetConfig, robot, wall0: float, strict: bool):
-    """The driver of a robot that needs no bus to connect: a MAVLink vehicle at its url, or a
-    ``sim`` robot alone in a real-time world of its own (``sim.world = "solo"``). Returns
-    (driver, the solo world's hub or None)."""
-    from drivers.mavlink.driver import MavlinkDriver
-
-    if robot.driver == "mavlink":
-        return MavlinkDriver(robot, clock=time.time, strict=strict), None
-    solo = dataclasses.replace(cfg, robots=(robot,))
-    hub = make_hub(solo)
-    noise = cfg.sim.pose_noise
-    driver = SimDriver(
-        hub, robot.id, capabilities_of(robot), noise.xy, noise.theta, time_offset=wall0
-    )
-    return driver, hub
-
-
 def uses_world_process(cfg: FleetConfig, robot) -> bool:
-    """Whether ``fleet driver`` attaches this robot to the shared ``fleet world`` process."""
-    return robot.driver == "sim" and cfg.sim.world == "process"
+    """Whether ``fleet driver`` builds this robot's driver over the bus (a sim robot of the
+    shared ``fleet world`` process: ``sim.world = "process"``)."""
+    return driver_class(robot).over_bus(cfg)
 
 
 def run_agent(
@@ -101,7 +82,7 @@ def run_agent(
     wall0 = time.time()
     if uses_world_process(cfg, robot):
         return _run_remote(cfg, robot, stop, duration, connect_timeout, wall0)
-    driver, hub = _local_driver(cfg, robot, wall0, strict)
+    driver, hub = driver_class(robot).local(cfg, robot, wall0, strict)
     try:
         driver.connect(timeout=connect_timeout)
     except DriverError as exc:
@@ -129,13 +110,14 @@ def _run_remote(
     """A ``sim`` robot of the shared world process: the bus first (the link to the world runs
     over it), then the driver's handshake (the world's first pose sample for this robot)."""
     from drivers.base import DriverError
-    from drivers.remote_sim import RemoteSimDriver
 
+    remote = driver_class(robot).remote
+    assert remote is not None, f"driver {robot.driver!r}: over_bus without remote"
     bus = _open_until(stop, cfg, robot.id)
     if bus is None:
         return 0, ""
     with bus:
-        driver = RemoteSimDriver(bus, robot.id, capabilities_of(robot), clock=time.time)
+        driver = remote(bus, cfg, robot)
         try:
             driver.connect(timeout=connect_timeout)
         except DriverError as exc:
@@ -173,7 +155,7 @@ def _serve(
         "robot %s: agent up (%s driver%s), e-stop %s",
         robot.id,
         robot.driver,
-        ", shared world process" if hub is None and robot.driver == "sim" else "",
+        ", shared world process" if uses_world_process(cfg, robot) else "",
         "ENGAGED" if agent.core.estop else "off",
     )
     agent.announce(time.time())

@@ -146,9 +146,9 @@ class WorldServer:
 
 
 def world_config(cfg: FleetConfig) -> FleetConfig:
-    """The config of the shared world: its ``sim`` robots (a MAVLink robot is a real vehicle,
-    not a body of the stand-in world)."""
-    return dataclasses.replace(cfg, robots=tuple(r for r in cfg.robots if r.driver == "sim"))
+    """The config of the shared world: its robots that are bodies of the world (``sim``; a
+    MAVLink robot is a real vehicle, not a body of the stand-in world)."""
+    return dataclasses.replace(cfg, robots=tuple(r for r in cfg.robots if r.spec.world_body))
 
 
 def run_world(cfg: FleetConfig, stop: threading.Event, duration: float = 0.0) -> int:

@@ -22,7 +22,9 @@ the default ``time.monotonic`` clock). A lockstep dry run passes its sim clock a
 that advances the sim. Nothing ever blocks without a timeout; ``poll``, ``send``, ``health`` and
 ``stop`` never block.
 
-Keepalive: our HEARTBEAT goes to the robot at 1 Hz and the current setpoint is re-sent at
+Keepalive: our HEARTBEAT goes to the robot at ``mavlink.heartbeat_hz`` (1 Hz by default: an
+ArduRover's GCS failsafe ``FS_TIMEOUT`` must then be at least 3 s, three periods, or one late
+heartbeat trips it) and the current setpoint is re-sent at
 ``SETPOINT_HZ`` from ``poll``/``send``/``health``, so the agent must call ``poll`` regularly (it
 does, every tick). A command is held for its ``ttl``; after that the re-sent setpoint is zero.
 When no vehicle HEARTBEAT arrived for the link timeout, the link is lost: ``health().ok`` is
@@ -73,7 +75,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 SETPOINT_HZ = 10.0  # Hz, keepalive rate of the current setpoint (PX4 needs > 2 Hz)
-HEARTBEAT_PERIOD = 1.0  # s, our GCS heartbeat
+HEARTBEAT_PERIOD = 1.0  # s, our GCS heartbeat by default (``[robots.mavlink] heartbeat_hz``)
 PX4_STREAM_BEFORE_OFFBOARD = 1.2  # s of setpoints before asking for OFFBOARD (PX4 wants >= 1 s)
 COMMAND_RETRY = 0.5  # s before a COMMAND_LONG without an ACK is sent again
 POSE_QUEUE = 1024
@@ -128,6 +130,7 @@ class MavlinkDriver:
         self.profile = cfg.profile
         self.system_id = cfg.system_id
         self.gcs_id = cfg.gcs_system_id
+        self.heartbeat_period = 1.0 / cfg.mavlink.heartbeat_hz  # s, our GCS heartbeat
         self.capabilities = capabilities_of(cfg)
         self._clock = clock
         self._idle = idle
@@ -360,7 +363,7 @@ class MavlinkDriver:
             now = self._clock()
             for m in link.take(self.system_id):
                 self._handle(m, now)
-            if now - self._last_hb_sent >= HEARTBEAT_PERIOD:
+            if now - self._last_hb_sent >= self.heartbeat_period:
                 self._send_heartbeat(now)
             if self._streaming and now - self._last_sp_sent >= 1.0 / SETPOINT_HZ:
                 if not self._lost(now):

@@ -579,6 +579,28 @@ def test_shared_link_keeps_every_robots_heartbeat(pool):
     ls.close()
 
 
+@pytest.mark.parametrize(("heartbeat_hz", "tripped"), [(1.0, True), (3.0, False)])
+def test_gcs_heartbeat_rate_against_fs_timeout(pool, heartbeat_hz, tripped):
+    """An ArduRover whose FS_TIMEOUT is 1 s (the README's old advice) trips its GCS failsafe
+    against our default 1 Hz heartbeat (one period plus a poll's lateness); three heartbeats per
+    FS_TIMEOUT (``[robots.mavlink] heartbeat_hz = 3``) keep it in GUIDED."""
+    port = free_udp_port()
+    r = robot("a", "ardurover", port, 1, mavlink={"heartbeat_hz": heartbeat_hz})
+    cfg = make_config([r])
+    ls = Lockstep(cfg)
+    emu = ls.emulator(cfg.robots[0], gcs_timeout=1.0)
+    drv = MavlinkDriver(cfg.robots[0], clock=ls.clock, idle=ls.advance, pool=pool)
+    assert drv.heartbeat_period == pytest.approx(1.0 / heartbeat_hz)
+    drv.connect(timeout=2.0)
+    for _ in range(100):  # 5 s, polled every 50 ms as the agent does
+        ls.advance(0.05)
+        drv.poll()
+    assert emu.counters["gcs_heartbeats"] >= 4 * heartbeat_hz
+    assert (emu.failsafe == "gcs" or emu.mode == mc.ROVER_HOLD) is tripped
+    drv.close()
+    ls.close()
+
+
 def test_start_emulators_only_for_mavlink_robots():
     port = free_udp_port()
     sim_robot = {"id": "s", "kind": "omni", "start": [6.0, 6.0, 0.0]}

@@ -10,6 +10,7 @@ import pytest
 
 from controller.cli import main
 from controller.config import ConfigError, endpoint_error, load_config
+from tests.support.certs import make_certs, openssl_missing
 from tests.support.config import base_config_dict, write_toml
 
 
@@ -39,6 +40,33 @@ def _set(section: str, key: str, value):
 def _robot_start(i: int, start):
     def mutate(d):
         d["robots"][i]["start"] = start
+
+    return mutate
+
+
+def _with_zenoh(**keys):
+    """[zenoh] with the controller's identity ``ctl`` and an operator ``op``, plus ``keys``."""
+
+    def mutate(d):
+        d["zenoh"].update(user="ctl", password="x", operators=["op"])
+        d["zenoh"].update(keys)
+
+    return mutate
+
+
+def _robot_users(*users: str):
+    def mutate(d):
+        _with_zenoh()(d)
+        for r, user in zip(d["robots"], users, strict=False):
+            r.update(zenoh_user=user, zenoh_password=f"pw-{user}")
+
+    return mutate
+
+
+def _robot_certs(*certs: str):
+    def mutate(d):
+        for r, cert in zip(d["robots"], certs, strict=False):
+            r.update(zenoh_certificate=cert, zenoh_private_key=cert + ".key")
 
     return mutate
 
@@ -90,6 +118,44 @@ CASES = {
         _robot_start(2, [9.3, 2.8, 0.0]),
         "robots[2].start",
         "overlaps obstacles[1]",
+    ),
+    # issue 22 item 7: the gaps of fleet check
+    "timestep-absurdly-small": (_set("sim", "timestep", 1e-9), "sim.timestep", ">= 0.0001"),
+    "timestep-longer-than-a-tick": (
+        _set("sim", "timestep", 0.1),  # fleet.rate_hz = 20: one tick is 0.05 s
+        "sim.timestep",
+        "longer than one control tick",
+    ),
+    "tls-listen-without-tls-files": (
+        _set("zenoh", "listen", ["tls/127.0.0.1:7447"]),
+        "zenoh.listen[0]",
+        "zenoh.tls is not set",
+    ),
+    "tls-connect-without-tls-files": (
+        _set("zenoh", "connect", ["tls/127.0.0.1:7447"]),
+        "zenoh.connect[0]",
+        "root_ca",
+    ),
+    "two-robots-one-user": (_robot_users("r", "r"), "robots[1].zenoh_user", "one identity"),
+    "robot-is-the-controller": (
+        _robot_users("ctl", "r2"),
+        "robots[0].zenoh_user",
+        "zenoh.user (the controller)",
+    ),
+    "robot-is-an-operator": (
+        _robot_users("r1", "op"),
+        "robots[1].zenoh_user",
+        "an operator",
+    ),
+    "operator-is-the-controller": (
+        _with_zenoh(operators=["ctl"]),
+        "zenoh.operators[0]",
+        "one identity",
+    ),
+    "two-robots-one-certificate": (
+        _robot_certs("c.pem", "c.pem"),
+        "robots[1].zenoh_certificate",
+        "one certificate",
     ),
 }
 
@@ -172,3 +238,62 @@ def test_fleet_run_refuses_the_same_before_starting(tmp_path, capsys):
     out = blocker / "sub" / "run.mcap"
     assert main(["run", "--config", str(bad_zenoh.parent / "bad.toml"), "--out", str(out)]) == 2
     assert "--out" in capsys.readouterr().err
+
+
+def test_distinct_identities_are_fine(tmp_path):
+    cfg = load_config(_write(tmp_path, _robot_users("r1", "r2", "r3")))
+    assert [r.zenoh_user for r in cfg.robots[:3]] == ["r1", "r2", "r3"]
+
+
+@pytest.mark.parametrize("nest", ["[", "{a = "])
+def test_deeply_nested_toml_exits_2_without_a_traceback(tmp_path, capsys, nest):
+    """5 000 nested arrays (or inline tables) made tomllib raise RecursionError (a traceback)."""
+    close = "]" if nest == "[" else "}"
+    path = tmp_path / "deep.toml"
+    path.write_text("x = " + nest * 5000 + "1" + close * 5000 + "\n")
+    assert main(["check", "--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "nested deeper than" in err and "Traceback" not in err
+
+
+def test_deep_tables_that_parse_are_bounded_too(tmp_path, capsys):
+    """[a.a.a. ... ] 5 000 deep parses; the nesting bound names its top key."""
+    path = tmp_path / "deep.toml"
+    path.write_text("[" + ".".join(["deep"] * 5000) + "]\nx = 1\n")
+    assert main(["check", "--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: deep: " in err and "nested deeper than 32" in err
+
+
+def test_timestep_of_one_tick_is_accepted(tmp_path):
+    cfg = load_config(_write(tmp_path, _set("sim", "timestep", 0.05)))  # rate_hz 20
+    assert cfg.sim.timestep == 0.05
+
+
+def test_tls_endpoint_with_its_own_tls_settings_is_accepted(tmp_path):
+    ep = "tls/127.0.0.1:7447#root_ca_certificate=/etc/ca.pem"
+    load_config(_write(tmp_path, _set("zenoh", "connect", [ep])))
+
+
+def test_two_certificates_with_one_common_name_are_refused(tmp_path, capsys):
+    """Distinct files, same CN: the mTLS ACL could not tell the robots apart."""
+    why = openssl_missing()
+    if why:
+        pytest.skip(why)
+    a = make_certs(tmp_path / "a", ["r1", "ctl"])
+    b = make_certs(tmp_path / "b", ["r1"])  # another r1, signed by another CA: same CN
+
+    def mutate(d):
+        d["zenoh"]["tls"] = {
+            "certificate": str(a["ctl"][0]),
+            "private_key": str(a["ctl"][1]),
+            "root_ca": str(a["ca"][0]),
+            "mtls": True,
+        }
+        d["zenoh"]["listen"] = ["tls/127.0.0.1:7447"]
+        for r, who in zip(d["robots"], (a["r1"], b["r1"]), strict=False):
+            r.update(zenoh_certificate=str(who[0]), zenoh_private_key=str(who[1]))
+
+    path = _write(tmp_path, mutate)
+    load_config(path)  # the loader reads no certificate (a robot's computer has only its own)
+    _check_fails(path, "robots[1].zenoh_certificate", "common name 'r1'", capsys)

@@ -1,0 +1,194 @@
+"""The drivers as the config knows them: name → sub-table ``[robots.<name>]``, its validation,
+its ACL needs and its advice (:class:`DriverSpec`, :data:`DRIVER_SPECS`). The driver classes
+are registered under the same names in controller/runtime/wiring.py (the only importer of
+drivers/). Adding a driver: its sub-table dataclass and ``register_driver`` here, its class
+there, its module in drivers/.
+"""
+
+from __future__ import annotations
+
+import typing
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from controller.config.load import ConfigError, _rule
+
+if TYPE_CHECKING:
+    from controller.config.sections import FleetConfig
+
+MAVLINK_PROFILES = ("ardurover", "px4")
+
+
+# --------------------------------------------------------------------------- drivers
+
+
+@dataclass(frozen=True, kw_only=True)
+class MavlinkSection:
+    """``[robots.mavlink]``: a MAVLink rover (drivers/mavlink/). Its keys are also accepted
+    flat in ``[[robots]]`` (as before the sub-table), except the newer ``heartbeat_hz`` and
+    ``fs_timeout``."""
+
+    url: str = _rule("")
+    system_id: int = _rule(1, min=1, max=255)
+    profile: str = _rule("", choices=("",) + MAVLINK_PROFILES)
+    # s without a vehicle HEARTBEAT before the link is lost; 2.5 periods of a vehicle's default
+    # 1 Hz heartbeat (the driver widens it to 2.5 periods of what the vehicle really sends)
+    link_timeout: float = _rule(2.5, gt=0, max=60)
+    arm: bool = _rule(True)
+    hold_on_close: bool = _rule(True)  # the driver switches the vehicle to HOLD when it closes
+    # s: the longest the vehicle may keep its last setpoint once our stream stops (PX4
+    # COM_OF_LOSS_T, read on connect: a warning above it, `fleet driver --strict` refuses)
+    max_vehicle_timeout: float = _rule(1.0, gt=0, max=60)
+    gcs_system_id: int = _rule(255, min=1, max=255)  # our MAVLink system id (the GCS failsafe's)
+    telemetry_hz: float = _rule(50.0, min=30, max=1000)  # LOCAL_POSITION_NED/ATTITUDE rate asked
+    # Hz: our GCS HEARTBEAT to the vehicle (what its GCS failsafe counts)
+    heartbeat_hz: float = _rule(1.0, min=0.2, max=50)
+    # s: the vehicle's GCS failsafe timeout as set on it (ArduRover FS_TIMEOUT), for fleet check
+    # to compare with heartbeat_hz (0: not given)
+    fs_timeout: float = _rule(0.0, min=0, max=3600)
+
+
+#: an ArduRover's FS_TIMEOUT must span this many of our heartbeat periods (one lost or late
+#: heartbeat must not trip the failsafe: at 1 Hz, FS_TIMEOUT = 1 s flaps)
+FS_TIMEOUT_PERIODS = 3.0
+
+
+@dataclass(frozen=True)
+class DriverSpec:
+    """What the config knows of one driver (``robots[].driver``): its ``[robots.<name>]``
+    sub-table and how it is validated, and what its agent needs from the hub's ACL. The driver
+    classes themselves are registered in controller/runtime/wiring.py (the only importer of
+    drivers/), under the same names.
+
+    ``section``: the sub-table's dataclass (None: the driver has no settings); ``flat_keys``:
+    its keys also accepted directly in ``[[robots]]``; ``world_body``: the robot is a body of the
+    stand-in world (its pose from the world's sensors), not a vehicle of its own;
+    ``validate(cfg, i, src)``: cross-field rules of robot ``i``; ``acl(cfg, robot)``: extra
+    (keys its agent puts, keys it is sent) beyond every robot's own; ``notes(cfg, i)``: advice
+    for ``fleet check`` (the loader's notes)."""
+
+    name: str
+    section: type | None = None
+    flat_keys: tuple[str, ...] = ()
+    world_body: bool = False
+    validate: typing.Callable[[Any, int, str], None] | None = None
+    acl: typing.Callable[[Any, Any], tuple[list[str], list[str]]] | None = None
+    notes: typing.Callable[[Any, int], tuple[str, ...]] | None = None
+
+
+DRIVER_SPECS: dict[str, DriverSpec] = {}
+
+
+def register_driver(spec: DriverSpec) -> DriverSpec:
+    """Add a driver's config entry (its name becomes valid for ``robots[].driver``)."""
+    if spec.name in DRIVER_SPECS:
+        raise ValueError(f"driver {spec.name!r} is already registered")
+    DRIVER_SPECS[spec.name] = spec
+    return spec
+
+
+def driver_spec(name: str) -> DriverSpec:
+    """The registered driver ``name`` (KeyError naming the valid ones)."""
+    try:
+        return DRIVER_SPECS[name]
+    except KeyError:
+        raise KeyError(f"unknown driver {name!r}; expected one of {tuple(DRIVER_SPECS)}") from None
+
+
+def _sim_acl(cfg: Any, robot: Any) -> tuple[list[str], list[str]]:
+    """A sim robot of the shared ``fleet world`` process puts the command it applies and is
+    sent its samples (only when the config rehearses that way)."""
+    from controller import wire
+
+    if cfg.sim.world != "process":
+        return [], []
+    fleet = cfg.fleet.name
+    return [wire.key("world_cmd", fleet, id=robot.id)], [wire.key("world_pose", fleet, id=robot.id)]
+
+
+def _flat(driver: str, key: str) -> property:
+    """A flat ``[[robots]]`` key read from the robot's ``[robots.<driver>]`` sub-table."""
+
+    def get(self: Any) -> Any:
+        return getattr(getattr(self, driver), key)
+
+    get.__doc__ = f"``{driver}.{key}`` (also accepted flat in [[robots]])"
+    return property(get)
+
+
+def _validate_mavlink(cfg: FleetConfig, i: int, src: str) -> None:
+    """A MAVLink robot needs a url and a profile; its system id is unique on its url; an
+    ArduRover is differential (GUIDED never moves sideways)."""
+    r = cfg.robots[i]
+    path = f"robots[{i}]"
+    if not r.url:
+        raise ConfigError(src, f"{path}.url", "a mavlink robot needs a url")
+    if not r.profile:
+        raise ConfigError(
+            src, f"{path}.profile", f"a mavlink robot needs one of {MAVLINK_PROFILES}"
+        )
+    if r.gcs_system_id == r.system_id:
+        raise ConfigError(
+            src, f"{path}.gcs_system_id", f"must differ from the robot's system_id {r.system_id}"
+        )
+    for j, other in enumerate(cfg.robots[:i]):
+        if other.driver == "mavlink" and other.url == r.url and other.system_id == r.system_id:
+            raise ConfigError(
+                src,
+                f"{path}.system_id",
+                f"robots[{j}] uses system_id {r.system_id} on the same url {r.url!r}",
+            )
+    m = r.mavlink
+    least = FS_TIMEOUT_PERIODS / m.heartbeat_hz
+    if r.profile == "ardurover" and 0 < m.fs_timeout < least - 1e-9:
+        raise ConfigError(
+            src,
+            f"{path}.mavlink.fs_timeout",
+            f"FS_TIMEOUT {m.fs_timeout:g} s is under {FS_TIMEOUT_PERIODS:g} periods of our "
+            f"{m.heartbeat_hz:g} Hz heartbeat: one late heartbeat would trip the GCS failsafe; "
+            f"set FS_TIMEOUT >= {least:g} s on the vehicle (or raise mavlink.heartbeat_hz)",
+        )
+    if r.profile == "ardurover" and r.kind != "diff":
+        raise ConfigError(
+            src,
+            f"{path}.kind",
+            'an ardurover robot never moves sideways in GUIDED: set kind = "diff"',
+        )
+
+
+def _mavlink_notes(cfg: FleetConfig, i: int) -> tuple[str, ...]:
+    """The GCS failsafe an ArduRover needs (README "In the lab") when its FS_TIMEOUT is not
+    given (``mavlink.fs_timeout``): at least FS_TIMEOUT_PERIODS of our heartbeat periods."""
+    r = cfg.robots[i]
+    if r.profile != "ardurover" or r.mavlink.fs_timeout:
+        return ()
+    hz = r.mavlink.heartbeat_hz
+    return (
+        f"robots[{i}] ({r.id!r}, ardurover): set FS_GCS_ENABLE = 1 and FS_TIMEOUT >= "
+        f"{FS_TIMEOUT_PERIODS / hz:g} s on the vehicle ({FS_TIMEOUT_PERIODS:g} periods of "
+        f"mavlink.heartbeat_hz = {hz:g}); give it as mavlink.fs_timeout to have it checked",
+    )
+
+
+# the built-in drivers (their classes: controller/runtime/wiring.py DRIVER_CLASSES)
+register_driver(DriverSpec("sim", world_body=True, acl=_sim_acl))
+register_driver(
+    DriverSpec(
+        "mavlink",
+        section=MavlinkSection,
+        flat_keys=(
+            "url",
+            "system_id",
+            "profile",
+            "link_timeout",
+            "arm",
+            "hold_on_close",
+            "max_vehicle_timeout",
+            "gcs_system_id",
+            "telemetry_hz",
+        ),
+        validate=_validate_mavlink,
+        notes=_mavlink_notes,
+    )
+)
+DRIVERS = tuple(DRIVER_SPECS)
