@@ -24,6 +24,7 @@ from pathlib import Path
 import pytest
 
 from tests.support.config import ROOT
+from tests.support.imports import type_checking_blocks
 
 PURE_FOLDERS = ("planning", "estimation", "mission")
 PURE_THIRD_PARTY = {"numpy", "scipy", "osqp", "filterpy", "shapely"}
@@ -46,20 +47,10 @@ SIM_BACKEND_MAY_IMPORT = {
 }
 
 
-def _type_checking_blocks(tree: ast.AST) -> set[int]:
-    """ids of nodes inside ``if TYPE_CHECKING:`` (type-only imports are no runtime coupling)."""
-    skip: set[int] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
-            for child in node.body:
-                skip.update(id(n) for n in ast.walk(child))
-    return skip
-
-
 def imports_of(path: Path) -> set[str]:
     """Every module a file imports at run time (``from a import b`` gives ``a`` and ``a.b``)."""
     tree = ast.parse(path.read_text(), filename=str(path))
-    skip = _type_checking_blocks(tree)
+    skip = type_checking_blocks(tree)
     out: set[str] = set()
     for node in ast.walk(tree):
         if id(node) in skip:

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from tests.support.config import ROOT
+from tests.support.imports import type_checking_blocks
 
 
 def module_names(package: Path) -> dict[str, Path]:
@@ -27,15 +28,6 @@ def module_names(package: Path) -> dict[str, Path]:
             parts.pop()
         out[".".join(parts)] = path
     return out
-
-
-def _type_checking_only(tree: ast.AST) -> set[int]:
-    skip: set[int] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
-            for child in node.body:
-                skip.update(id(n) for n in ast.walk(child))
-    return skip
 
 
 def _resolve(name: str, modules: dict[str, Path]) -> str | None:
@@ -51,7 +43,7 @@ def import_graph(package: Path) -> dict[str, set[str]]:
     graph: dict[str, set[str]] = {m: set() for m in modules}
     for mod, path in modules.items():
         tree = ast.parse(path.read_text(), filename=str(path))
-        skip = _type_checking_only(tree)
+        skip = type_checking_blocks(tree)
         is_pkg = path.name == "__init__.py"
         for node in ast.walk(tree):
             if id(node) in skip:
