@@ -42,7 +42,7 @@ class HoldMission:
     n: int
 
     def plan(self, view: FleetView) -> Intent:
-        return Intent(np.zeros((self.n, 2)), Phase.STANDBY, stop=True)
+        return Intent(np.zeros((self.n, 2)), Phase.HOLD, stop=True)
 
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
         return MissionOutput(commands=np.zeros((self.n, 3)), phase=intent.phase)

@@ -28,8 +28,8 @@ class Phase(StrEnum):
     TRANSPORT = "transport"  # push the object along the route
     DONE = "done"
     FAILED = "failed"
-    GOTO = "goto"  # GotoMission
-    STANDBY = "hold"  # HoldMission (bring-up): every robot stopped (same word as HOLD)
+    GOTO = "goto"  # GotoMission (HoldMission, the bring-up check, reports HOLD: every robot
+    # stopped; the word on the bus is "hold" either way)
 
 
 class Reason(StrEnum):
@@ -45,6 +45,7 @@ class Reason(StrEnum):
     ESTOP = "estop"
     NO_ROUTE = "no_route"
     STALLED = "stalled"
+    NOT_DELIVERED = "not_delivered"  # the run ended with the object outside object.goal's tolerance
 
 
 Event = tuple[str, dict[str, Any]]

@@ -19,7 +19,7 @@ import numpy as np
 from controller import geometry, wire
 from controller.config import FleetConfig
 from controller.io.bus import Bus
-from controller.mission.types import Mission
+from controller.mission.types import Mission, Reason
 from controller.runtime.lockstep import ControllerLockstep, LockstepCoordinator
 from controller.runtime.node import ControllerNode
 from controller.runtime.planner import PlannerWorker
@@ -255,7 +255,7 @@ def failure_of(result: Mapping[str, Any], verdict: Verdict, mission_failure: dic
         first = min(result["verdict"], key=lambda f: verdict.when.get(f["reason"], math.inf))
         return {**first, "t": verdict.when.get(first["reason"])}
     if not result.get("done"):
-        reason = "estop" if result.get("estop") else "timeout"
+        reason = Reason.ESTOP if result.get("estop") else Reason.TIMEOUT
         detail = f"sim time ran out ({result['sim_time_s']} s) in phase {result['mission_phase']}"
         return {"reason": reason, "t": result["sim_time_s"], "detail": detail}
     if result.get("transported") is False:
@@ -263,7 +263,7 @@ def failure_of(result: Mapping[str, Any], verdict: Verdict, mission_failure: dic
             f"the object ended {result.get('goal_error_m', math.nan):.2f} m and "
             f"{result.get('goal_error_deg', math.nan):.1f} deg from object.goal (truth)"
         )
-        return {"reason": "not_delivered", "t": result["sim_time_s"], "detail": detail}
+        return {"reason": Reason.NOT_DELIVERED, "t": result["sim_time_s"], "detail": detail}
     return None
 
 
