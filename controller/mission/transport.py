@@ -427,6 +427,22 @@ class TransportMission:
             )
         )
 
+    def _take_arrangement(
+        self, view: FleetView, pose: np.ndarray, events: list[Event]
+    ) -> Intent | None:
+        """The new contacts, once they have come (None: go on with them); meanwhile the robots
+        hold; a set no robots can push with fails ``too_heavy`` before anyone pushes."""
+        got = self._set_job.take(view.t)
+        if got is None:
+            return self._held(view, pose, events)
+        if not got.ok:
+            detail = f"the re-arrangement planner failed: {got.error}"
+            return self._fail(Reason.STALLED, detail, view, events)
+        if not got.value.feasible:
+            return self._fail(Reason.TOO_HEAVY, got.value.detail, view, events)
+        self._arrange(view, pose, got.value, events)
+        return None
+
     def _rearrange(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         """Movers follow their path around the object; the others hold still. (The stall clock
         waits: re-arranging makes no progress by design; it has its own timeout.) An object
@@ -437,13 +453,9 @@ class TransportMission:
             return self._deliver(view, pose, events)
         self.progress_t = view.t
         if self._set_job.pending:
-            got = self._set_job.take(view.t)
-            if got is None:
-                return self._held(view, pose, events)
-            if not got.ok:
-                detail = f"the re-arrangement planner failed: {got.error}"
-                return self._fail(Reason.STALLED, detail, view, events)
-            self._arrange(view, pose, got.value, events)
+            waiting = self._take_arrangement(view, pose, events)
+            if waiting is not None:
+                return waiting
         vel = np.zeros((self.n, 2))
         hold = np.ones(self.n, bool)
         for i in self.moves:

@@ -45,6 +45,7 @@ class Reason(StrEnum):
     ESTOP = "estop"
     NO_ROUTE = "no_route"
     STALLED = "stalled"
+    TOO_HEAVY = "too_heavy"  # the whole fleet at its force limits cannot push the object
     NOT_DELIVERED = "not_delivered"  # the run ended with the object outside object.goal's tolerance
 
 

@@ -23,13 +23,17 @@ TURN_SHARE = 0.3  # a segment whose turn takes more than this share of the unit 
 class Arrangement:
     """Contact points and outward normals (K, 2), object frame; ``value``: Eq. 5's value, or
     the capacity of an LP set (≥ 1: it can move the object as asked); ``pushers``: K;
-    ``basis``: ``eq5`` or ``lp_capacity``."""
+    ``basis``: ``eq5`` or ``lp_capacity``; ``feasible``: the set can move the object at all
+    (False: the whole fleet, every robot at its limit, cannot overcome the floor friction:
+    ``detail`` says the force needed against the force available)."""
 
     points: np.ndarray
     normals: np.ndarray
     value: float
     pushers: int
     basis: str
+    feasible: bool = True
+    detail: str = ""
 
 
 def can_push(
@@ -82,7 +86,17 @@ def plan_arrangement(
             if can_push(lp, model, twist_v, pts, -nrm, np.full(len(pts), weakest)):
                 return Arrangement(pts, nrm, value, n, "eq5")
     pts, nrm, value, n = wrench_set(cfg, model, twist_v, weakest, robots, turn_margin)
-    return Arrangement(pts, nrm, value, n, "lp_capacity")
+    if value * turn_margin >= 1.0 - 1e-9:
+        return Arrangement(pts, nrm, value, n, "lp_capacity")
+    # the best set the contacts allow (as many robots as fit where they push, all of them if
+    # need be) cannot overcome the floor friction: the LP says so before anyone pushes
+    need = float(np.hypot(*required_wrench(twist_v, model.mass, model.floor_friction, 1.0)[:2]))
+    detail = (
+        f"too heavy to push: the floor friction needs {need:.1f} N; the best set of contacts "
+        f"({n} robots where they fit, {weakest:g} N each) reaches {100 * value * turn_margin:.0f}"
+        f" % of it; the {robots} robots have {robots * weakest:.1f} N in all"
+    )
+    return Arrangement(pts, nrm, value, n, "lp_capacity", feasible=False, detail=detail)
 
 
 def pushing_set(

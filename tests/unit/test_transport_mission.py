@@ -218,3 +218,24 @@ def test_a_fleet_wide_silence_pauses_the_transport_and_loses_nobody():
     out = m.plan(view(cfg, t, poses, cfg.object.start))
     assert [k for k, _ in out.events][0] == "outage_end" and not m.lost
     assert m.contacts == contacts
+
+
+def test_an_object_the_whole_fleet_cannot_push_fails_too_heavy_before_anyone_pushes():
+    """Floor friction 0.6 × 20 kg × g ≈ 118 N against six robots of 6 N: no set of contacts
+    moves it. The arrangement says so (the LP knows before anyone pushes) and the transport
+    fails ``too_heavy`` at once, naming the force needed against the force available (before:
+    nine re-arrangements, then ``stalled``). A crate whose pushers must all fit on its short
+    back face (two robots) fails the same way though the fleet's summed force would do: where
+    more fit, more are recruited (``test_a_heavy_object_recruits_free_robots``)."""
+    for mass, friction, fleet_ok in ((20.0, 0.6, False), (7.3, 0.2, True)):
+        sc = Scenario(
+            "heavy", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0), mass=mass, floor_friction=friction
+        )
+        m, cfg, poses = mission(sc)
+        out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
+        assert out.failed and out.reason == "too_heavy" and np.all(out.velocities == 0.0)
+        detail = dict(out.events)["failure"]["detail"]
+        need = friction * mass * 9.81
+        assert f"needs {need:.1f} N" in detail and "36.0 N in all" in detail
+        assert (need <= 36.0) is fleet_ok
+        assert m.plans == 0 and m.relocations == 0  # nobody was asked to push or to move
