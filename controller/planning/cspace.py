@@ -296,6 +296,19 @@ class FootprintChecker:
             out[i : i + chunk] = ok
         return out
 
+    def clearances(self, poses: ArrayLike) -> FloatArray:
+        """Distance (m) from the object polygon at each reference pose (N, 3) to the nearest
+        obstacle or wall, exact (shapely; 0 where it touches an obstacle), vectorised."""
+        w = self.world(poses)
+        x0, y0, x1, y1 = self.box
+        d = np.minimum(
+            np.minimum(w[..., 0].min(axis=-1) - x0, x1 - w[..., 0].max(axis=-1)),
+            np.minimum(w[..., 1].min(axis=-1) - y0, y1 - w[..., 1].max(axis=-1)),
+        )
+        if self._union is not None and len(w):
+            d = np.minimum(d, shapely.distance(shapely.polygons(w), self._union))
+        return d
+
     def clearance(self, pose: ArrayLike) -> tuple[float, str]:
         """Distance (m) from the object polygon at a reference pose to the nearest obstacle or
         wall, and what that is ("obstacles[i]" or "the walls")."""
@@ -517,6 +530,7 @@ class ObjectCSpace:
     checker: FootprintChecker
     counts: dict[str, int]
     _moves: dict[int, bool] = field(default_factory=dict, repr=False)
+    _clear: dict[int, float] = field(default_factory=dict, repr=False)
 
     @property
     def occupied(self) -> BoolArray:
@@ -579,7 +593,9 @@ class ObjectCSpace:
         """Object polygon to the nearest obstacle or wall (m) at an object-frame pose, and which."""
         return self.checker.clearance(self.ref_pose(pose))
 
-    def moves_free(self, k: int, iy: int, ix: int, moves: list[int]) -> list[bool]:
+    def moves_free(
+        self, k: int, iy: int, ix: int, moves: list[int], quick: bool = False
+    ) -> list[bool]:
         """Exact, cached test of lattice moves from free state (k, iy, ix) to free neighbours.
 
         moves: 0-7 the translations of :data:`MOVES_8`, :data:`TURN_UP`, :data:`TURN_DOWN`.
@@ -587,16 +603,48 @@ class ObjectCSpace:
         the states around this one (5 x 5 cells, 3 headings), is tested in one vectorised batch
         (a search that needs one of them soon needs its neighbours), and each result is cached
         for both ends of the move (the sweep is the same both ways).
+
+        ``quick``: first pass every move whose two end states both clear the ring by half the
+        move's sweep (:meth:`_surely_free`): the same answers (a swept point lies within half
+        the sweep of the footprint at one end), fewer exact sweep tests.
         """
         k_bins, ny, nx = self.free.shape
         base = (k * ny + iy) * nx + ix
         got = [self._moves.get(base * 10 + mv) for mv in moves]
         if any(v is None for v in got):
-            self._check_block(k, iy, ix)
+            self._check_block(k, iy, ix, quick)
             got = [self._moves.get(base * 10 + mv, False) for mv in moves]
         return got  # type: ignore[return-value]
 
-    def _check_block(self, k: int, iy: int, ix: int) -> None:
+    def _surely_free(self, src: NDArray[np.int_], dst: NDArray[np.int_], mv) -> BoolArray:
+        """Moves (k, iy, ix) -> (k, iy, ix) by move number that surely keep the ring clear:
+        both end states' exact clearance (cached per state) is at least the ring plus half the
+        move's sweep (half the step for a translation, the chord of half the turn at the
+        footprint's radius for a turn) plus 1e-9 m. Every point of the swept footprint lies
+        within that half sweep of the footprint at one end, so such a move passes the exact
+        test too."""
+        k_bins, ny, nx = self.free.shape
+        fs = (src[:, 0] * ny + src[:, 1]) * nx + src[:, 2]
+        fd = (dst[:, 0] * ny + dst[:, 1]) * nx + dst[:, 2]
+        cache = self._clear
+        ends = np.unique(np.concatenate([fs, fd]))
+        miss = np.array([e not in cache for e in ends.tolist()], dtype=bool)
+        if miss.any():
+            e = ends[miss]
+            kk, rest = np.divmod(e, ny * nx)
+            yy, xx = np.divmod(rest, nx)
+            xs, ys = self.frame.centers()
+            cl = self.checker.clearances(np.stack([xs[xx], ys[yy], kk * self.step], 1))
+            cache.update(zip(e.tolist(), cl.tolist(), strict=True))
+        c = np.minimum(
+            np.array([cache[v] for v in fs.tolist()]), np.array([cache[v] for v in fd.tolist()])
+        )
+        res = self.frame.resolution
+        chord = 2.0 * self.checker.rho * math.sin(self.step / 4.0)
+        half = np.where(mv < 8, 0.5 * res * np.hypot(*MOVES_8[np.minimum(mv, 7)].T), chord)
+        return c >= self.checker.req + half + 1e-9
+
+    def _check_block(self, k: int, iy: int, ix: int, quick: bool = False) -> None:
         k_bins, ny, nx = self.free.shape
         ks = sorted({(k + dk) % k_bins for dk in (-1, 0, 1)})
         y0, y1, x0, x1 = max(iy - 2, 0), min(iy + 3, ny), max(ix - 2, 0), min(ix + 3, nx)
@@ -619,19 +667,21 @@ class ObjectCSpace:
         fd = (dst[:, 0] * ny + dst[:, 1]) * nx + dst[:, 2]
         keys = fs * 10 + mv
         need &= np.array([key not in self._moves for key in keys.tolist()], dtype=bool)
-        src, mv, fs, fd = src[need], mv[need], fs[need], fd[need]
+        src, dst, mv, fs, fd = src[need], dst[need], mv[need], fs[need], fd[need]
         if len(src) == 0:
             return
+        ok = self._surely_free(src, dst, mv) if quick else np.zeros(len(src), dtype=bool)
+        todo = ~ok
         xs, ys = self.frame.centers()
         pose = np.stack([xs[src[:, 2]], ys[src[:, 1]], src[:, 0] * self.step], 1)
-        ok = np.zeros(len(src), dtype=bool)
-        tr = mv < 8
+        tr = todo & (mv < 8)
         if tr.any():
             steps = MOVES_8[mv[tr]] * self.frame.resolution
             ok[tr] = self.checker.translations_free(pose[tr], steps)
-        if (~tr).any():
-            turns = np.where(mv[~tr] == TURN_UP, self.step, -self.step)
-            ok[~tr] = self.checker.rotations_free(pose[~tr], turns)
+        rot = todo & (mv >= 8)
+        if rot.any():
+            turns = np.where(mv[rot] == TURN_UP, self.step, -self.step)
+            ok[rot] = self.checker.rotations_free(pose[rot], turns)
         back = np.where(mv < 8, (mv + 4) % 8, np.where(mv == TURN_UP, TURN_DOWN, TURN_UP))
         self._moves.update(zip((fs * 10 + mv).tolist(), ok.tolist(), strict=True))
         self._moves.update(zip((fd * 10 + back).tolist(), ok.tolist(), strict=True))
