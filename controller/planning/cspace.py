@@ -61,6 +61,8 @@ MOVES_8 = np.array(
 #: Lattice move numbers past the 8 translations: one heading bin up (+), one down (-).
 TURN_UP, TURN_DOWN = 8, 9
 _TOL = 1e-12
+#: The block of moves checked together on a cache miss: heading bins and cells either side.
+_BLOCK = (1, 3)
 
 
 class CSpaceError(ConfigError):
@@ -261,6 +263,7 @@ class FootprintChecker:
         self._union = shapely.union_all(self._shapes) if self._shapes else None
         if self._union is not None:
             shapely.prepare(self._union)
+        self._tree = shapely.STRtree(self._shapes) if self._shapes else None
         self._polar = np.arctan2(self.poly[:, 1], self.poly[:, 0])
         self._radius = np.linalg.norm(self.poly, axis=1)
 
@@ -290,24 +293,16 @@ class FootprintChecker:
         for i in range(0, len(p), chunk):
             w = self.world(p[i : i + chunk])
             ok = self._walls_ok(w)
-            if self._union is not None and ok.any():
+            if self._tree is not None and ok.any():
+                # within the ring of some obstacle (an STR tree finds the near ones; the same
+                # answer as against their union, faster)
                 polys = shapely.polygons(w[ok])
-                ok[ok] = ~shapely.dwithin(polys, self._union, self.req - _TOL)
+                hit, _ = self._tree.query(polys, predicate="dwithin", distance=self.req - _TOL)
+                near = np.zeros(len(polys), dtype=bool)
+                near[hit] = True
+                ok[ok] = ~near
             out[i : i + chunk] = ok
         return out
-
-    def clearances(self, poses: ArrayLike) -> FloatArray:
-        """Distance (m) from the object polygon at each reference pose (N, 3) to the nearest
-        obstacle or wall, exact (shapely; 0 where it touches an obstacle), vectorised."""
-        w = self.world(poses)
-        x0, y0, x1, y1 = self.box
-        d = np.minimum(
-            np.minimum(w[..., 0].min(axis=-1) - x0, x1 - w[..., 0].max(axis=-1)),
-            np.minimum(w[..., 1].min(axis=-1) - y0, y1 - w[..., 1].max(axis=-1)),
-        )
-        if self._union is not None and len(w):
-            d = np.minimum(d, shapely.distance(shapely.polygons(w), self._union))
-        return d
 
     def clearance(self, pose: ArrayLike) -> tuple[float, str]:
         """Distance (m) from the object polygon at a reference pose to the nearest obstacle or
@@ -361,36 +356,86 @@ class FootprintChecker:
         return d >= self.req - _TOL
 
     def _trail_distance(self, p, v, edges, verts) -> FloatArray:
+        """Per translation, the least distance between a vertex trail and an edge, over the
+        (trail, edge) pairs whose boxes come within the ring (the others are farther: they
+        cannot decide the test), each pair computed as :func:`segment_distance` does."""
         w = self.world(p)  # (N, n, 2)
+        w1 = w + v[:, None]
         sa, sb = edges
+        d = np.full(len(p), np.inf)
         # footprint vertices along their straight trails against obstacle and wall edges
-        d = segment_distance(w[:, :, None], (w + v[:, None])[:, :, None], sa[None, None], sb)
-        d = d.reshape(len(p), -1).min(axis=1)
+        i, a, b = _near_pairs(
+            (np.minimum(w, w1), np.maximum(w, w1)),
+            (np.minimum(sa, sb)[None], np.maximum(sa, sb)[None]),
+            self.req,
+        )
+        if len(i):
+            np.minimum.at(d, i, segment_distance(w[i, a], w1[i, a], sa[b], sb[b]))
         if len(verts):  # obstacle vertices moving the other way against the footprint edges
-            fa, fb = w[:, None], np.roll(w, -1, axis=1)[:, None]
-            o0 = np.broadcast_to(verts[None, :, None], (len(p), len(verts), 1, 2))
-            d2 = segment_distance(o0, o0 - v[:, None, None], fa, fb)
-            d = np.minimum(d, d2.reshape(len(p), -1).min(axis=1))
+            fa, fb = w, np.roll(w, -1, axis=1)
+            o1 = verts[None] - v[:, None]  # (N, V, 2)
+            i, a, b = _near_pairs(
+                (np.minimum(verts[None], o1), np.maximum(verts[None], o1)),
+                (np.minimum(fa, fb), np.maximum(fa, fb)),
+                self.req,
+            )
+            if len(i):
+                dd = segment_distance(verts[a], o1[i, a], fa[i, b], fb[i, b])
+                np.minimum.at(d, i, dd)
         return d
 
     def _arc_distance(self, p, dt, edges, verts) -> FloatArray:
-        c = p[:, None, None, :2]
+        """As :meth:`_trail_distance` for turns in place (arcs, by
+        :func:`arc_segment_distance`)."""
+        c = p[:, :2]
         sa, sb = edges
+        d = np.full(len(p), np.inf)
         # footprint vertices along arcs about the reference point against the edges
-        start = (p[:, 2:3] + self._polar[None])[:, :, None]
-        d = arc_segment_distance(
-            c, self._radius[None, :, None], start, dt[:, None, None], sa[None, None], sb
+        start = p[:, 2:3] + self._polar[None]  # (N, n)
+        rad = np.broadcast_to(self._radius[None], start.shape)
+        i, a, b = _near_pairs(
+            _arc_boxes(c, rad, start, dt),
+            (np.minimum(sa, sb)[None], np.maximum(sa, sb)[None]),
+            self.req,
         )
-        d = d.reshape(len(p), -1).min(axis=1)
+        if len(i):
+            dd = arc_segment_distance(c[i], rad[i, a], start[i, a], dt[i], sa[b], sb[b])
+            np.minimum.at(d, i, dd)
         if len(verts):  # obstacle vertices turning the other way against the footprint edges
             w = self.world(p)
-            fa, fb = w[:, None], np.roll(w, -1, axis=1)[:, None]  # (N, 1, n, 2)
+            fa, fb = w, np.roll(w, -1, axis=1)  # (N, n, 2)
             rel = verts[None] - p[:, None, :2]  # (N, V, 2)
-            rad = np.linalg.norm(rel, axis=-1)[..., None]
-            ang = np.arctan2(rel[..., 1], rel[..., 0])[..., None]
-            d2 = arc_segment_distance(c, rad, ang, -dt[:, None, None], fa, fb)
-            d = np.minimum(d, d2.reshape(len(p), -1).min(axis=1))
+            rad = np.linalg.norm(rel, axis=-1)
+            ang = np.arctan2(rel[..., 1], rel[..., 0])
+            i, a, b = _near_pairs(
+                _arc_boxes(c, rad, ang, -dt), (np.minimum(fa, fb), np.maximum(fa, fb)), self.req
+            )
+            if len(i):
+                dd = arc_segment_distance(c[i], rad[i, a], ang[i, a], -dt[i], fa[i, b], fb[i, b])
+                np.minimum.at(d, i, dd)
         return d
+
+
+def _near_pairs(boxes_a, boxes_b, reach: float) -> tuple[NDArray[np.intp], ...]:
+    """(i, a, b) of the pairs of boxes (lo, hi) that come within ``reach`` of each other:
+    boxes_a (N, A, 2) against boxes_b (N or 1, B, 2), per move i. A pair left out is more than
+    ``reach`` apart along x or y."""
+    (la, ha), (lb, hb) = boxes_a, boxes_b
+    la, ha, lb, hb = la[:, :, None], ha[:, :, None], lb[:, None], hb[:, None]
+    near = (la[..., 0] <= hb[..., 0] + reach) & (ha[..., 0] + reach >= lb[..., 0])
+    near &= (la[..., 1] <= hb[..., 1] + reach) & (ha[..., 1] + reach >= lb[..., 1])
+    return np.nonzero(near)
+
+
+def _arc_boxes(c: FloatArray, rad: FloatArray, start: FloatArray, sweep: FloatArray):
+    """Boxes (lo, hi) (N, A, 2) holding the arcs about centres c (N, 2) of radii and start
+    angles (N, A) through the signed angles sweep (N,) (|sweep| <= pi): the chord's box grown
+    by the sagitta (and 1e-9 m)."""
+    a1 = start + sweep[:, None]
+    e0 = c[:, None] + rad[..., None] * np.stack([np.cos(start), np.sin(start)], axis=-1)
+    e1 = c[:, None] + rad[..., None] * np.stack([np.cos(a1), np.sin(a1)], axis=-1)
+    sag = (rad * (1.0 - np.cos(np.abs(sweep)[:, None] / 2.0)) + 1e-9)[..., None]
+    return np.minimum(e0, e1) - sag, np.maximum(e0, e1) + sag
 
 
 # --------------------------------------------------------------------------- rasters
@@ -530,7 +575,6 @@ class ObjectCSpace:
     checker: FootprintChecker
     counts: dict[str, int]
     _moves: dict[int, bool] = field(default_factory=dict, repr=False)
-    _clear: dict[int, float] = field(default_factory=dict, repr=False)
 
     @property
     def occupied(self) -> BoolArray:
@@ -593,61 +637,29 @@ class ObjectCSpace:
         """Object polygon to the nearest obstacle or wall (m) at an object-frame pose, and which."""
         return self.checker.clearance(self.ref_pose(pose))
 
-    def moves_free(
-        self, k: int, iy: int, ix: int, moves: list[int], quick: bool = False
-    ) -> list[bool]:
+    def moves_free(self, k: int, iy: int, ix: int, moves: list[int]) -> list[bool]:
         """Exact, cached test of lattice moves from free state (k, iy, ix) to free neighbours.
 
         moves: 0-7 the translations of :data:`MOVES_8`, :data:`TURN_UP`, :data:`TURN_DOWN`.
         On a miss, every untested move between free states that are not both margin-free, from
-        the states around this one (5 x 5 cells, 3 headings), is tested in one vectorised batch
+        the states around this one (7 x 7 cells, 3 headings), is tested in one vectorised batch
         (a search that needs one of them soon needs its neighbours), and each result is cached
         for both ends of the move (the sweep is the same both ways).
-
-        ``quick``: first pass every move whose two end states both clear the ring by half the
-        move's sweep (:meth:`_surely_free`): the same answers (a swept point lies within half
-        the sweep of the footprint at one end), fewer exact sweep tests.
         """
         k_bins, ny, nx = self.free.shape
         base = (k * ny + iy) * nx + ix
         got = [self._moves.get(base * 10 + mv) for mv in moves]
         if any(v is None for v in got):
-            self._check_block(k, iy, ix, quick)
+            self._check_block(k, iy, ix)
             got = [self._moves.get(base * 10 + mv, False) for mv in moves]
         return got  # type: ignore[return-value]
 
-    def _surely_free(self, src: NDArray[np.int_], dst: NDArray[np.int_], mv) -> BoolArray:
-        """Moves (k, iy, ix) -> (k, iy, ix) by move number that surely keep the ring clear:
-        both end states' exact clearance (cached per state) is at least the ring plus half the
-        move's sweep (half the step for a translation, the chord of half the turn at the
-        footprint's radius for a turn) plus 1e-9 m. Every point of the swept footprint lies
-        within that half sweep of the footprint at one end, so such a move passes the exact
-        test too."""
+    def _check_block(self, k: int, iy: int, ix: int) -> None:
         k_bins, ny, nx = self.free.shape
-        fs = (src[:, 0] * ny + src[:, 1]) * nx + src[:, 2]
-        fd = (dst[:, 0] * ny + dst[:, 1]) * nx + dst[:, 2]
-        cache = self._clear
-        ends = np.unique(np.concatenate([fs, fd]))
-        miss = np.array([e not in cache for e in ends.tolist()], dtype=bool)
-        if miss.any():
-            e = ends[miss]
-            kk, rest = np.divmod(e, ny * nx)
-            yy, xx = np.divmod(rest, nx)
-            xs, ys = self.frame.centers()
-            cl = self.checker.clearances(np.stack([xs[xx], ys[yy], kk * self.step], 1))
-            cache.update(zip(e.tolist(), cl.tolist(), strict=True))
-        c = np.minimum(
-            np.array([cache[v] for v in fs.tolist()]), np.array([cache[v] for v in fd.tolist()])
-        )
-        res = self.frame.resolution
-        chord = 2.0 * self.checker.rho * math.sin(self.step / 4.0)
-        half = np.where(mv < 8, 0.5 * res * np.hypot(*MOVES_8[np.minimum(mv, 7)].T), chord)
-        return c >= self.checker.req + half + 1e-9
-
-    def _check_block(self, k: int, iy: int, ix: int, quick: bool = False) -> None:
-        k_bins, ny, nx = self.free.shape
-        ks = sorted({(k + dk) % k_bins for dk in (-1, 0, 1)})
-        y0, y1, x0, x1 = max(iy - 2, 0), min(iy + 3, ny), max(ix - 2, 0), min(ix + 3, nx)
+        bk, bxy = _BLOCK
+        ks = sorted({(k + dk) % k_bins for dk in range(-bk, bk + 1)})
+        y0, y1 = max(iy - bxy, 0), min(iy + bxy + 1, ny)
+        x0, x1 = max(ix - bxy, 0), min(ix + bxy + 1, nx)
         a = np.argwhere(self.free[ks, y0:y1, x0:x1])
         a[:, 0] = np.asarray(ks)[a[:, 0]]
         a[:, 1] += y0
@@ -670,18 +682,16 @@ class ObjectCSpace:
         src, dst, mv, fs, fd = src[need], dst[need], mv[need], fs[need], fd[need]
         if len(src) == 0:
             return
-        ok = self._surely_free(src, dst, mv) if quick else np.zeros(len(src), dtype=bool)
-        todo = ~ok
         xs, ys = self.frame.centers()
         pose = np.stack([xs[src[:, 2]], ys[src[:, 1]], src[:, 0] * self.step], 1)
-        tr = todo & (mv < 8)
+        ok = np.zeros(len(src), dtype=bool)
+        tr = mv < 8
         if tr.any():
             steps = MOVES_8[mv[tr]] * self.frame.resolution
             ok[tr] = self.checker.translations_free(pose[tr], steps)
-        rot = todo & (mv >= 8)
-        if rot.any():
-            turns = np.where(mv[rot] == TURN_UP, self.step, -self.step)
-            ok[rot] = self.checker.rotations_free(pose[rot], turns)
+        if (~tr).any():
+            turns = np.where(mv[~tr] == TURN_UP, self.step, -self.step)
+            ok[~tr] = self.checker.rotations_free(pose[~tr], turns)
         back = np.where(mv < 8, (mv + 4) % 8, np.where(mv == TURN_UP, TURN_DOWN, TURN_UP))
         self._moves.update(zip((fs * 10 + mv).tolist(), ok.tolist(), strict=True))
         self._moves.update(zip((fd * 10 + back).tolist(), ok.tolist(), strict=True))

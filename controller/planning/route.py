@@ -621,7 +621,7 @@ class _FastSearch:
         bad: set[int] = set()
         if todo:
             k, iy, ix = pl._unflat(c)
-            res = pl.cspace.moves_free(k, iy, ix, [cands[i][0] for i in todo], quick=True)
+            res = pl.cspace.moves_free(k, iy, ix, [cands[i][0] for i in todo])
             bad = {i for i, ok in zip(todo, res, strict=True) if not ok}
         manip, lazy = pl.params.manipulation_cost, isinstance(self.h, _FastCostToGo)
         out = []

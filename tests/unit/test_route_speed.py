@@ -110,3 +110,59 @@ def test_the_expansion_limit_stops_both_alike():
     fast = RoutePlanner(cs, poses[0], params).plan(poses[1], max_expanded=40)
     same(ref, fast)
     assert fast.status == "no_path" and "limit of 40" in fast.reason
+
+
+def _full_trail_distance(ch, p, v):
+    """The sweep distance of a translation over every (vertex, edge) pair (the formula of
+    before the pair filter)."""
+    from controller.planning.cspace import segment_distance
+
+    w = ch.world(p)
+    sa, sb = ch.seg_a, ch.seg_b
+    d = segment_distance(w[:, :, None], (w + v[:, None])[:, :, None], sa[None, None], sb)
+    d = d.reshape(len(p), -1).min(axis=1)
+    fa, fb = w[:, None], np.roll(w, -1, axis=1)[:, None]
+    o0 = np.broadcast_to(ch.verts[None, :, None], (len(p), len(ch.verts), 1, 2))
+    d2 = segment_distance(o0, o0 - v[:, None, None], fa, fb)
+    return np.minimum(d, d2.reshape(len(p), -1).min(axis=1))
+
+
+def _full_arc_distance(ch, p, dt):
+    from controller.planning.cspace import arc_segment_distance
+
+    c = p[:, None, None, :2]
+    sa, sb = ch.seg_a, ch.seg_b
+    start = (p[:, 2:3] + ch._polar[None])[:, :, None]
+    d = arc_segment_distance(c, ch._radius[None, :, None], start, dt[:, None, None],
+                             sa[None, None], sb)  # fmt: skip
+    d = d.reshape(len(p), -1).min(axis=1)
+    w = ch.world(p)
+    fa, fb = w[:, None], np.roll(w, -1, axis=1)[:, None]
+    rel = ch.verts[None] - p[:, None, :2]
+    rad = np.linalg.norm(rel, axis=-1)[..., None]
+    ang = np.arctan2(rel[..., 1], rel[..., 0])[..., None]
+    d2 = arc_segment_distance(c, rad, ang, -dt[:, None, None], fa, fb)
+    return np.minimum(d, d2.reshape(len(p), -1).min(axis=1))
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_pair_filtered_sweep_tests_answer_as_the_full_formula(seed):
+    """The sweep tests only compute the (vertex, edge) pairs whose boxes come within the ring:
+    on free poses near obstacles (where the answers are mixed), every answer is the full
+    formula's, for translations and for turns of up to half a circle either way."""
+    obstacles, _ = random_case(seed, 12)
+    cs = build_object_cspace(BOUNDS, obstacles, L_SHAPE, RADIUS, 0.1, 12)
+    ch = cs.checker
+    free = np.argwhere(cs.free & ~cs.margin_free)
+    rng = np.random.default_rng(seed)
+    pick = free[rng.choice(len(free), size=min(400, len(free)), replace=False)]
+    xs, ys = cs.frame.centers()
+    poses = np.stack([xs[pick[:, 2]], ys[pick[:, 1]], pick[:, 0] * cs.step], 1)
+    poses[:, :2] += rng.uniform(-0.05, 0.05, (len(poses), 2))
+    steps = rng.uniform(-0.15, 0.15, (len(poses), 2))
+    turns = rng.uniform(-math.pi, math.pi, len(poses))
+    req = ch.req - 1e-12
+    got_t, got_r = ch.translations_free(poses, steps), ch.rotations_free(poses, turns)
+    np.testing.assert_array_equal(got_t, _full_trail_distance(ch, poses, steps) >= req)
+    np.testing.assert_array_equal(got_r, _full_arc_distance(ch, poses, turns) >= req)
+    assert 0 < got_t.sum() < len(poses) and 0 < got_r.sum() < len(poses)  # mixed answers
