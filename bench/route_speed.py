@@ -1,16 +1,17 @@
 """Object-route speed (issue 23 item 7): the fast search against the reference, one process.
 
 Prints ONE JSON object on stdout (progress on stderr). For each map and heuristic, ``old`` is
-``RoutePlanner.plan(..., reference=True)`` (the generic ``weighted_astar`` over
-``_ObjectMoves``: the loop of before, checking moves without the clearance pre-test) and
-``new`` the default fast search; each run builds its own C-space, so both start with a cold
-move cache (moves checked exactly are cached on the C-space), then re-plans once on the same
-planner (``warm``: the loop alone). Both must give the same route and counts (checked here too:
-``same``). Reported: expansions, search seconds, microseconds per expansion, the C-space build
-and the goal's table (``RoutePlanner``) seconds, the default route's total (C-space + table +
-search), the ratios old / new, and PyPI ``pathfinding``'s A* on the 2-D projection of the same
-problem (the cells free at some heading, 8-connected, start cell to goal cell) as a peer for the
-cost per expansion of a Python A*.
+the code of before (``controller/planning/{cspace,heuristics,route}.py`` read from git at
+``--old-commit`` and loaded beside today's, same process), ``ref_loop`` today's C-space with the
+reference search loop (``plan(..., reference=True)``: the generic ``weighted_astar`` over
+``_ObjectMoves``), and ``new`` today's default; each run builds its own C-space, so every side
+starts with a cold move cache (moves checked exactly are cached on the C-space), then re-plans
+once on the same planner (``warm``: the loop alone). All must give the same route and counts
+(checked here too: ``same``). Reported: expansions, search seconds, microseconds per
+expansion, the C-space build and the goal's table (``RoutePlanner``) seconds, the default
+route's total (C-space + table + search), the ratios old / new, and PyPI ``pathfinding``'s A*
+on the 2-D projection of the same problem (the cells free at some heading, 8-connected, start
+cell to goal cell) as a peer for the cost per expansion of a Python A*.
 
 Maps: ``maze`` a seeded 12.8 m maze (8 x 8 rooms of 1.6 m, 0.2 m walls) at 128^2 x 36, start
 and goal in opposite corners; ``yamashita`` the shipped map at 128^2 x 36 (Goal4, the hard one);
@@ -27,8 +28,10 @@ import argparse
 import json
 import os
 import statistics
+import subprocess
 import sys
 import time
+import types
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +50,32 @@ L_SHAPE = np.array(
 # the paper's heuristics on the hard cases take long in the old loop: cap them so that a run of
 # the whole bench stays within minutes (a capped run is reported with "limited": true)
 MAX_EXPANDED = 400_000
+
+
+OLD_COMMIT = "7f6c25c"  # the branch's base: the route code before issue 23 item 7
+
+
+def old_code(commit: str) -> types.SimpleNamespace:
+    """cspace, heuristics and route as they were at ``commit``, loaded as modules of their own
+    (``old_planning_*``); everything else (config, geometry) is today's, unchanged since."""
+    mods = {}
+    for name in ("heuristics", "cspace", "route"):
+        src = subprocess.run(
+            ["git", "-C", str(ROOT), "show", f"{commit}:controller/planning/{name}.py"],
+            capture_output=True, text=True, check=True,
+        ).stdout  # fmt: skip
+        src = src.replace(
+            "from controller.planning.cspace import", "from old_planning_cspace import"
+        )
+        src = src.replace(
+            "from controller.planning import heuristics",
+            "import old_planning_heuristics as heuristics",
+        )
+        mod = types.ModuleType(f"old_planning_{name}")
+        sys.modules[mod.__name__] = mod
+        exec(compile(src, f"{commit}:controller/planning/{name}.py", "exec"), mod.__dict__)
+        mods[name] = mod
+    return types.SimpleNamespace(**mods)
 
 
 def log(msg: str) -> None:
@@ -128,17 +157,23 @@ def cases(names: list[str]) -> dict:
     return out
 
 
-def one_run(case: tuple, kind: str, reference: bool) -> dict:
+def one_run(case: tuple, kind: str, side: str, old) -> dict:
     bounds, obstacles, poly, radius, start, goal, res = case
     params = RouteSection(resolution=res, heading_bins=36, heuristic=kind)
+    build, planner_cls = build_object_cspace, RoutePlanner
+    kw = {"max_expanded": MAX_EXPANDED}
+    if side == "old":
+        build, planner_cls = old.cspace.build_object_cspace, old.route.RoutePlanner
+    elif side == "ref_loop":
+        kw["reference"] = True
     t0 = time.perf_counter()
-    cs = build_object_cspace(bounds, obstacles, poly, radius, res, 36)
+    cs = build(bounds, obstacles, poly, radius, res, 36)
     t1 = time.perf_counter()
-    planner = RoutePlanner(cs, goal, params)
+    planner = planner_cls(cs, goal, params)
     t2 = time.perf_counter()
-    r = planner.plan(start, reference=reference, max_expanded=MAX_EXPANDED)
+    r = planner.plan(start, **kw)
     t3 = time.perf_counter()
-    r2 = planner.plan(start, reference=reference, max_expanded=MAX_EXPANDED)
+    r2 = planner.plan(start, **kw)
     t4 = time.perf_counter()
     assert r2.expanded == r.expanded and r2.cost == r.cost
     return {
@@ -173,13 +208,13 @@ def pathfinding_2d(free2d: np.ndarray, cells, repeats: int) -> dict:
             "path_cells": len(path)}  # fmt: skip
 
 
-def bench_case(name: str, case: tuple, kinds: list[str], repeats: int) -> dict:
+def bench_case(name: str, case: tuple, kinds: list[str], repeats: int, old) -> dict:
     out: dict = {}
     for kind in kinds:
-        runs: dict[str, list[dict]] = {"old": [], "new": []}
-        for _ in range(repeats):  # interleaved, so load hits both alike
-            runs["old"].append(one_run(case, kind, True))
-            runs["new"].append(one_run(case, kind, False))
+        runs: dict[str, list[dict]] = {"old": [], "ref_loop": [], "new": []}
+        for _ in range(repeats):  # interleaved, so load hits all alike
+            for side, rs in runs.items():
+                rs.append(one_run(case, kind, side, old))
         row: dict = {}
         for side, rs in runs.items():
             r = rs[0]["result"]
@@ -199,12 +234,13 @@ def bench_case(name: str, case: tuple, kinds: list[str], repeats: int) -> dict:
                 "warm_us_per_expansion": 1e6 * med["warm"] / max(r.expanded, 1),
                 "total_seconds": med["cspace"] + med["table"] + med["search"],
             }
-        a, b = runs["old"][0]["result"], runs["new"][0]["result"]
-        row["same"] = bool(
+        b = runs["new"][0]["result"]
+        row["same"] = all(
             a.status == b.status
             and a.cost == b.cost
             and (a.expanded, a.generated, a.reexpanded) == (b.expanded, b.generated, b.reexpanded)
             and np.array_equal(a.waypoints, b.waypoints)
+            for a in (runs["old"][0]["result"], runs["ref_loop"][0]["result"])
         )
         o, n = row["old"], row["new"]
         row["ratio"] = {
@@ -220,7 +256,10 @@ def bench_case(name: str, case: tuple, kinds: list[str], repeats: int) -> dict:
         out[kind] = row
         log(
             f"{name} {kind}: {n['expanded']} expanded, old {o['us_per_expansion']:.1f} µs/exp "
-            f"(warm {o['warm_us_per_expansion']:.1f}), new {n['us_per_expansion']:.1f} "
+            f"(warm {o['warm_us_per_expansion']:.1f}), ref loop "
+            f"{row['ref_loop']['us_per_expansion']:.1f} "
+            f"(warm {row['ref_loop']['warm_us_per_expansion']:.1f}), "
+            f"new {n['us_per_expansion']:.1f} "
             f"(warm {n['warm_us_per_expansion']:.1f}); search x{row['ratio']['search_seconds']:.2f}"
             f"; total old {o['total_seconds']:.3f} s, new {n['total_seconds']:.3f} s; same "
             f"{row['same']}"
@@ -238,14 +277,17 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--maps", default="maze,yamashita,room_128,room_256")
     ap.add_argument("--heuristics", default="cost_to_go,euclid,wavefront,skeleton")
+    ap.add_argument("--old-commit", default=OLD_COMMIT)
     args = ap.parse_args()
+    old = old_code(args.old_commit)
     load0 = os.getloadavg()[0]
     kinds = args.heuristics.split(",")
     result: dict = {"bench": "route_speed", "repeats": args.repeats, "heading_bins": 36,
-                    "max_expanded": MAX_EXPANDED, "maps": {}}  # fmt: skip
+                    "max_expanded": MAX_EXPANDED, "old_commit": args.old_commit,
+                    "maps": {}}  # fmt: skip
     for name, case in cases(args.maps.split(",")).items():
         res_kinds = kinds if name != "room_256" else ["cost_to_go"]
-        result["maps"][name] = bench_case(name, case, res_kinds, args.repeats)
+        result["maps"][name] = bench_case(name, case, res_kinds, args.repeats, old)
     result["load"] = [load0, os.getloadavg()[0]]
     print(json.dumps(result, indent=1))
 

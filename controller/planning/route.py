@@ -520,41 +520,63 @@ class _FastCostToGo(_CostToGoH):
     def __init__(self, base: _CostToGoH):
         self.__dict__.update(base.__dict__)
         self.memo = {}
+        self.memos: list[dict[int, float]] = [{} for _ in range(10)]  # per ray: state -> D
         self.ev = memoryview(self.e)
         self.known: dict[int, float] = {}
 
     def _ray(self, c: int, ray: int) -> float:
-        memo, e, joins, manip = self.memo, self.ev, self.joins, self.manip
+        memo, e, joins, manip = self.memos[ray], self.ev, self.joins, self.manip
         if ray < 8:
             cost, mode, off = self.tcost[ray], ray, self.toff[ray]
         else:
             cost, mode, off = self.rc, MODE_ROTATE, 0
-        layer, last = self.layer, self.k_bins - 1
-        wrap = last * layer
-        up = ray == TURN_UP
         path = []
         x, val = c, INF
-        for _ in range(self.n):
-            v = memo.get(x * 10 + ray)
-            if v is not None:
-                val = v
-                break
-            if e[x] == INF:
-                break
-            path.append(x)
-            if off:
+        if off:  # a translation: straight along the row, column or diagonal
+            while True:
+                v = memo.get(x)
+                if v is not None:
+                    val = v
+                    break
+                if e[x] == INF:
+                    break
+                path.append(x)
                 x += off
-            elif up:
+        else:
+            val = self._turn_walk(c, ray == TURN_UP, memo, path)
+        for x in reversed(path):
+            # min(join, manip + E, cost + val) as the reference writes it: the same float
+            v = manip + e[x]
+            w = cost + val
+            if w < v:
+                v = w
+            if x in joins:
+                j = self.join(x, mode)
+                if j < v:
+                    v = j
+            memo[x] = val = v
+        return val
+
+    def _turn_walk(self, c: int, up: bool, memo: dict[int, float], path: list[int]) -> float:
+        """The states of a turn ray from c not yet memoised (into ``path``) and the value where
+        it stops (a memoised state, a blocked state, or back at c: inf)."""
+        e, layer, last = self.ev, self.layer, self.k_bins - 1
+        wrap = last * layer
+        x = c
+        for _ in range(self.k_bins + 1):
+            v = memo.get(x)
+            if v is not None:
+                return v
+            if e[x] == INF:
+                return INF
+            path.append(x)
+            if up:
                 x = x - wrap if x // layer == last else x + layer
             else:
                 x = x + wrap if x // layer == 0 else x - layer
             if x == c:  # turned full circle
-                break
-        for x in reversed(path):
-            j = INF if x not in joins else self.join(x, mode)
-            val = min(j, manip + e[x], cost + val)
-            memo[x * 10 + ray] = val
-        return val
+                return INF
+        return INF
 
     def __getitem__(self, s: int) -> float:
         v = self.known.get(s)
