@@ -20,7 +20,8 @@ Which states are free is decided **exactly**, fast:
    classify every state as *surely colliding* (a point of the footprint lies within the ring of
    an obstacle), *surely free* (the footprint, grown by half a cell diagonal, misses every cell
    within ring + half a cell diagonal of an obstacle) or *uncertain* (a thin shell).
-3. The uncertain states are decided by an exact polygon test (shapely 2, vectorised).
+3. The uncertain states are decided by an exact polygon test (shapely 2, vectorised, the
+   obstacles near each footprint found by an STR tree).
 
 The same correlations mark the states whose clearance exceeds the ring by the largest sweep
 margin of a move (``max(res / sqrt 2, 2 rho sin(pi / 2K))``): a move between two such states is
@@ -28,12 +29,14 @@ free with no further test. Every other move is checked exactly, lazily, when the
 uses it (:meth:`ObjectCSpace.moves_free`), by :class:`FootprintChecker`'s swept-footprint tests:
 a translation or rotation between two free poses collides exactly when a vertex of the footprint
 (moving along a segment or an arc) comes within the ring of an obstacle edge, or an obstacle
-vertex (moving the other way relative to the object) within the ring of a footprint edge.
-Nothing is conservative beyond floating-point tolerance (1e-12 m), so the lattice loses only what
-its spacing loses: a way whose clearance beyond the ring is a cell or more on each side is found
-at the default 0.1 m x 36 headings, also through doorways turned off the lattice's directions and
-heading bins (checked in ``tests/unit/test_route.py``); the heading quantization moves no point
-by more than ``rho pi / K`` (0.06 m for the shipped 1 m crate).
+vertex (moving the other way relative to the object) within the ring of a footprint edge;
+only the (vertex, edge) pairs whose bounding boxes come within the ring are computed (the others
+cannot decide the test). Nothing is conservative beyond floating-point tolerance (1e-12 m), so
+the lattice loses only what its spacing loses: a way whose clearance beyond the ring is a cell
+or more on each side is found at the default 0.1 m x 36 headings, also through doorways turned
+off the lattice's directions and heading bins (checked in ``tests/unit/test_route.py``); the
+heading quantization moves no point by more than ``rho pi / K`` (0.06 m for the shipped 1 m
+crate).
 """
 
 from __future__ import annotations

@@ -49,6 +49,14 @@ is not. Re-opening of closed states: always for A* (``w_g = 1``, ``w_h <= 1``), 
 greedy, for ``w_h > 1`` when ``route.reopen`` is set.
 
 Unreachable goals are answers, not errors: ``status = "no_path"`` with a reason.
+
+**Speed.** :meth:`RoutePlanner.plan` runs a search loop specialised to these states
+(``_FastSearch``): each lattice cell's checked moves are found once per planner (not once per
+expansion of each of its modes), h is read once per state, tables through memoryviews. It is
+the generic :func:`weighted_astar` over ``_ObjectMoves`` step for step (same f, pathmax,
+tie-breaking, re-opening and pruning, so the same expansions and route);
+``plan(..., reference=True)`` runs that reference (``tests/unit/test_route_speed.py`` compares
+them, ``bench/route_speed.py`` times them against the code of before).
 """
 
 from __future__ import annotations
@@ -623,37 +631,42 @@ class _FastSearch:
             self.h = _FastPotential(h)
         self.free = memoryview(planner._free_p)
         self.margin = memoryview(planner._margin_p)
-        self.succ: dict[int, tuple[tuple[int, int, float], ...]] = {}
+        self.succ: dict[int, tuple[int, ...]] = {}
+        k_bins, layer = planner.cspace.heading_bins, planner._layer
+        manip, rc = planner.params.manipulation_cost, planner._rot_cost
+        base = [*planner._tcost, rc, rc, rc, rc]
+        #: per move code: cell offset, mode, cost, cost with a re-arrangement
+        self.moves = (
+            [*planner._toff, layer, -layer, -(k_bins - 1) * layer, (k_bins - 1) * layer],
+            [*range(8), MODE_ROTATE, MODE_ROTATE, MODE_ROTATE, MODE_ROTATE],
+            base,
+            [b + manip for b in base],
+        )
 
-    def successors(self, c: int) -> tuple[tuple[int, int, float, float, int, Any], ...]:
-        """The free, checked lattice moves out of padded cell c, in the reference's order
-        (cached per planner): (successor state, its cell, cost, cost with a re-arrangement,
-        its mode, its h for the potentials (None for the cost-to-go, whose h must be read in
-        the reference's order: its memo fills as it is read))."""
+    def successors(self, c: int) -> tuple[int, ...]:
+        """The free, checked lattice moves out of padded cell c, in the reference's order, as
+        move codes (cached per planner; small ints, so the cache stays small): 0-7 the
+        translations, 8 / 9 a turn up / down, 10 / 11 the same wrapping round the heading bins
+        (their offsets, modes and costs are in :attr:`moves`)."""
         pl, free, margin = self.pl, self.free, self.margin
         k_bins, layer = pl.cspace.heading_bins, pl._layer
         cands = [(d, c + pl._toff[d]) for d in range(8)]
         if k_bins > 1:
             k = c // layer
-            cands.append((TURN_UP, c - (k_bins - 1) * layer if k == k_bins - 1 else c + layer))
+            cands.append(
+                (TURN_UP + 2 * (k == k_bins - 1), c + self.moves[0][8 + 2 * (k == k_bins - 1)])
+            )
             if k_bins > 2:
-                cands.append((TURN_DOWN, c + (k_bins - 1) * layer if k == 0 else c - layer))
+                cands.append((TURN_DOWN + 2 * (k == 0), c + self.moves[0][9 + 2 * (k == 0)]))
         cands = [(mv, c2) for mv, c2 in cands if free[c2]]
         todo = [i for i, (_, c2) in enumerate(cands) if not (margin[c] and margin[c2])]
         bad: set[int] = set()
         if todo:
             k, iy, ix = pl._unflat(c)
-            res = pl.cspace.moves_free(k, iy, ix, [cands[i][0] for i in todo])
+            asked = [cands[i][0] - 2 if cands[i][0] >= 10 else cands[i][0] for i in todo]
+            res = pl.cspace.moves_free(k, iy, ix, asked)
             bad = {i for i, ok in zip(todo, res, strict=True) if not ok}
-        manip, lazy = pl.params.manipulation_cost, isinstance(self.h, _FastCostToGo)
-        out = []
-        for i, (mv, c2) in enumerate(cands):
-            if i not in bad:
-                mode = mv if mv < 8 else MODE_ROTATE
-                t = c2 * N_MODES + mode
-                cost = pl._tcost[mv] if mv < 8 else pl._rot_cost
-                out.append((t, c2, cost, cost + manip, mode, None if lazy else self.h[t]))
-        got = self.succ[c] = tuple(out)
+        got = self.succ[c] = tuple(mv for i, (mv, _) in enumerate(cands) if i not in bad)
         return got
 
     def extra_moves(self, m: int, c: int, reach: list[_Join]) -> list[tuple[int, float]]:
@@ -718,21 +731,24 @@ class _FastSearch:
         return how many states they pushed."""
         wg, wh, pathmax, reopen = search
         h, succ, successors = self.h, self.succ, self.successors
+        offs, modes, bases, pluses = self.moves
         manip = self.pl.params.manipulation_cost
         gmin: dict[int, float] = {}
         push, inf, start_mode = heapq.heappush, INF, MODE_START
 
         def expand(s: int, c: int, m: int, g: float, f: float) -> int:
             n = 0
-            for t, c2, base, plus, mode, h2 in succ.get(c) or successors(c):
-                g2 = g + (base if m == mode or m == start_mode else plus)
+            for mv in succ.get(c) or successors(c):
+                c2 = c + offs[mv]
+                mode = modes[mv]
+                g2 = g + (bases[mv] if m == mode or m == start_mode else pluses[mv])
                 gm = gmin.get(c2, inf)
                 if g2 >= gm + manip:
                     continue
                 if g2 < gm:
                     gmin[c2] = g2
-                if h2 is None:
-                    h2 = h[t]
+                t = c2 * N_MODES + mode
+                h2 = h[t]
                 if h2 < inf and g2 < gbest.get(t, inf) and (reopen or t not in closed):
                     gbest[t] = g2
                     parent[t] = s
