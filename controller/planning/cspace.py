@@ -263,9 +263,6 @@ class FootprintChecker:
         self.verts = np.concatenate(verts)
         self.vert_owner = np.concatenate(vowner)
         self._shapes = [shapely.Polygon(o) for o in self.obstacles]
-        self._union = shapely.union_all(self._shapes) if self._shapes else None
-        if self._union is not None:
-            shapely.prepare(self._union)
         self._tree = shapely.STRtree(self._shapes) if self._shapes else None
         self._polar = np.arctan2(self.poly[:, 1], self.poly[:, 0])
         self._radius = np.linalg.norm(self.poly, axis=1)
