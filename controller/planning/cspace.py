@@ -20,7 +20,8 @@ Which states are free is decided **exactly**, fast:
    classify every state as *surely colliding* (a point of the footprint lies within the ring of
    an obstacle), *surely free* (the footprint, grown by half a cell diagonal, misses every cell
    within ring + half a cell diagonal of an obstacle) or *uncertain* (a thin shell).
-3. The uncertain states are decided by an exact polygon test (shapely 2, vectorised).
+3. The uncertain states are decided by an exact polygon test (shapely 2, vectorised, the
+   obstacles near each footprint found by an STR tree).
 
 The same correlations mark the states whose clearance exceeds the ring by the largest sweep
 margin of a move (``max(res / sqrt 2, 2 rho sin(pi / 2K))``): a move between two such states is
@@ -28,12 +29,14 @@ free with no further test. Every other move is checked exactly, lazily, when the
 uses it (:meth:`ObjectCSpace.moves_free`), by :class:`FootprintChecker`'s swept-footprint tests:
 a translation or rotation between two free poses collides exactly when a vertex of the footprint
 (moving along a segment or an arc) comes within the ring of an obstacle edge, or an obstacle
-vertex (moving the other way relative to the object) within the ring of a footprint edge.
-Nothing is conservative beyond floating-point tolerance (1e-12 m), so the lattice loses only what
-its spacing loses: a way whose clearance beyond the ring is a cell or more on each side is found
-at the default 0.1 m x 36 headings, also through doorways turned off the lattice's directions and
-heading bins (checked in ``tests/unit/test_route.py``); the heading quantization moves no point
-by more than ``rho pi / K`` (0.06 m for the shipped 1 m crate).
+vertex (moving the other way relative to the object) within the ring of a footprint edge;
+only the (vertex, edge) pairs whose bounding boxes come within the ring are computed (the others
+cannot decide the test). Nothing is conservative beyond floating-point tolerance (1e-12 m), so
+the lattice loses only what its spacing loses: a way whose clearance beyond the ring is a cell
+or more on each side is found at the default 0.1 m x 36 headings, also through doorways turned
+off the lattice's directions and heading bins (checked in ``tests/unit/test_route.py``); the
+heading quantization moves no point by more than ``rho pi / K`` (0.06 m for the shipped 1 m
+crate).
 """
 
 from __future__ import annotations
@@ -61,6 +64,8 @@ MOVES_8 = np.array(
 #: Lattice move numbers past the 8 translations: one heading bin up (+), one down (-).
 TURN_UP, TURN_DOWN = 8, 9
 _TOL = 1e-12
+#: The block of moves checked together on a cache miss: heading bins and cells either side.
+_BLOCK = (1, 3)
 
 
 class CSpaceError(ConfigError):
@@ -258,9 +263,7 @@ class FootprintChecker:
         self.verts = np.concatenate(verts)
         self.vert_owner = np.concatenate(vowner)
         self._shapes = [shapely.Polygon(o) for o in self.obstacles]
-        self._union = shapely.union_all(self._shapes) if self._shapes else None
-        if self._union is not None:
-            shapely.prepare(self._union)
+        self._tree = shapely.STRtree(self._shapes) if self._shapes else None
         self._polar = np.arctan2(self.poly[:, 1], self.poly[:, 0])
         self._radius = np.linalg.norm(self.poly, axis=1)
 
@@ -290,9 +293,14 @@ class FootprintChecker:
         for i in range(0, len(p), chunk):
             w = self.world(p[i : i + chunk])
             ok = self._walls_ok(w)
-            if self._union is not None and ok.any():
+            if self._tree is not None and ok.any():
+                # within the ring of some obstacle (an STR tree finds the near ones; the same
+                # answer as against their union, faster)
                 polys = shapely.polygons(w[ok])
-                ok[ok] = ~shapely.dwithin(polys, self._union, self.req - _TOL)
+                hit, _ = self._tree.query(polys, predicate="dwithin", distance=self.req - _TOL)
+                near = np.zeros(len(polys), dtype=bool)
+                near[hit] = True
+                ok[ok] = ~near
             out[i : i + chunk] = ok
         return out
 
@@ -348,36 +356,86 @@ class FootprintChecker:
         return d >= self.req - _TOL
 
     def _trail_distance(self, p, v, edges, verts) -> FloatArray:
+        """Per translation, the least distance between a vertex trail and an edge, over the
+        (trail, edge) pairs whose boxes come within the ring (the others are farther: they
+        cannot decide the test), each pair computed as :func:`segment_distance` does."""
         w = self.world(p)  # (N, n, 2)
+        w1 = w + v[:, None]
         sa, sb = edges
+        d = np.full(len(p), np.inf)
         # footprint vertices along their straight trails against obstacle and wall edges
-        d = segment_distance(w[:, :, None], (w + v[:, None])[:, :, None], sa[None, None], sb)
-        d = d.reshape(len(p), -1).min(axis=1)
+        i, a, b = _near_pairs(
+            (np.minimum(w, w1), np.maximum(w, w1)),
+            (np.minimum(sa, sb)[None], np.maximum(sa, sb)[None]),
+            self.req,
+        )
+        if len(i):
+            np.minimum.at(d, i, segment_distance(w[i, a], w1[i, a], sa[b], sb[b]))
         if len(verts):  # obstacle vertices moving the other way against the footprint edges
-            fa, fb = w[:, None], np.roll(w, -1, axis=1)[:, None]
-            o0 = np.broadcast_to(verts[None, :, None], (len(p), len(verts), 1, 2))
-            d2 = segment_distance(o0, o0 - v[:, None, None], fa, fb)
-            d = np.minimum(d, d2.reshape(len(p), -1).min(axis=1))
+            fa, fb = w, np.roll(w, -1, axis=1)
+            o1 = verts[None] - v[:, None]  # (N, V, 2)
+            i, a, b = _near_pairs(
+                (np.minimum(verts[None], o1), np.maximum(verts[None], o1)),
+                (np.minimum(fa, fb), np.maximum(fa, fb)),
+                self.req,
+            )
+            if len(i):
+                dd = segment_distance(verts[a], o1[i, a], fa[i, b], fb[i, b])
+                np.minimum.at(d, i, dd)
         return d
 
     def _arc_distance(self, p, dt, edges, verts) -> FloatArray:
-        c = p[:, None, None, :2]
+        """As :meth:`_trail_distance` for turns in place (arcs, by
+        :func:`arc_segment_distance`)."""
+        c = p[:, :2]
         sa, sb = edges
+        d = np.full(len(p), np.inf)
         # footprint vertices along arcs about the reference point against the edges
-        start = (p[:, 2:3] + self._polar[None])[:, :, None]
-        d = arc_segment_distance(
-            c, self._radius[None, :, None], start, dt[:, None, None], sa[None, None], sb
+        start = p[:, 2:3] + self._polar[None]  # (N, n)
+        rad = np.broadcast_to(self._radius[None], start.shape)
+        i, a, b = _near_pairs(
+            _arc_boxes(c, rad, start, dt),
+            (np.minimum(sa, sb)[None], np.maximum(sa, sb)[None]),
+            self.req,
         )
-        d = d.reshape(len(p), -1).min(axis=1)
+        if len(i):
+            dd = arc_segment_distance(c[i], rad[i, a], start[i, a], dt[i], sa[b], sb[b])
+            np.minimum.at(d, i, dd)
         if len(verts):  # obstacle vertices turning the other way against the footprint edges
             w = self.world(p)
-            fa, fb = w[:, None], np.roll(w, -1, axis=1)[:, None]  # (N, 1, n, 2)
+            fa, fb = w, np.roll(w, -1, axis=1)  # (N, n, 2)
             rel = verts[None] - p[:, None, :2]  # (N, V, 2)
-            rad = np.linalg.norm(rel, axis=-1)[..., None]
-            ang = np.arctan2(rel[..., 1], rel[..., 0])[..., None]
-            d2 = arc_segment_distance(c, rad, ang, -dt[:, None, None], fa, fb)
-            d = np.minimum(d, d2.reshape(len(p), -1).min(axis=1))
+            rad = np.linalg.norm(rel, axis=-1)
+            ang = np.arctan2(rel[..., 1], rel[..., 0])
+            i, a, b = _near_pairs(
+                _arc_boxes(c, rad, ang, -dt), (np.minimum(fa, fb), np.maximum(fa, fb)), self.req
+            )
+            if len(i):
+                dd = arc_segment_distance(c[i], rad[i, a], ang[i, a], -dt[i], fa[i, b], fb[i, b])
+                np.minimum.at(d, i, dd)
         return d
+
+
+def _near_pairs(boxes_a, boxes_b, reach: float) -> tuple[NDArray[np.intp], ...]:
+    """(i, a, b) of the pairs of boxes (lo, hi) that come within ``reach`` of each other:
+    boxes_a (N, A, 2) against boxes_b (N or 1, B, 2), per move i. A pair left out is more than
+    ``reach`` apart along x or y."""
+    (la, ha), (lb, hb) = boxes_a, boxes_b
+    la, ha, lb, hb = la[:, :, None], ha[:, :, None], lb[:, None], hb[:, None]
+    near = (la[..., 0] <= hb[..., 0] + reach) & (ha[..., 0] + reach >= lb[..., 0])
+    near &= (la[..., 1] <= hb[..., 1] + reach) & (ha[..., 1] + reach >= lb[..., 1])
+    return np.nonzero(near)
+
+
+def _arc_boxes(c: FloatArray, rad: FloatArray, start: FloatArray, sweep: FloatArray):
+    """Boxes (lo, hi) (N, A, 2) holding the arcs about centres c (N, 2) of radii and start
+    angles (N, A) through the signed angles sweep (N,) (|sweep| <= pi): the chord's box grown
+    by the sagitta (and 1e-9 m)."""
+    a1 = start + sweep[:, None]
+    e0 = c[:, None] + rad[..., None] * np.stack([np.cos(start), np.sin(start)], axis=-1)
+    e1 = c[:, None] + rad[..., None] * np.stack([np.cos(a1), np.sin(a1)], axis=-1)
+    sag = (rad * (1.0 - np.cos(np.abs(sweep)[:, None] / 2.0)) + 1e-9)[..., None]
+    return np.minimum(e0, e1) - sag, np.maximum(e0, e1) + sag
 
 
 # --------------------------------------------------------------------------- rasters
@@ -584,7 +642,7 @@ class ObjectCSpace:
 
         moves: 0-7 the translations of :data:`MOVES_8`, :data:`TURN_UP`, :data:`TURN_DOWN`.
         On a miss, every untested move between free states that are not both margin-free, from
-        the states around this one (5 x 5 cells, 3 headings), is tested in one vectorised batch
+        the states around this one (7 x 7 cells, 3 headings), is tested in one vectorised batch
         (a search that needs one of them soon needs its neighbours), and each result is cached
         for both ends of the move (the sweep is the same both ways).
         """
@@ -598,8 +656,10 @@ class ObjectCSpace:
 
     def _check_block(self, k: int, iy: int, ix: int) -> None:
         k_bins, ny, nx = self.free.shape
-        ks = sorted({(k + dk) % k_bins for dk in (-1, 0, 1)})
-        y0, y1, x0, x1 = max(iy - 2, 0), min(iy + 3, ny), max(ix - 2, 0), min(ix + 3, nx)
+        bk, bxy = _BLOCK
+        ks = sorted({(k + dk) % k_bins for dk in range(-bk, bk + 1)})
+        y0, y1 = max(iy - bxy, 0), min(iy + bxy + 1, ny)
+        x0, x1 = max(ix - bxy, 0), min(ix + bxy + 1, nx)
         a = np.argwhere(self.free[ks, y0:y1, x0:x1])
         a[:, 0] = np.asarray(ks)[a[:, 0]]
         a[:, 1] += y0
@@ -619,7 +679,7 @@ class ObjectCSpace:
         fd = (dst[:, 0] * ny + dst[:, 1]) * nx + dst[:, 2]
         keys = fs * 10 + mv
         need &= np.array([key not in self._moves for key in keys.tolist()], dtype=bool)
-        src, mv, fs, fd = src[need], mv[need], fs[need], fd[need]
+        src, dst, mv, fs, fd = src[need], dst[need], mv[need], fs[need], fd[need]
         if len(src) == 0:
             return
         xs, ys = self.frame.centers()

@@ -49,6 +49,14 @@ is not. Re-opening of closed states: always for A* (``w_g = 1``, ``w_h <= 1``), 
 greedy, for ``w_h > 1`` when ``route.reopen`` is set.
 
 Unreachable goals are answers, not errors: ``status = "no_path"`` with a reason.
+
+**Speed.** :meth:`RoutePlanner.plan` runs a search loop specialised to these states
+(``_FastSearch``): each lattice cell's checked moves are found once per planner (not once per
+expansion of each of its modes), h is read once per state, tables through memoryviews. It is
+the generic :func:`weighted_astar` over ``_ObjectMoves`` step for step (same f, pathmax,
+tie-breaking, re-opening and pruning, so the same expansions and route);
+``plan(..., reference=True)`` runs that reference (``tests/unit/test_route_speed.py`` compares
+them, ``bench/route_speed.py`` times them against the code of before).
 """
 
 from __future__ import annotations
@@ -511,6 +519,268 @@ class _CostToGoH:
         return max(e, v)
 
 
+class _FastCostToGo(_CostToGoH):
+    """:class:`_CostToGoH` for the fast search: the same values, computed by the same float
+    operations in the same order (so the memo fills alike and h is bit for bit the same), with
+    E read through a memoryview, the ray walk inlined, and h kept per state once computed (a
+    state's h never changes after its first evaluation: its rays are memoised then)."""
+
+    def __init__(self, base: _CostToGoH):
+        self.__dict__.update(base.__dict__)
+        self.memo = {}
+        self.memos: list[dict[int, float]] = [{} for _ in range(10)]  # per ray: state -> D
+        self.ev = memoryview(self.e)
+        self.known: dict[int, float] = {}
+
+    def _ray(self, c: int, ray: int) -> float:
+        memo, e, joins, manip = self.memos[ray], self.ev, self.joins, self.manip
+        if ray < 8:
+            cost, mode, off = self.tcost[ray], ray, self.toff[ray]
+        else:
+            cost, mode, off = self.rc, MODE_ROTATE, 0
+        path = []
+        x, val = c, INF
+        if off:  # a translation: straight along the row, column or diagonal
+            while True:
+                v = memo.get(x)
+                if v is not None:
+                    val = v
+                    break
+                if e[x] == INF:
+                    break
+                path.append(x)
+                x += off
+        else:
+            val = self._turn_walk(c, ray == TURN_UP, memo, path)
+        for x in reversed(path):
+            # min(join, manip + E, cost + val) as the reference writes it: the same float
+            v = manip + e[x]
+            w = cost + val
+            if w < v:
+                v = w
+            if x in joins:
+                j = self.join(x, mode)
+                if j < v:
+                    v = j
+            memo[x] = val = v
+        return val
+
+    def _turn_walk(self, c: int, up: bool, memo: dict[int, float], path: list[int]) -> float:
+        """The states of a turn ray from c not yet memoised (into ``path``) and the value where
+        it stops (a memoised state, a blocked state, or back at c: inf)."""
+        e, layer, last = self.ev, self.layer, self.k_bins - 1
+        wrap = last * layer
+        x = c
+        for _ in range(self.k_bins + 1):
+            v = memo.get(x)
+            if v is not None:
+                return v
+            if e[x] == INF:
+                return INF
+            path.append(x)
+            if up:
+                x = x - wrap if x // layer == last else x + layer
+            else:
+                x = x + wrap if x // layer == 0 else x - layer
+            if x == c:  # turned full circle
+                return INF
+        return INF
+
+    def __getitem__(self, s: int) -> float:
+        v = self.known.get(s)
+        if v is None:
+            v = self.known[s] = _CostToGoH.__getitem__(self, s)
+        return v
+
+
+class _FastPotential:
+    """:class:`_PotentialH`'s values through memoryviews (no numpy scalar per look-up)."""
+
+    def __init__(self, base: _PotentialH):
+        self.h3 = memoryview(base.h3)
+        self.hmode = [memoryview(np.ascontiguousarray(a)) for a in base.hmode]
+        self.layer, self.n = base.layer, base.n
+
+    def __getitem__(self, s: int) -> float:
+        if s >= self.n:
+            return 0.0
+        c, m = divmod(s, N_MODES)
+        v = self.h3[c]
+        if v == INF:
+            return INF
+        return v + self.hmode[m][c % self.layer]
+
+
+class _FastSearch:
+    """The object search of :func:`weighted_astar` with :class:`_ObjectMoves`, specialised: the
+    same states, moves, costs, f (with pathmax), tie-breaking (f, then h, then g, then the
+    state), re-opening and pruning, so the same expansions in the same order and the same
+    route (``tests/unit/test_route_speed.py`` checks it against that reference). Faster
+    because each lattice cell's checked moves (successor cell, mode, cost) are found once per
+    planner, not once per expansion of each of its 11 modes; h is read once per state; the
+    tables are read through memoryviews; and the loop is one function with local names."""
+
+    def __init__(self, planner: RoutePlanner):
+        self.pl = planner
+        h = planner._h_obj
+        self.h: _FastCostToGo | _FastPotential
+        if isinstance(h, _CostToGoH):
+            self.h = _FastCostToGo(h)
+        else:
+            assert h is not None
+            self.h = _FastPotential(h)
+        self.free = memoryview(planner._free_p)
+        self.margin = memoryview(planner._margin_p)
+        self.succ: dict[int, tuple[int, ...]] = {}
+        k_bins, layer = planner.cspace.heading_bins, planner._layer
+        manip, rc = planner.params.manipulation_cost, planner._rot_cost
+        base = [*planner._tcost, rc, rc, rc, rc]
+        #: per move code: cell offset, mode, cost, cost with a re-arrangement
+        self.moves = (
+            [*planner._toff, layer, -layer, -(k_bins - 1) * layer, (k_bins - 1) * layer],
+            [*range(8), MODE_ROTATE, MODE_ROTATE, MODE_ROTATE, MODE_ROTATE],
+            base,
+            [b + manip for b in base],
+        )
+
+    def successors(self, c: int) -> tuple[int, ...]:
+        """The free, checked lattice moves out of padded cell c, in the reference's order, as
+        move codes (cached per planner; small ints, so the cache stays small): 0-7 the
+        translations, 8 / 9 a turn up / down, 10 / 11 the same wrapping round the heading bins
+        (their offsets, modes and costs are in :attr:`moves`)."""
+        pl, free, margin = self.pl, self.free, self.margin
+        k_bins, layer = pl.cspace.heading_bins, pl._layer
+        cands = [(d, c + pl._toff[d]) for d in range(8)]
+        if k_bins > 1:
+            k = c // layer
+            cands.append(
+                (TURN_UP + 2 * (k == k_bins - 1), c + self.moves[0][8 + 2 * (k == k_bins - 1)])
+            )
+            if k_bins > 2:
+                cands.append((TURN_DOWN + 2 * (k == 0), c + self.moves[0][9 + 2 * (k == 0)]))
+        cands = [(mv, c2) for mv, c2 in cands if free[c2]]
+        todo = [i for i, (_, c2) in enumerate(cands) if not (margin[c] and margin[c2])]
+        bad: set[int] = set()
+        if todo:
+            k, iy, ix = pl._unflat(c)
+            asked = [cands[i][0] - 2 if cands[i][0] >= 10 else cands[i][0] for i in todo]
+            res = pl.cspace.moves_free(k, iy, ix, asked)
+            bad = {i for i, ok in zip(todo, res, strict=True) if not ok}
+        got = self.succ[c] = tuple(mv for i, (mv, _) in enumerate(cands) if i not in bad)
+        return got
+
+    def extra_moves(self, m: int, c: int, reach: list[_Join]) -> list[tuple[int, float]]:
+        """(state, cost) of the moves that are not lattice moves: the virtual start's ways to
+        the lattice, a lattice state's way to the goal (the reference's costs)."""
+        manip = self.pl.params.manipulation_cost
+        if c >= self.pl._n:
+            return [
+                (j.state * N_MODES + (j.modes[-1] if j.modes else MODE_START),
+                 j.cost + manip * j.changes)
+                for j in reach
+            ]  # fmt: skip
+        j = self.pl._goal_joins.get(c)
+        if j is None:
+            return []
+        turn_in = bool(j.modes) and _arrival_charge(m, j.modes[0])
+        return [(self.pl._n * N_MODES + 1, j.cost + manip * (j.changes + turn_in))]
+
+    def run(
+        self, reach: list[_Join], wg: float, wh: float, pathmax: bool, reopen: bool,
+        max_expanded: int, trace: bool,
+    ) -> SearchOutcome:  # fmt: skip
+        """The search from the virtual start (the states of :class:`_ObjectMoves`)."""
+        n_lattice = self.pl._n
+        start = n_lattice * N_MODES
+        goal = start + 1
+        gbest: dict[int, float] = {start: 0.0}
+        parent: dict[int, int] = {start: -1}
+        closed: set[int] = set()
+        heap: list[tuple[float, float, float, int]] = [(0.0, 0.0, 0.0, start)]
+        expand, relax = self._expanders(gbest, parent, closed, heap, (wg, wh, pathmax, reopen))
+        special = set(self.pl._goal_joins)
+        special.add(n_lattice)
+        pop = heapq.heappop
+        ftrace: list[float] = []
+        expanded = reexpanded = 0
+        generated = 1
+        while heap:
+            f, _, g, s = pop(heap)
+            if g > gbest[s]:
+                continue
+            if s in closed:
+                reexpanded += 1
+            closed.add(s)
+            expanded += 1
+            if trace:
+                ftrace.append(f)
+            if s == goal or expanded >= max_expanded:
+                counts = (expanded, generated, reexpanded)
+                return self._outcome(s == goal, parent, g, counts, ftrace, s)
+            c, m = divmod(s, N_MODES)
+            if c < n_lattice:
+                generated += expand(s, c, m, g, f)
+            if c in special:
+                generated += relax(s, self.extra_moves(m, c, reach), g, f)
+        return SearchOutcome(None, INF, expanded, generated, reexpanded, ftrace, False)
+
+    def _expanders(self, gbest, parent, closed, heap, search):
+        """The two halves of an expansion over the search's tables (closures, for speed):
+        ``expand(s, c, m, g, f)`` relaxes the lattice moves of state s (cell c, mode m) with the
+        reference's pruning; ``relax(s, moves, g, f)`` the (state, cost) moves given. Both
+        return how many states they pushed."""
+        wg, wh, pathmax, reopen = search
+        h, succ, successors = self.h, self.succ, self.successors
+        offs, modes, bases, pluses = self.moves
+        manip = self.pl.params.manipulation_cost
+        gmin: dict[int, float] = {}
+        push, inf, start_mode = heapq.heappush, INF, MODE_START
+
+        def expand(s: int, c: int, m: int, g: float, f: float) -> int:
+            n = 0
+            for mv in succ.get(c) or successors(c):
+                c2 = c + offs[mv]
+                mode = modes[mv]
+                g2 = g + (bases[mv] if m == mode or m == start_mode else pluses[mv])
+                gm = gmin.get(c2, inf)
+                if g2 >= gm + manip:
+                    continue
+                if g2 < gm:
+                    gmin[c2] = g2
+                t = c2 * N_MODES + mode
+                h2 = h[t]
+                if h2 < inf and g2 < gbest.get(t, inf) and (reopen or t not in closed):
+                    gbest[t] = g2
+                    parent[t] = s
+                    f2 = wg * g2 + wh * h2
+                    push(heap, (f if pathmax and f2 < f else f2, h2, g2, t))
+                    n += 1
+            return n
+
+        def relax(s: int, moves: list[tuple[int, float]], g: float, f: float) -> int:
+            n = 0
+            for t, cost in moves:
+                g2 = g + cost
+                h2 = h[t]
+                if h2 < inf and g2 < gbest.get(t, inf) and (reopen or t not in closed):
+                    gbest[t] = g2
+                    parent[t] = s
+                    f2 = wg * g2 + wh * h2
+                    push(heap, (f if pathmax and f2 < f else f2, h2, g2, t))
+                    n += 1
+            return n
+
+        return expand, relax
+
+    @staticmethod
+    def _outcome(found, parent, g, counts, ftrace, s) -> SearchOutcome:
+        expanded, generated, reexpanded = counts
+        if found:
+            return SearchOutcome(_unwind(parent, s), g, expanded, generated, reexpanded, ftrace,
+                                 False)  # fmt: skip
+        return SearchOutcome(None, INF, expanded, generated, reexpanded, ftrace, True)
+
+
 class RoutePlanner:
     """The object's route planner for one C-space and one goal: build once, plan from any start.
 
@@ -580,6 +850,7 @@ class RoutePlanner:
         self._toff = [int(dy * self._w + dx) for dx, dy in MOVES_8]
         self._tcost = [fr.resolution * math.hypot(dx, dy) / params.speed for dx, dy in MOVES_8]
         self._h_obj: _PotentialH | _CostToGoH | None = None
+        self._fast: _FastSearch | None = None
         if not self.goal_reason:
             self._h_obj = self._heuristic(turn_bound)
 
@@ -769,12 +1040,15 @@ class RoutePlanner:
         pathmax: bool = True,
         max_expanded: int = 20_000_000,
         trace: bool = False,
+        reference: bool = False,
     ) -> RouteResult:
         """The route from the object-frame ``start`` pose to the goal (see :class:`RouteResult`).
 
         Never raises for an unreachable goal or a colliding start: the result's status is
         "no_path" with a reason. ``pathmax=False`` turns Eq. 2 off (for tests); ``trace``
-        records f of each expansion.
+        records f of each expansion. ``reference=True`` runs the search through the generic
+        :func:`weighted_astar` and :class:`_ObjectMoves` (the slow reference the fast search is
+        checked against, for tests and ``bench/route_speed.py``): same route, same counts.
         """
         kind, wg, wh = self.kind, self.wg, self.wh
         start_p = _pose3(start, "start")
@@ -789,7 +1063,9 @@ class RoutePlanner:
                                wg=wg, wh=wh)  # fmt: skip
         joins = self._joins(start_p, False)
         assert self._h_obj is not None
-        h = self._h_obj
+        if not reference and self._fast is None:
+            self._fast = _FastSearch(self)
+        h = self._h_obj if reference or self._fast is None else self._fast.h
         reach = [j for j in joins if h[j.state * N_MODES + MODE_START] < INF]  # E < inf
         if self.kind != "cost_to_go":  # the potentials do not know the lattice's components
             labels = self.cspace.labels.ravel()
@@ -802,23 +1078,34 @@ class RoutePlanner:
                 else "no lattice state next to the start joins it without a collision"
             )
             return _no_path(f"goal unreachable: {why}", kind, wg, wh)
-        s_virtual = self._n * N_MODES
-        out = weighted_astar(
-            s_virtual,
-            s_virtual + 1,
-            h,
-            _ObjectMoves(self, reach),
-            wg=wg,
-            wh=wh,
-            pathmax=pathmax,
-            reopen=reopens(wg, wh, self.params.reopen),
-            max_expanded=max_expanded,
-            trace=trace,
-        )
+        reopen = reopens(wg, wh, self.params.reopen)
+        if self._fast is not None and not reference:
+            out = self._fast.run(reach, wg, wh, pathmax, reopen, max_expanded, trace)
+        else:
+            out = self._reference_search(reach, pathmax, reopen, max_expanded, trace)
         counts = out.counts()
         if out.path is None:
             return _no_path(out.reason(max_expanded), kind, wg, wh, **counts)
         return self._result(start_p, out.path, out.cost, {j.state: j for j in reach}, counts)
+
+    def _reference_search(
+        self, reach: list[_Join], pathmax: bool, reopen: bool, max_expanded: int, trace: bool
+    ) -> SearchOutcome:
+        """The object search through the generic :func:`weighted_astar` (the reference)."""
+        s_virtual = self._n * N_MODES
+        assert self._h_obj is not None
+        return weighted_astar(
+            s_virtual,
+            s_virtual + 1,
+            self._h_obj,
+            _ObjectMoves(self, reach),
+            wg=self.wg,
+            wh=self.wh,
+            pathmax=pathmax,
+            reopen=reopen,
+            max_expanded=max_expanded,
+            trace=trace,
+        )
 
     def _result(
         self,
