@@ -100,7 +100,7 @@ class ControllerNode:
         self.inputs_arrived = threading.Condition()  # notified on every pose (lockstep waits)
         self._poses = bus.subscribe_topic("robot_pose", waker=self.inputs_arrived)
         self._object = bus.subscribe_topic("object_pose", waker=self.inputs_arrived)
-        self._estops = bus.subscribe_topic("estop")
+        self._estops = bus.subscribe_topic("estop", lossless=True)  # never drop an e-stop
         self._robot_events = bus.subscribe_topic("robot_event")
         self._latch_replies = Inbox()
         self._latch_key = bus.serve_estop("controller", "main", self.latch_state)
