@@ -59,6 +59,7 @@ class NodeCounters:
     link_events: int = 0
     link_restored: int = 0
     skewed: int = 0  # poses stamped further than fleet.max_clock_skew from the tick time
+    ahead: int = 0  # poses stamped after the tick time (within the skew): taken at the tick
 
 
 class ControllerNode:
@@ -201,10 +202,20 @@ class ControllerNode:
             )
         return True
 
+    def _stamp(self, t: float, now: float | None) -> float:
+        """A pose's stamp, but never after the tick: a measurement from the future (a fast
+        clock, or a spoofer inside the skew) is taken as made at the tick, so it cannot
+        extrapolate a filter past the tick nor push its timeline ahead (counted: ``ahead``)."""
+        if now is None or t <= now:
+            return t
+        self.counters.ahead += 1
+        return now
+
     def sample(self, now: float | None = None) -> None:
         """Drain the inboxes into the filters and the latched e-stop. With ``now`` (the tick
         time: the same clock domain as the stamps) a pose stamped further than
-        ``fleet.max_clock_skew`` from it is dropped and counted (``skewed``)."""
+        ``fleet.max_clock_skew`` from it is dropped and counted (``skewed``), and one stamped
+        after it is taken at ``now`` (``ahead``)."""
         self._sample_estop()
         self._sample_events()
         for item in self._poses.drain():
@@ -214,7 +225,7 @@ class ControllerNode:
             m = item.msg
             if self._skewed(m.t, now):
                 continue
-            res = self.est.measure_robot(rid, m.t, m.x, m.y, m.theta)
+            res = self.est.measure_robot(rid, self._stamp(m.t, now), m.x, m.y, m.theta)
             self.counters.poses += 1
             self.counters.rejected += res == "rejected"
             self.counters.out_of_order += res == "out_of_order"
@@ -222,7 +233,7 @@ class ControllerNode:
             m = item.msg
             if self._skewed(m.t, now):
                 continue
-            self.est.measure_object(m.t, m.x, m.y, m.theta)
+            self.est.measure_object(self._stamp(m.t, now), m.x, m.y, m.theta)
             self.counters.object_poses += 1
 
     def _robot_id(self, key: str) -> str:
