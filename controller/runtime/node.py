@@ -34,6 +34,9 @@ from controller.mission.types import FleetView, Mission, MissionOutput
 
 log = logging.getLogger(__name__)
 
+# s: a pose stamped at most this after the tick is taken as stamped (float rounding of sim time,
+# sub-tick sensor timing); later stamps are taken at the tick
+AHEAD_TOLERANCE = 1e-3
 STAGES = ("sample", "plan", "safety", "publish")  # timed: sample+estimate, plan, safety, publish
 
 
@@ -59,7 +62,7 @@ class NodeCounters:
     link_events: int = 0
     link_restored: int = 0
     skewed: int = 0  # poses stamped further than fleet.max_clock_skew from the tick time
-    ahead: int = 0  # poses stamped after the tick time (within the skew): taken at the tick
+    ahead: int = 0  # poses stamped > 1 ms after the tick time (within the skew): taken at the tick
 
 
 class ControllerNode:
@@ -205,8 +208,9 @@ class ControllerNode:
     def _stamp(self, t: float, now: float | None) -> float:
         """A pose's stamp, but never after the tick: a measurement from the future (a fast
         clock, or a spoofer inside the skew) is taken as made at the tick, so it cannot
-        extrapolate a filter past the tick nor push its timeline ahead (counted: ``ahead``)."""
-        if now is None or t <= now:
+        extrapolate a filter past the tick nor push its timeline ahead (counted: ``ahead``).
+        Up to ``AHEAD_TOLERANCE`` after the tick a stamp is kept (rounding, not a clock)."""
+        if now is None or t <= now + AHEAD_TOLERANCE:
             return t
         self.counters.ahead += 1
         return now
