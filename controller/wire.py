@@ -139,6 +139,7 @@ class FleetStatus(Message):
     estop: bool = False
     robots: list[dict[str, Any]] = field(default_factory=list)
     counters: dict[str, Any] = field(default_factory=dict)
+    controller: str = ""  # the answering controller's liveliness id (alive/controller/<id>)
 
     TYPE: ClassVar[str] = "fleet.FleetStatus"
 

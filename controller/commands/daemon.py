@@ -1,4 +1,5 @@
-"""``fleet daemon [--config F] [--out F.mcap] [--duration S] [--mission capture|hold] [--viz]``.
+"""``fleet daemon [--config F] [--out F.mcap] [--duration S] [--mission capture|hold] [--viz]
+[--take-over]``.
 
 The controller on the lab network (``controller.runtime.daemon``). Stops on SIGINT/SIGTERM
 (robots then stop by their own watchdogs) or when the mission ends; exit 1 when it failed.
@@ -24,6 +25,12 @@ def add_arguments(parser, word: str) -> None:
         help="serve the fleet live to Foxglove on ws://127.0.0.1:<viz.port>",
     )
     parser.add_argument(
+        "--take-over",
+        action="store_true",
+        help="start although another controller of the fleet runs: it stops commanding and "
+        "exits 1 once it sees this one, which commands nothing until it is gone",
+    )
+    parser.add_argument(
         "--mission",
         choices=MISSION_KINDS,
         default="capture",
@@ -45,4 +52,6 @@ def run(args) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     mission = build_mission(cfg, args.mission)  # MissionError: exit 1 (cli.exit_code)
-    return run_daemon(cfg, mission, args.mission, out, stop, args.duration, viz=args.viz)
+    return run_daemon(
+        cfg, mission, args.mission, out, stop, args.duration, viz=args.viz, take_over=args.take_over
+    )

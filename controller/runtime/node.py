@@ -77,9 +77,12 @@ class ControllerNode:
         lossless_commands: bool = False,
         extra_drops: Callable[[], dict[str, int]] | None = None,
         clock: Callable[[], float] | None = None,
+        ident: str = "main",
     ) -> None:
         """``clock`` (s, monotonic) only times the stages; ``extra_drops`` adds drop counters
-        of other parts (the recorder) to ``fleet status``."""
+        of other parts (the recorder) to ``fleet status``; ``ident`` is the controller's
+        liveliness id (``alive/controller/<ident>``, named in ``fleet status``)."""
+        self.ident = ident
         self.clock = clock
         self.timings: dict[str, list[float]] = {k: [] for k in STAGES}
         self.cfg = cfg
@@ -117,7 +120,7 @@ class ControllerNode:
         self._done_pub = bus.publisher("sim_done", command=True, lossless=True)
         bus.watch_alive("robot", self._on_alive)
         bus.serve("status", self.status)
-        bus.declare_alive("controller", "main")
+        bus.declare_alive("controller", ident)
 
     # -- inputs
     def _on_alive(self, rid: str, alive: bool) -> None:
@@ -418,6 +421,7 @@ class ControllerNode:
             estop=self.estop,
             robots=robots,
             counters={**vars(self.counters), **self.drops()},
+            controller=self.ident,
         )
 
 
