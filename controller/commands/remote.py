@@ -99,7 +99,9 @@ def run(args) -> int:
                 file=sys.stderr,
             )
             return 1
-        st = _newest(replies)
+        from controller.runtime.claim import newest_status
+
+        st = newest_status(replies)
         others = sorted({r.controller for r in replies} - {st.controller})
         if args.json:
             emit_json({"ok": True, **wire.to_dict(st), "controllers": [st.controller, *others]})
@@ -116,14 +118,3 @@ def run(args) -> int:
                     f"{', LINK LOST' if r.get('link_lost') else ''}"
                 )
         return 0
-
-
-def _newest(replies: list):
-    """The answer of the newest controller (the one a take-over leaves commanding)."""
-    from controller.runtime.claim import newer
-
-    best = replies[0]
-    for r in replies[1:]:
-        if newer(r.controller, best.controller):
-            best = r
-    return best

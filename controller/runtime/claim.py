@@ -52,6 +52,16 @@ def make_ident(now_ms: int, others: list[str], pid: int | None = None, host: str
     return f"main-{stamp}-{os.getpid() if pid is None else pid}-{host}"
 
 
+def newest_status(replies: list):
+    """Of several ``FleetStatus`` answers, the newest controller's (the one a take-over
+    leaves commanding)."""
+    best = replies[0]
+    for r in replies[1:]:
+        if newer(r.controller, best.controller):
+            best = r
+    return best
+
+
 class Claim:
     """A daemon's claim: its id, and the newer controller it yielded to (if any).
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import threading
 
 from controller import wire
-from controller.io.bus import DecodeStats, Decoder, Inbox, Received, _Raw, decode_payload
+from controller.io.bus import Decoder, DecodeStats, Inbox, Received, _Raw, decode_payload
 
 FLEET = "lab"
 
