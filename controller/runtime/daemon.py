@@ -168,18 +168,23 @@ def run_daemon(
         with bus:
             claim.watch(bus)
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
+            rk = Ratekeeper(cfg.fleet.rate_hz)
             node = ControllerNode(
                 cfg,
                 bus,
                 mission,
                 make_estimator(cfg),
-                extra_drops=recorder.drops,
+                # the loop's health beside the drops: ticks that started late, periods skipped
+                extra_drops=lambda: {
+                    **recorder.drops(),
+                    "late_ticks": rk.lagged,
+                    "skipped_ticks": rk.skipped,
+                },
                 clock=time.monotonic,
                 ident=claim.ident,
             )
             latch = LatchWatch(node)
             latch.start(time.monotonic(), LATCH_WAIT_AT_START)
-            rk = Ratekeeper(cfg.fleet.rate_hz)
             print(
                 f"fleet daemon: fleet {cfg.fleet.name!r} on {list(cfg.zenoh.listen)} ({how}), "
                 f"{cfg.fleet.rate_hz} Hz, log {recorder.location}, controller {claim.ident}",

@@ -105,13 +105,18 @@ class ControllerNode:
         self.last_tick = 0.0
         self._seq = 0
         self.inputs_arrived = threading.Condition()  # notified on every pose (lockstep waits)
-        self._poses = bus.subscribe_topic("robot_pose", waker=self.inputs_arrived)
-        self._object = bus.subscribe_topic("object_pose", waker=self.inputs_arrived)
+        # bounded per robot (a flood drops the oldest), lossless in the lockstep dry run
+        lossless = lossless_commands
+        self._poses = bus.subscribe_topic(
+            "robot_pose", waker=self.inputs_arrived, lossless=lossless
+        )
+        self._object = bus.subscribe_topic(
+            "object_pose", waker=self.inputs_arrived, lossless=lossless
+        )
         self._estops = bus.subscribe_topic("estop", lossless=True)  # never drop an e-stop
         self._robot_events = bus.subscribe_topic("robot_event")
         self._latch_replies = Inbox()
         self._latch_key = bus.serve_estop("controller", "main", self.latch_state)
-        lossless = lossless_commands
         self._cmd_pub = {
             r: bus.publisher("robot_cmd", command=True, lossless=lossless, id=r) for r in self.ids
         }
