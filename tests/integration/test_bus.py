@@ -58,7 +58,7 @@ def test_garbage_payloads_are_counted_and_dropped(port):
     ep = f"tcp/127.0.0.1:{port}"
     with (
         Bus(ZenohSection(), "g", listen=[ep], connect=[]) as a,
-        Bus(ZenohSection(), "g", listen=[], connect=[ep]) as b,
+        Bus(ZenohSection(inbox_depth=64), "g", listen=[], connect=[ep]) as b,  # a 41-burst
     ):
         inbox = b.subscribe_topic("robot_cmd")  # wildcard over robots
         key = a.key("robot_cmd", id="r1")
