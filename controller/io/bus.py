@@ -594,7 +594,7 @@ class Bus:
         """Samples on ``key_expr`` into ``inbox`` (created if not given: bounded per key unless
         ``lossless``, see ``inbox``). On zenoh's thread only the size is checked and the raw
         bytes staged; the bus's decoder thread decodes them into the inbox (staging is bounded
-        per key like the inbox, unless the inbox is unbounded).
+        per key like the inbox, unless ``lossless`` or the inbox is unbounded).
 
         ``msg_type`` None decodes by the key's registered topic. ``on_message``, if given, runs
         on the decoder thread after enqueueing: keep it short.
@@ -609,13 +609,14 @@ class Bus:
             return decode_payload(fleet, k, payload, msg_type, stats, limit)
 
         decoder = self._decoder()
-        lossless = box.depth == 0 and box.maxsize == 0
+        staged_lossless = lossless or (box.depth == 0 and box.maxsize == 0)
 
         def callback(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
             payload = self._payload(sample, k)
             if payload is not None:
-                decoder.submit(_Raw(time.time(), k, payload, decode, box, on_message), lossless)
+                raw = _Raw(time.time(), k, payload, decode, box, on_message)
+                decoder.submit(raw, staged_lossless)
 
         sub = self.session.declare_subscriber(key_expr, callback)
         self._handles.append(sub)
