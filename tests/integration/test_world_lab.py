@@ -150,8 +150,8 @@ def test_world_daemon_drivers_arrest_kill_restart(tmp_path, port):
         bus = connect_client(port, "the world")
         with bus:
             truth = Truth(bus)
-            phases = bus.subscribe_topic("plan", what="phase")
-            cmds = bus.subscribe_topic("world_cmd")
+            phases = bus.subscribe_topic("plan", lossless=True, what="phase")
+            cmds = bus.subscribe_topic("world_cmd", lossless=True)  # read as a history
             wait_for(lambda: truth.take() > 0, 20, "the world's truth")
             d1 = daemon(1, "capture")
             agents = [spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ROBOTS]
