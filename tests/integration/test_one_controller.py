@@ -4,6 +4,8 @@ one stops commanding and exits 1 naming the newcomer), and ``fleet status`` name
 
 from __future__ import annotations
 
+import signal
+
 import pytest
 
 from tests.support.lab import fleet, fleet_json, lab_config, spawn, stop_all, tail
@@ -64,3 +66,31 @@ def test_a_second_daemon_refuses_and_a_take_over_leaves_one_commanding(tmp_path,
     finally:
         codes = stop_all(procs)
     assert codes[-1] == 0  # the newcomer stopped cleanly
+
+
+def test_a_hung_daemon_taken_over_exits_when_it_resumes(tmp_path, port):
+    """Through a hub: the old daemon hangs (SIGSTOP); a take-over waits for its token to expire
+    (its lease), then runs; continued (SIGCONT), the old one sees the newer controller and
+    exits 1 naming it, leaving the newcomer answering."""
+    cfg = lab_config(tmp_path, port, robots=2)
+    c = str(cfg)
+    args = ("daemon", "--config", c, "--mission", "hold", "--out")
+    hub = spawn(tmp_path / "hub.txt", "hub", "--config", c)
+    procs = [hub]
+    try:
+        first = spawn(tmp_path / "first.txt", *args, str(tmp_path / "first.mcap"))
+        procs.append(first)
+        wait_for(lambda: _status(cfg).get("ok", False), 40, "the first daemon")
+        old = _status(cfg)["controller"]
+        first.send_signal(signal.SIGSTOP)
+        newcomer = spawn(tmp_path / "new.txt", *args, str(tmp_path / "new.mcap"), "--take-over")
+        procs.append(newcomer)
+        wait_for(lambda: _status(cfg).get("controller", old) != old, 40, "the newcomer answering")
+        new = _status(cfg)["controller"]
+        first.send_signal(signal.SIGCONT)
+        assert first.wait(timeout=30) == 1, tail(first)
+        assert f"controller {new} took over" in tail(first)
+        st = _status(cfg)
+        assert st["controllers"] == [new] and newcomer.poll() is None
+    finally:
+        stop_all(procs)
