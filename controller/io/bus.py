@@ -397,7 +397,8 @@ class Decoder:
 
     def submit(self, raw: _Raw, lossless: bool) -> None:
         """Stage a sample (zenoh's thread); ``lossless`` samples are never evicted."""
-        bucket = (id(raw.box), raw.key) if not lossless else (id(raw.box), raw.key, raw)
+        # a lossless sample is a bucket of its own (never full): it waits for its turn
+        bucket = (id(raw.box), raw.key) if not lossless else (id(raw.box), raw.key, id(raw))
         self.stage._add(bucket, raw.key, raw)
 
     def _run(self) -> None:
