@@ -4,7 +4,15 @@
   PoseMeasurement reply), median and p99 in ms, same run, same processes;
 - one-way throughput of commands (messages/s received by the other process).
 
-Usage: python bench/bus.py [--n 2000]
+``--flood``: the daemon's tick (``ControllerNode.tick`` with a 20 Hz rate keeper, hold mission,
+4 robots) while another process puts poses on the robots' keys: the normal rate (30 Hz per
+robot), 10x that, as fast as it can, and the normal rate plus 4 MiB payloads (10 Hz per key).
+Each case runs twice in this process, interleaved: ``before`` is the bus as it was (decoding on
+zenoh's thread into unbounded inboxes, 4 MiB limit), ``after`` today's (size checked first,
+decoder thread, inboxes bounded per key). Tick p50/p99/max (ms), late ticks, poses taken in,
+drops, the p99 ratio, and the load average.
+
+Usage: python bench/bus.py [--n 2000] | python bench/bus.py --flood [--seconds 4]
 """
 
 from __future__ import annotations
@@ -26,7 +34,7 @@ sys.path.insert(0, str(ROOT))
 
 from controller import wire  # noqa: E402
 from controller.config import ZenohSection  # noqa: E402
-from controller.io.bus import Bus  # noqa: E402
+from controller.io.bus import Bus, Inbox, Received, decode_payload  # noqa: E402
 
 FLEET = "bench"
 
@@ -75,18 +83,168 @@ def stats_ms(samples: list[float]) -> dict[str, float]:
     a = np.asarray(samples) * 1e3
     return {
         "median_ms": round(float(np.median(a)), 4),
+        "p50_ms": round(float(np.percentile(a, 50)), 4),
         "p99_ms": round(float(np.percentile(a, 99)), 4),
         "n": len(a),
     }
 
 
+# --------------------------------------------------------------------------- --flood
+
+ROBOTS = 4
+POSE_HZ = 30.0  # the normal pose rate of a robot (sim.pose_rate_hz)
+BIG = 4 * 1024 * 1024 - 1024  # under the old 4 MiB limit: the old bus decoded it all
+CASES = {  # name: (pose rate multiplier, 0 = as fast as possible; big payloads per s per key)
+    "normal": (1.0, 0.0),
+    "poses_10x": (10.0, 0.0),
+    "poses_max": (0.0, 0.0),
+    "big_4mib": (1.0, 10.0),
+}
+
+
+class BeforeBus(Bus):
+    """The bus before issue 22 (same session, same codec): every sample copied and decoded on
+    zenoh's thread into an unbounded inbox; the codec's 4 MiB limit only."""
+
+    def inbox(self, *, lossless: bool = False, waker=None) -> Inbox:
+        return Inbox(waker=waker)
+
+    def subscribe(self, key_expr, msg_type, inbox=None, on_message=None, lossless=False):
+        box = inbox if inbox is not None else Inbox()
+        self._inboxes.append(box)
+        fleet, stats = self.fleet, self.stats
+
+        def callback(sample) -> None:
+            k = str(sample.key_expr)
+            msg = decode_payload(fleet, k, sample.payload.to_bytes(), msg_type, stats)
+            if msg is not None:
+                box.put(Received(time.time(), k, msg))
+
+        self._handles.append(self.session.declare_subscriber(key_expr, callback))
+        return box
+
+
+def flood_child(endpoint: str, case: str, seconds: float) -> None:
+    """Robot-side flooder: liveliness tokens for r1..rN, then poses (and big payloads)."""
+    import zenoh
+
+    from controller.io.ratekeeper import Ratekeeper
+
+    mult, big_hz = CASES[case]
+    big = b'{"t": 0.0, "seq": 0, "x": 0, "y": 0, "theta": 0, "pad": "' + b"x" * BIG + b'"}'
+    ids = [f"r{i + 1}" for i in range(ROBOTS)]
+    with Bus(ZenohSection(), FLEET, listen=[], connect=[endpoint]) as bus:
+        pubs = [
+            bus.session.declare_publisher(
+                bus.key("robot_pose", id=r), congestion_control=zenoh.CongestionControl.BLOCK
+            )
+            for r in ids
+        ]
+        for r in ids:
+            bus.declare_alive("robot", r)
+        rk = Ratekeeper(POSE_HZ * mult) if mult else None
+        every = int(round(POSE_HZ * mult / big_hz)) if big_hz else 0
+        end = time.monotonic() + seconds
+        k = 0
+        while time.monotonic() < end:
+            if rk is not None:
+                rk.keep_time()
+            k += 1
+            now = time.time()
+            for i, pub in enumerate(pubs):
+                m = wire.PoseMeasurement(t=now, seq=k, x=1.0 + i, y=1.0, theta=0.0)
+                pub.put(wire.encode(m))
+                if every and k % every == 0:
+                    pub.put(big)
+
+
+def flood_run(bus_cls, case: str, seconds: float) -> dict:
+    """One case against one bus: the node's ticks while the child floods."""
+    import tomllib
+
+    from controller.config import parse_config
+    from controller.io.ratekeeper import Ratekeeper
+    from controller.mission.basic import HoldMission
+    from controller.runtime.node import ControllerNode
+    from controller.runtime.wiring import make_estimator
+
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    with open(ROOT / "fleet.toml", "rb") as f:
+        data = tomllib.load(f)
+    proto = dict(data["robots"][0], kind="omni", driver="sim")
+    data["robots"] = [dict(proto, id=f"r{i + 1}", start=[1.0 + i, 1.0, 0.0]) for i in range(ROBOTS)]
+    data["object"].pop("goal", None)
+    data["fleet"]["name"] = FLEET
+    data["zenoh"] = {"mode": "peer", "listen": [ep], "connect": []}
+    cfg = parse_config(data, "bench")
+    with bus_cls(cfg.zenoh, FLEET) as bus:
+        node = ControllerNode(cfg, bus, HoldMission(ROBOTS), make_estimator(cfg))
+        proc = subprocess.Popen(
+            [sys.executable, __file__, "--flood-child", ep, case, str(seconds + 3.0)],
+            env=dict(os.environ, PYTHONPATH=str(ROOT)),
+        )
+        try:
+            deadline = time.monotonic() + 30
+            while not node.present.all():  # the child's tokens: its publishers are declared
+                if time.monotonic() > deadline:
+                    raise SystemExit("flood child did not come up")
+                time.sleep(0.05)  # polling a flag set on zenoh's thread
+            rk = Ratekeeper(cfg.fleet.rate_hz)
+            ticks: list[float] = []
+            lags: list[float] = []
+            poses0 = node.counters.poses
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                rk.keep_time()
+                lags.append(rk.last_lag)
+                t0 = time.perf_counter()
+                node.tick(time.time())
+                ticks.append(time.perf_counter() - t0)
+            out = {
+                **{f"tick_{k}": v for k, v in stats_ms(ticks).items()},
+                "tick_max_ms": round(max(ticks) * 1e3, 3),
+                "lag_max_ms": round(max(lags) * 1e3, 3),
+                "late_ticks": rk.lagged,
+                "skipped_ticks": rk.skipped,
+                "poses_taken": node.counters.poses - poses0,
+                "drops": bus.drops(),
+            }
+        finally:
+            proc.kill()
+            proc.wait(timeout=30)
+    return out
+
+
+def flood_main(seconds: float) -> None:
+    out: dict = {"robots": ROBOTS, "pose_hz": POSE_HZ, "seconds": seconds, "cases": {}}
+    for case in CASES:
+        res = {
+            "before": flood_run(BeforeBus, case, seconds),
+            "after": flood_run(Bus, case, seconds),
+        }
+        b, a = res["before"]["tick_p99_ms"], res["after"]["tick_p99_ms"]
+        res["tick_p99_after_over_before"] = round(a / b, 3) if b else None
+        out["cases"][case] = res
+    out["loadavg"] = [round(v, 2) for v in os.getloadavg()]
+    print(json.dumps(out))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--n", type=int, default=2000)
+    ap.add_argument("--flood", action="store_true", help="the daemon's tick under floods")
+    ap.add_argument("--seconds", type=float, default=4.0, help="per --flood case and bus")
     ap.add_argument("--child", help=argparse.SUPPRESS)
+    ap.add_argument("--flood-child", nargs=3, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         child(args.child)
+        return
+    if args.flood_child:
+        flood_child(args.flood_child[0], args.flood_child[1], float(args.flood_child[2]))
+        return
+    if args.flood:
+        flood_main(args.seconds)
         return
     ep = f"tcp/127.0.0.1:{free_port()}"
     with Bus(ZenohSection(), FLEET, listen=[ep], connect=[]) as bus:

@@ -142,6 +142,7 @@ class FleetStatus(Message):
     # per planner (transport, route, rearrange, capture): wall latency p50/p99/max s, late...
     plan_latency_s: dict[str, Any] = field(default_factory=dict)
     tick_ms: dict[str, Any] = field(default_factory=dict)  # the tick's p50/p99/max, ms
+    controller: str = ""  # the answering controller's liveliness id (alive/controller/<id>)
 
     TYPE: ClassVar[str] = "fleet.FleetStatus"
 

@@ -168,8 +168,9 @@ class Agent:
             driver.capabilities, params.cmd_ttl, max_clock_skew=params.max_clock_skew
         )
         rid = params.robot_id
-        self._cmds = bus.subscribe_topic("robot_cmd", waker=commands_arrived, id=rid)
-        self._estops = bus.subscribe_topic("estop")
+        # lossless: the lockstep handshake counts every command, and no e-stop may be lost
+        self._cmds = bus.subscribe_topic("robot_cmd", waker=commands_arrived, lossless=True, id=rid)
+        self._estops = bus.subscribe_topic("estop", lossless=True)
         self._latch_replies = _Replies()
         self._pose_pub = bus.publisher("robot_pose", id=rid)
         self._event_pub = bus.publisher("robot_event", id=rid)

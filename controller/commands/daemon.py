@@ -1,4 +1,5 @@
-"""``fleet daemon [--config F] [--out F.mcap] [--duration S] [--mission capture|hold] [--viz]``.
+"""``fleet daemon [--config F] [--out F.mcap] [--duration S] [--mission capture|hold] [--viz]
+[--take-over]``.
 
 The controller on the lab network (``controller.runtime.daemon``). Stops on SIGINT/SIGTERM
 (robots then stop by their own watchdogs) or when the mission ends; exit 1 when it failed.
@@ -22,6 +23,12 @@ def add_arguments(parser, word: str) -> None:
         "--viz",
         action="store_true",
         help="serve the fleet live to Foxglove on ws://127.0.0.1:<viz.port>",
+    )
+    parser.add_argument(
+        "--take-over",
+        action="store_true",
+        help="start although another controller of the fleet runs: it stops commanding and "
+        "exits 1 once it sees this one, which commands nothing until it is gone",
     )
     parser.add_argument(
         "--mission",
@@ -48,5 +55,13 @@ def run(args) -> int:
     planners = PlannerWorker.for_config(cfg, lockstep=False)  # the slow plans off the loop
     mission = build_mission(cfg, args.mission, planners=planners)  # MissionError: exit 1
     return run_daemon(
-        cfg, mission, args.mission, out, stop, args.duration, viz=args.viz, planners=planners
+        cfg,
+        mission,
+        args.mission,
+        out,
+        stop,
+        args.duration,
+        viz=args.viz,
+        planners=planners,
+        take_over=args.take_over,
     )

@@ -1,6 +1,7 @@
 """``fleet status|estop|resume [--config F] [--json]``: talk to the fleet over the bus.
 
-``status`` queries the daemon's status queryable (exit 1 when no daemon answers). ``estop``
+``status`` queries the daemon's status queryable (exit 1 when no daemon answers) and names
+the controller that answers (``controller``; ``controllers``: every one that answered). ``estop``
 publishes a latched emergency stop straight to the agents (through the hub, or the daemon's
 session when no hub runs): every agent stops its robot and refuses commands until ``resume``.
 Both then ask every holder of the latch (``estop/state/<role>/<id>``) until each known agent
@@ -98,11 +99,19 @@ def run(args) -> int:
                 file=sys.stderr,
             )
             return 1
-        st = replies[0]
+        from controller.runtime.claim import newest_status
+
+        st = newest_status(replies)
+        others = sorted({r.controller for r in replies} - {st.controller})
         if args.json:
-            emit_json({"ok": True, **wire.to_dict(st)})
+            emit_json({"ok": True, **wire.to_dict(st), "controllers": [st.controller, *others]})
         else:
-            print(f"fleet {st.fleet}: phase {st.phase}, e-stop {'ENGAGED' if st.estop else 'off'}")
+            print(
+                f"fleet {st.fleet}: phase {st.phase}, e-stop {'ENGAGED' if st.estop else 'off'}"
+                f" (controller {st.controller or 'unnamed'})"
+            )
+            if others:
+                print(f"  MORE THAN ONE CONTROLLER ANSWERED: also {', '.join(others)}")
             for r in st.robots:
                 print(
                     f"  {r['id']}: {'present' if r['present'] else 'absent'}"

@@ -152,6 +152,11 @@ class ZenohSection:
     operators: tuple[str, ...] = _rule(())  # usernames that may put estop/resume (acl profile)
     # filled by the loader for an acl profile: the generated access_control block (JSON)
     acl_block: str = _rule("", internal=True)
+    # bytes: a received payload larger than this is dropped unread (counted as oversize)
+    max_payload: int = _rule(65536, min=1024, max=64 * 1024 * 1024)
+    # samples kept per key in a subscriber's inbox (a pose key normally holds 1-2 per tick); a
+    # flood drops the oldest (inbox_overflow); the lockstep dry run's inboxes are unbounded
+    inbox_depth: int = _rule(8, min=1, max=1_000_000)
 
     @property
     def secured(self) -> bool:

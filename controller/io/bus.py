@@ -1,9 +1,12 @@
 """The bus: one zenoh session per process role, built from the ``[zenoh]`` config section.
 
 I/O edge only (the planning core never imports this). Publishers encode with ``controller.wire``;
-subscriber callbacks run on zenoh's thread and only decode and enqueue into an ``Inbox`` (a bad
-payload is counted and logged once per burst, never raised). Liveliness tokens mark presence;
-a queryable serves the fleet status.
+subscriber callbacks run on zenoh's thread and only check the payload's size (over
+``zenoh.max_payload`` it is dropped unread, counted) and stage the raw bytes for the session's
+decoder thread, which decodes them into the subscriber's ``Inbox`` (a bad payload is counted and
+logged once per burst, never raised). Staging and inboxes keep at most ``zenoh.inbox_depth``
+samples per key (a flood drops the oldest, counted), except the lossless ones (lockstep).
+Liveliness tokens mark presence; a queryable serves the fleet status.
 
 Zenoh facts this relies on (NOTES.md): a session that is not closed hangs the process at exit,
 so ``Bus`` is a context manager and every test closes it; a channel subscriber you keep no
@@ -15,9 +18,9 @@ from __future__ import annotations
 import ipaddress
 import json
 import logging
-import queue
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +33,8 @@ from controller.config import ConfigError, ZenohIdentity, ZenohSection
 
 log = logging.getLogger(__name__)
 
-#: bytes: a payload larger than this is dropped unread (counted): no message of ours comes close
+#: bytes: the codec's own ceiling; a session drops anything over ``zenoh.max_payload`` (64 KiB
+#: by default) before this, unread
 MAX_PAYLOAD_BYTES = 4 * 1024 * 1024
 
 
@@ -191,28 +195,49 @@ class BusError(ConnectionError):
 
 
 class DecodeStats:
-    """Counts payloads that did not decode, per key; logs the first of each burst."""
+    """Counts payloads that did not decode (oversized ones apart too) and samples a full inbox
+    dropped, per key; logs the first of each burst."""
 
     def __init__(self, quiet_after: float = 5.0) -> None:
         self._lock = threading.Lock()
         self.counts: dict[str, int] = {}
-        self._last_logged: dict[str, float] = {}
+        self.oversize: dict[str, int] = {}
+        self.overflow: dict[str, int] = {}
+        self._last_logged: dict[tuple[str, str], float] = {}
         self._quiet_after = quiet_after
 
-    def bad(self, key: str, err: Exception) -> None:
+    def _count(self, table: dict[str, int], what: str, key: str, detail: object) -> None:
         now = time.monotonic()
         with self._lock:
-            self.counts[key] = self.counts.get(key, 0) + 1
-            last = self._last_logged.get(key)
+            n = table[key] = table.get(key, 0) + 1
+            last = self._last_logged.get((what, key))
             if last is None or now - last > self._quiet_after:
-                self._last_logged[key] = now
-                n = self.counts[key]
-                log.warning("dropped a bad payload on %s (%d so far): %s", key, n, err)
+                self._last_logged[(what, key)] = now
+                log.warning("dropped %s on %s (%d so far): %s", what, key, n, detail)
+
+    def bad(self, key: str, err: Exception) -> None:
+        """A payload that did not decode."""
+        self._count(self.counts, "a bad payload", key, err)
+
+    def too_large(self, key: str, size: int, limit: int) -> None:
+        """A payload over the session's limit, dropped unread (also a bad payload)."""
+        self._count(self.oversize, "an oversized payload", key, f"{size} bytes > {limit}")
+        with self._lock:
+            self.counts[key] = self.counts.get(key, 0) + 1
+
+    def overflowed(self, key: str) -> None:
+        """A full inbox dropped the oldest sample of ``key``."""
+        self._count(self.overflow, "the oldest queued sample (inbox full)", key, "a flood?")
 
     @property
     def total(self) -> int:
         with self._lock:
             return sum(self.counts.values())
+
+    @property
+    def total_oversize(self) -> int:
+        with self._lock:
+            return sum(self.oversize.values())
 
 
 def decode_payload(
@@ -221,13 +246,14 @@ def decode_payload(
     payload: bytes,
     msg_type: type[wire.Message] | None,
     stats: DecodeStats,
+    max_bytes: int = MAX_PAYLOAD_BYTES,
 ) -> wire.Message | None:
-    """A subscriber's decode step: the message, or None after counting a bad payload (too
-    large, not JSON, wrong fields or types, NaN/inf, out-of-range magnitudes, no registered
-    type for ``key``). Never raises."""
+    """A subscriber's decode step: the message, or None after counting a bad payload (over
+    ``max_bytes``, not JSON, wrong fields or types, NaN/inf, out-of-range magnitudes, no
+    registered type for ``key``). Never raises."""
     try:
-        if len(payload) > MAX_PAYLOAD_BYTES:
-            raise wire.WireError(f"payload of {len(payload)} bytes > {MAX_PAYLOAD_BYTES}")
+        if len(payload) > max_bytes:
+            raise wire.WireError(f"payload of {len(payload)} bytes > {max_bytes}")
         tp = msg_type
         if tp is None:
             topic = wire.topic_for_key(fleet, key)
@@ -241,48 +267,166 @@ def decode_payload(
 
 
 class Inbox:
-    """A thread-safe queue of ``Received`` samples, filled by zenoh callbacks.
+    """A thread-safe inbox of ``Received`` samples, filled by the bus's decoder thread (or
+    anyone: replies, replays, tests), emptied oldest first.
+
+    Bounds (0: none): ``depth`` samples per key, a new one then drops that key's oldest (a
+    flooding key evicts only its own samples); ``maxsize`` samples in all, a new one then is
+    dropped itself. Both count in ``overflow`` and call ``on_drop(key)``. Lossless paths (the
+    lockstep clock and its answers) use neither.
 
     ``waker``, when given, is notified after every arrival: a consumer that waits for several
     inboxes at once (the lockstep handshake) blocks on it instead of polling.
     """
 
-    def __init__(self, maxsize: int = 0, waker: threading.Condition | None = None) -> None:
-        self._q: queue.Queue[Received] = queue.Queue(maxsize)
+    def __init__(
+        self,
+        maxsize: int = 0,
+        waker: threading.Condition | None = None,
+        depth: int = 0,
+        on_drop: Callable[[str], None] | None = None,
+    ) -> None:
+        self._cond = threading.Condition()
+        self._buckets: dict[Any, deque[tuple[int, Any]]] = {}
+        self._n = 0
+        self._seq = 0
+        self.maxsize = maxsize
+        self.depth = depth
         self.overflow = 0
+        self._on_drop = on_drop
         self._waker = waker
 
-    def put(self, item: Received) -> None:
-        try:
-            self._q.put_nowait(item)
-        except queue.Full:
-            self.overflow += 1
+    def _add(self, bucket: Any, key: str, entry: Any) -> None:
+        dropped = False
+        with self._cond:
+            if self.maxsize and self._n >= self.maxsize:
+                self.overflow += 1
+                dropped = True
+            else:
+                q = self._buckets.get(bucket)
+                if q is None:
+                    q = self._buckets[bucket] = deque()
+                if self.depth and len(q) >= self.depth:
+                    q.popleft()
+                    self.overflow += 1
+                    dropped = True
+                else:
+                    self._n += 1
+                self._seq += 1
+                q.append((self._seq, entry))
+                self._cond.notify_all()
+        if dropped and self._on_drop is not None:
+            self._on_drop(key)
         if self._waker is not None:
             with self._waker:
                 self._waker.notify_all()
 
+    def put(self, item: Received) -> None:
+        self._add(item.key, item.key, item)
+
+    def _take_all(self) -> list[Any]:
+        """Every entry, oldest first (under the lock's protection of the swap)."""
+        with self._cond:
+            if not self._n:
+                return []
+            buckets = list(self._buckets.values())
+            self._buckets = {}
+            self._n = 0
+        if len(buckets) == 1:
+            return [e for _, e in buckets[0]]
+        return [e for _, e in sorted((x for q in buckets for x in q), key=lambda x: x[0])]
+
     def drain(self) -> list[Received]:
         """Everything queued so far, oldest first; never blocks."""
-        out: list[Received] = []
-        while True:
-            try:
-                out.append(self._q.get_nowait())
-            except queue.Empty:
-                return out
+        return self._take_all()
 
     def qsize(self) -> int:
         """Samples waiting (approximate while producers run)."""
-        return self._q.qsize()
+        return self._n
+
+    def wait(self, timeout: float) -> bool:
+        """Whether something is queued, waiting at most ``timeout`` seconds for it."""
+        with self._cond:
+            return self._cond.wait_for(lambda: self._n > 0, timeout)
+
+    def wake(self) -> None:
+        """Wake whoever waits (shutting down)."""
+        with self._cond:
+            self._cond.notify_all()
 
     def get(self, timeout: float) -> Received | None:
         """The next sample, waiting at most ``timeout`` seconds."""
-        try:
-            return self._q.get(timeout=timeout)
-        except queue.Empty:
-            return None
+        with self._cond:
+            if not self._cond.wait_for(lambda: self._n > 0, timeout):
+                return None
+            bucket = min(self._buckets, key=lambda b: self._buckets[b][0][0])
+            q = self._buckets[bucket]
+            entry = q.popleft()[1]
+            if not q:
+                del self._buckets[bucket]
+            self._n -= 1
+            return entry
 
     def __iter__(self) -> Iterator[Received]:
         return iter(self.drain())
+
+
+@dataclass(frozen=True)
+class _Raw:
+    """A sample as it arrived, for the decoder thread: decoded into ``box``."""
+
+    recv_time: float
+    key: str
+    payload: bytes
+    decode: Callable[[str, bytes], wire.Message | None]
+    box: Inbox
+    on_message: Callable[[Received], None] | None
+
+
+class Decoder:
+    """The bus's decoder thread: zenoh's callbacks only stage the raw bytes (bounded per
+    subscriber and key, dropping the oldest); this thread decodes them, in arrival order, into
+    the subscribers' inboxes and runs their ``on_message`` handlers. A bad payload is counted
+    (by its decode function) and never reaches an inbox."""
+
+    def __init__(self, depth: int, on_drop: Callable[[str], None]) -> None:
+        self.stage = Inbox(depth=depth, on_drop=on_drop)
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name="bus-decoder", daemon=True)
+        self._thread.start()
+
+    def submit(self, raw: _Raw, lossless: bool) -> None:
+        """Stage a sample (zenoh's thread); ``lossless`` samples are never evicted."""
+        # a lossless sample is a bucket of its own (never full): it waits for its turn
+        bucket = (id(raw.box), raw.key) if not lossless else (id(raw.box), raw.key, id(raw))
+        self.stage._add(bucket, raw.key, raw)
+
+    def _run(self) -> None:
+        while True:
+            self.stage.wait(0.5)
+            entries = self.stage._take_all()
+            if not entries and self._closed:
+                return
+            for raw in entries:
+                self._deliver(raw)
+
+    @staticmethod
+    def _deliver(raw: _Raw) -> None:
+        msg = raw.decode(raw.key, raw.payload)
+        if msg is None:
+            return
+        item = Received(raw.recv_time, raw.key, msg)
+        raw.box.put(item)
+        if raw.on_message is not None:
+            try:
+                raw.on_message(item)
+            except Exception:  # noqa: BLE001
+                log.exception("message handler failed on %s", raw.key)
+
+    def close(self) -> None:
+        self._closed = True
+        self.stage.wake()
+        self._thread.join(timeout=2.0)
 
 
 class Publisher:
@@ -318,7 +462,10 @@ class Bus:
     ) -> None:
         self.fleet = fleet
         self.stats = DecodeStats()
+        self.max_payload = section.max_payload  # bytes: larger samples are dropped unread
+        self.inbox_depth = section.inbox_depth  # samples per key in a bounded inbox
         self._inboxes: list[Inbox] = []
+        self._decoder_thread: Decoder | None = None
         self._handles: list[Any] = []
         conf = zenoh_config(
             section, mode=mode, listen=listen, connect=connect, lease_s=lease_s, identity=identity
@@ -346,6 +493,8 @@ class Bus:
                 pass
         self._handles.clear()
         self.session.close()
+        if self._decoder_thread is not None:
+            self._decoder_thread.close()
 
     def __enter__(self) -> Bus:
         return self
@@ -354,11 +503,52 @@ class Bus:
         self.close()
 
     def drops(self) -> dict[str, int]:
-        """What this session dropped: payloads that did not decode, samples a full inbox lost."""
+        """What this session dropped: payloads that did not decode (``bad_payloads``, the
+        oversized ones included and also counted apart, ``oversize_payloads``) and samples a
+        full inbox or the decoder's staging lost (``inbox_overflow``)."""
         return {
             "bad_payloads": self.stats.total,
-            "inbox_overflow": sum(b.overflow for b in self._inboxes),
+            "oversize_payloads": self.stats.total_oversize,
+            "inbox_overflow": sum(b.overflow for b in self._inboxes)
+            + (self._decoder_thread.stage.overflow if self._decoder_thread else 0),
         }
+
+    def drops_by_key(self) -> dict[str, dict[str, int]]:
+        """The same drops per key: ``{"bad": {key: n}, "oversize": ..., "overflow": ...}``."""
+        st = self.stats
+        with st._lock:
+            return {
+                "bad": dict(st.counts),
+                "oversize": dict(st.oversize),
+                "overflow": dict(st.overflow),
+            }
+
+    def inbox(self, *, lossless: bool = False, waker: threading.Condition | None = None) -> Inbox:
+        """A new inbox bounded at ``zenoh.inbox_depth`` samples per key (dropping the oldest,
+        counted), or unbounded when ``lossless``."""
+        depth = 0 if lossless else self.inbox_depth
+        return Inbox(waker=waker, depth=depth, on_drop=self.stats.overflowed)
+
+    def _decoder(self) -> Decoder:
+        """The session's decoder thread, started with the first subscription."""
+        if self._decoder_thread is None:
+            self._decoder_thread = Decoder(self.inbox_depth, self.stats.overflowed)
+        return self._decoder_thread
+
+    def _payload(self, sample: zenoh.Sample, key: str, count: bool = True) -> bytes | None:
+        """A sample's bytes, or None after counting it (over ``max_payload``, unreadable):
+        the size is checked before anything is copied. ``count`` False: an oversized sample
+        is dropped uncounted (the raw tap: a decoding subscriber counts the same sample)."""
+        try:
+            size = len(sample.payload)
+            if size > self.max_payload:
+                if count:
+                    self.stats.too_large(key, size, self.max_payload)
+                return None
+            return sample.payload.to_bytes()
+        except Exception as exc:  # noqa: BLE001 - a callback must never raise
+            self.stats.bad(key, exc)
+            return None
 
     # -- keys
     def key(self, topic: str, **parts: str) -> str:
@@ -400,34 +590,34 @@ class Bus:
         msg_type: type[wire.Message] | None,
         inbox: Inbox | None = None,
         on_message: Callable[[Received], None] | None = None,
+        lossless: bool = False,
     ) -> Inbox:
-        """Decode samples on ``key_expr`` into ``inbox`` (created if not given).
+        """Samples on ``key_expr`` into ``inbox`` (created if not given: bounded per key unless
+        ``lossless``, see ``inbox``). On zenoh's thread only the size is checked and the raw
+        bytes staged; the bus's decoder thread decodes them into the inbox (staging is bounded
+        per key like the inbox, unless ``lossless`` or the inbox is unbounded).
 
         ``msg_type`` None decodes by the key's registered topic. ``on_message``, if given, runs
-        after enqueueing on zenoh's thread: keep it short.
+        on the decoder thread after enqueueing: keep it short.
         """
-        box = inbox if inbox is not None else Inbox()
+        box = inbox if inbox is not None else self.inbox(lossless=lossless)
         self._inboxes.append(box)
         fleet = self.fleet
         stats = self.stats
+        limit = self.max_payload
+
+        def decode(k: str, payload: bytes) -> wire.Message | None:
+            return decode_payload(fleet, k, payload, msg_type, stats, limit)
+
+        decoder = self._decoder()
+        staged_lossless = lossless or (box.depth == 0 and box.maxsize == 0)
 
         def callback(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
-            try:
-                payload = sample.payload.to_bytes()
-            except Exception as exc:  # noqa: BLE001 - a callback must never raise
-                stats.bad(k, exc)
-                return
-            msg = decode_payload(fleet, k, payload, msg_type, stats)
-            if msg is None:
-                return
-            item = Received(time.time(), k, msg)
-            box.put(item)
-            if on_message is not None:
-                try:
-                    on_message(item)
-                except Exception:  # noqa: BLE001
-                    log.exception("message handler failed on %s", k)
+            payload = self._payload(sample, k)
+            if payload is not None:
+                raw = _Raw(time.time(), k, payload, decode, box, on_message)
+                decoder.submit(raw, staged_lossless)
 
         sub = self.session.declare_subscriber(key_expr, callback)
         self._handles.append(sub)
@@ -438,22 +628,29 @@ class Bus:
         topic: str,
         inbox: Inbox | None = None,
         waker: threading.Condition | None = None,
+        lossless: bool = False,
         **parts: str,
     ) -> Inbox:
         """Decode a registered topic (one key with ``parts``, else every instance) into an inbox
-        (a new one notifying ``waker`` unless ``inbox`` is given)."""
+        (a new one notifying ``waker`` unless ``inbox`` is given; bounded per key unless
+        ``lossless``)."""
         t = wire.TOPICS[topic]
         if inbox is None:
-            inbox = Inbox(waker=waker)
+            inbox = self.inbox(lossless=lossless, waker=waker)
         k = t.key(self.fleet, **parts) if parts else t.wildcard(self.fleet)
         return self.subscribe(k, t.msg, inbox)
 
     def subscribe_raw(self, key_expr: str, callback: Callable[[str, bytes, float], None]) -> None:
-        """Raw bytes (key, payload, receive time) for the recorder; the callback must not raise."""
+        """Raw bytes (key, payload, receive time) for the recorder; the callback must not raise.
+        A payload over ``max_payload`` is counted and dropped unread, as for every subscriber."""
 
         def cb(sample: zenoh.Sample) -> None:
+            k = str(sample.key_expr)
+            payload = self._payload(sample, k, count=False)
+            if payload is None:
+                return
             try:
-                callback(str(sample.key_expr), sample.payload.to_bytes(), time.time())
+                callback(k, payload, time.time())
             except Exception:  # noqa: BLE001
                 log.exception("raw subscriber failed on %s", sample.key_expr)
 

@@ -41,7 +41,9 @@ class MemoryBus:
     def key(self, topic: str, **parts: str) -> str:
         return wire.key(topic, self.fleet, **parts)
 
-    def subscribe_topic(self, topic: str, inbox=None, waker=None, **parts: str) -> Inbox:
+    def subscribe_topic(
+        self, topic: str, inbox=None, waker=None, lossless: bool = False, **parts: str
+    ) -> Inbox:
         box = inbox if inbox is not None else Inbox(waker=waker)
         self.inboxes[topic] = box
         return box

@@ -7,6 +7,10 @@ drift-free rate keeper, runs the mission, serves ``fleet status`` and obeys ``fl
 seconds, or when the mission ends (robots then stop by their own watchdogs after one last zero
 command for everyone).
 
+One controller per fleet (``controller.runtime.claim``): a daemon that finds another
+controller's liveliness token refuses to start unless told to take over; a running one that
+sees a newer controller stops commanding and exits 1 naming it.
+
 The e-stop latch: at start, and after the loop was held up (a hung process, SIGSTOP), the
 controller asks every holder (hub, agents) for the latched e-stop and commands zero until one
 answers, so a restarted or resumed daemon never drives robots through an e-stop it missed.
@@ -25,6 +29,7 @@ from controller.config import FleetConfig
 from controller.io.bus import Bus, BusError
 from controller.io.ratekeeper import Ratekeeper
 from controller.mission.types import Mission
+from controller.runtime.claim import ROLE, Claim, make_ident, wait_until_alone
 from controller.runtime.node import ControllerNode
 from controller.runtime.planner import PlannerWorker
 from controller.runtime.recording import open_recorder
@@ -36,6 +41,11 @@ LATCH_WAIT_AT_START = 2.0  # s: nobody answers the latch query at start → go o
 LATCH_RETRY = 0.5  # s between latch queries while one is pending
 # s: a loop held up this long (a hung process) re-reads the latch before commanding again
 GAP = 1.0
+FIND_TIMEOUT = 1.0  # s: the look-up of other controllers' tokens at start
+# s: a take-over waits this long for the old controller to stop (a hung one keeps its token
+# until its transport lease, 10 s by default, expires)
+TAKE_OVER_WAIT = 15.0
+REOPEN_WAIT = 5.0  # s: the old controller's endpoint is freed when its process ends
 
 
 def open_daemon_bus(cfg: FleetConfig) -> tuple[Bus, str]:
@@ -56,6 +66,61 @@ def open_daemon_bus(cfg: FleetConfig) -> tuple[Bus, str]:
         except BusError:
             raise listen_error from None
         return bus, "joined the hub"
+
+
+def _reopen(cfg: FleetConfig, stop: threading.Event) -> tuple[Bus, str]:
+    """The daemon's session again, once the controller taken over from is gone (it may have
+    been the one listening on the endpoints)."""
+    deadline = time.monotonic() + REOPEN_WAIT
+    while True:
+        try:
+            return open_daemon_bus(cfg)
+        except BusError:
+            if time.monotonic() >= deadline or stop.is_set():
+                raise
+            stop.wait(0.2)  # retrying an endpoint a process frees as it ends
+
+
+def claim_fleet(
+    cfg: FleetConfig, take_over: bool, stop: threading.Event
+) -> tuple[Bus, str, Claim] | int:
+    """Open the daemon's session and claim the fleet (``controller.runtime.claim``): the bus,
+    how it joined and the claim; or exit 1 when another controller runs (without
+    ``take_over``) or would not stop (with it)."""
+    bus, how = open_daemon_bus(cfg)
+    try:
+        found = bus.alive_ids(ROLE, timeout=FIND_TIMEOUT)
+    except BaseException:
+        bus.close()
+        raise
+    claim = Claim(make_ident(int(time.time() * 1e3), found), found)
+    if not found:
+        return bus, how, claim
+    name = cfg.fleet.name
+    with bus:
+        if not take_over:
+            print(
+                f"fleet daemon: another controller of fleet {name!r} is running "
+                f"({', '.join(found)}): not starting (fleet daemon --take-over replaces it)",
+                file=sys.stderr,
+            )
+            return 1
+        claim.watch(bus)
+        bus.declare_alive(ROLE, claim.ident)
+        print(
+            f"fleet daemon: taking over fleet {name!r} from {', '.join(found)} as {claim.ident}",
+            file=sys.stderr,
+        )
+        if not wait_until_alone(claim, TAKE_OVER_WAIT, stop):
+            left = sorted(claim.predecessors) or [claim.yielded_to]
+            print(
+                f"fleet daemon: {', '.join(left)} did not stop within {TAKE_OVER_WAIT:.0f} s: "
+                "not starting (nothing was commanded)",
+                file=sys.stderr,
+            )
+            return 1
+    bus, how = _reopen(cfg, stop)
+    return bus, how, claim
 
 
 class LatchWatch:
@@ -113,32 +178,46 @@ def run_daemon(
     duration: float = 0.0,
     viz: bool = False,
     planners: PlannerWorker | None = None,
+    take_over: bool = False,
 ) -> int:
-    """The lab loop. Exit status: 0 stopped or done, 1 the mission failed. ``viz``: serve the
-    recorded messages live to Foxglove on 127.0.0.1. ``planners``: the worker ``mission``
-    plans through, off the loop (closed at the end)."""
+    """The lab loop. Exit status: 0 stopped or done, 1 the mission failed, another controller
+    runs (without ``take_over``) or a newer one took over. ``viz``: serve the recorded
+    messages live to Foxglove on 127.0.0.1. ``planners``: the worker ``mission`` plans
+    through, off the loop (closed at the end)."""
+    claimed = claim_fleet(cfg, take_over, stop)
+    if isinstance(claimed, int):
+        if planners is not None:
+            planners.close()
+        return claimed
+    bus, how, claim = claimed
     recorder = open_recorder(cfg, out, f"daemon/{mission_kind}", viz=viz, who="fleet daemon")
     status = 0
     health = ""
     try:
-        bus, how = open_daemon_bus(cfg)
         with bus:
+            claim.watch(bus)
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
+            rk = Ratekeeper(cfg.fleet.rate_hz)
             node = ControllerNode(
                 cfg,
                 bus,
                 mission,
                 make_estimator(cfg),
-                extra_drops=recorder.drops,
+                # the loop's health beside the drops: ticks that started late, periods skipped
+                extra_drops=lambda: {
+                    **recorder.drops(),
+                    "late_ticks": rk.lagged,
+                    "skipped_ticks": rk.skipped,
+                },
                 clock=time.monotonic,
                 planners=planners,
+                ident=claim.ident,
             )
             latch = LatchWatch(node)
             latch.start(time.monotonic(), LATCH_WAIT_AT_START)
-            rk = Ratekeeper(cfg.fleet.rate_hz)
             print(
                 f"fleet daemon: fleet {cfg.fleet.name!r} on {list(cfg.zenoh.listen)} ({how}), "
-                f"{cfg.fleet.rate_hz} Hz, log {recorder.location}",
+                f"{cfg.fleet.rate_hz} Hz, log {recorder.location}, controller {claim.ident}",
                 file=sys.stderr,
             )
             t0 = time.time()
@@ -151,7 +230,16 @@ def run_daemon(
                 if mono - last > GAP:
                     log.warning("the loop was held up %.1f s: re-reading the e-stop", mono - last)
                     latch.start(mono, None)
+                    claim.check(bus)  # taken over meanwhile?
                 last = mono
+                if claim.yielded.is_set():
+                    status = 1
+                    print(
+                        f"fleet daemon: controller {claim.yielded_to} took over: stopped "
+                        "commanding",
+                        file=sys.stderr,
+                    )
+                    break
                 latch.poll(mono)
                 now = time.time()  # wall clock: pose stamps come from other computers
                 result = node.tick(now)
@@ -171,7 +259,8 @@ def run_daemon(
                     break
                 if duration and now - t0 >= duration:
                     break
-            node.hold(time.time())
+            if not claim.yielded.is_set():
+                node.hold(time.time())
             ticks = node.status().tick_ms
             health = (
                 f"; {node.counters.ticks} ticks, {rk.lagged} late, {budget.over} over the "

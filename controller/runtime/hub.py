@@ -74,7 +74,11 @@ def run_hub(cfg: FleetConfig, stop: threading.Event, duration: float = 0.0) -> i
         cfg.zenoh, cfg.fleet.name, mode="router", listen=list(cfg.zenoh.listen), connect=[]
     ) as bus:
         bus.subscribe(
-            bus.key("estop"), wire.EStop, Inbox(maxsize=1), on_message=lambda r: latch.live(r.msg)
+            bus.key("estop"),
+            wire.EStop,
+            Inbox(maxsize=1),
+            on_message=lambda r: latch.live(r.msg),
+            lossless=True,  # every e-stop reaches the latch, whatever floods the key
         )
         own = bus.serve_estop("hub", "main", latch.state)
 

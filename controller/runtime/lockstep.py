@@ -71,7 +71,7 @@ class LockstepCoordinator:
         # handshakes run on sim time), and the ticks continue from there
         self.t0 = float(hub.t)
         self._clock = bus.publisher("sim_clock")
-        self._done = bus.subscribe_topic("sim_done")
+        self._done = bus.subscribe_topic("sim_done", lossless=True)
         self._object_pub = bus.publisher("object_pose")
         self._truth_obj = bus.publisher("truth_object")
         self._truth_robot = {
@@ -191,7 +191,7 @@ class ControllerLockstep:
 
     def __init__(self, node: ControllerNode, bus: Bus, wait_inputs: float) -> None:
         self.node = node
-        self.ticks = bus.subscribe_topic("sim_clock")
+        self.ticks = bus.subscribe_topic("sim_clock", lossless=True)
         self.wait_inputs = wait_inputs
         self.stop = threading.Event()
         self.error: BaseException | None = None

@@ -35,7 +35,10 @@ from controller.mission.types import FleetView, Mission, MissionOutput
 
 log = logging.getLogger(__name__)
 
-STAGES = ("sample", "plan", "safety", "publish")
+# s: a pose stamped at most this after the tick is taken as stamped (float rounding of sim time,
+# sub-tick sensor timing); later stamps are taken at the tick
+AHEAD_TOLERANCE = 1e-3
+STAGES = ("sample", "plan", "safety", "publish")  # timed: sample+estimate, plan, safety, publish
 TIMINGS = 200_000  # ticks of stage timings kept (the run summary's; about 3 h at 20 Hz)
 
 
@@ -62,6 +65,7 @@ class NodeCounters:
     link_restored: int = 0
     skewed: int = 0  # poses stamped further than fleet.max_clock_skew from the tick time
     over_budget: int = 0  # lab ticks that took longer than fleet.tick_budget
+    ahead: int = 0  # poses stamped > 1 ms after the tick time (within the skew): taken at the tick
 
 
 class ControllerNode:
@@ -77,10 +81,13 @@ class ControllerNode:
         extra_drops: Callable[[], dict[str, int]] | None = None,
         clock: Callable[[], float] | None = None,
         planners: Any = None,
+        ident: str = "main",
     ) -> None:
         """``clock`` (s, monotonic) only times the stages; ``extra_drops`` adds drop counters
         of other parts (the recorder) to ``fleet status``; ``planners`` (the planner worker)
-        adds its plan latencies (``plan_latency_s``)."""
+        adds its plan latencies (``plan_latency_s``); ``ident`` is the controller's liveliness
+        id (``alive/controller/<ident>``, named in ``fleet status``)."""
+        self.ident = ident
         self.clock = clock
         self.planners = planners
         self.last_tick_s: float | None = None  # the last tick's duration (with a clock)
@@ -107,13 +114,18 @@ class ControllerNode:
         self.last_tick = 0.0
         self._seq = 0
         self.inputs_arrived = threading.Condition()  # notified on every pose (lockstep waits)
-        self._poses = bus.subscribe_topic("robot_pose", waker=self.inputs_arrived)
-        self._object = bus.subscribe_topic("object_pose", waker=self.inputs_arrived)
-        self._estops = bus.subscribe_topic("estop")
+        # bounded per robot (a flood drops the oldest), lossless in the lockstep dry run
+        lossless = lossless_commands
+        self._poses = bus.subscribe_topic(
+            "robot_pose", waker=self.inputs_arrived, lossless=lossless
+        )
+        self._object = bus.subscribe_topic(
+            "object_pose", waker=self.inputs_arrived, lossless=lossless
+        )
+        self._estops = bus.subscribe_topic("estop", lossless=True)  # never drop an e-stop
         self._robot_events = bus.subscribe_topic("robot_event")
         self._latch_replies = Inbox()
         self._latch_key = bus.serve_estop("controller", "main", self.latch_state)
-        lossless = lossless_commands
         self._cmd_pub = {
             r: bus.publisher("robot_cmd", command=True, lossless=lossless, id=r) for r in self.ids
         }
@@ -122,7 +134,7 @@ class ControllerNode:
         self._done_pub = bus.publisher("sim_done", command=True, lossless=True)
         bus.watch_alive("robot", self._on_alive)
         bus.serve("status", self.status)
-        bus.declare_alive("controller", "main")
+        bus.declare_alive("controller", ident)
 
     # -- inputs
     def _on_alive(self, rid: str, alive: bool) -> None:
@@ -210,10 +222,21 @@ class ControllerNode:
             )
         return True
 
+    def _stamp(self, t: float, now: float | None) -> float:
+        """A pose's stamp, but never after the tick: a measurement from the future (a fast
+        clock, or a spoofer inside the skew) is taken as made at the tick, so it cannot
+        extrapolate a filter past the tick nor push its timeline ahead (counted: ``ahead``).
+        Up to ``AHEAD_TOLERANCE`` after the tick a stamp is kept (rounding, not a clock)."""
+        if now is None or t <= now + AHEAD_TOLERANCE:
+            return t
+        self.counters.ahead += 1
+        return now
+
     def sample(self, now: float | None = None) -> None:
         """Drain the inboxes into the filters and the latched e-stop. With ``now`` (the tick
         time: the same clock domain as the stamps) a pose stamped further than
-        ``fleet.max_clock_skew`` from it is dropped and counted (``skewed``)."""
+        ``fleet.max_clock_skew`` from it is dropped and counted (``skewed``), and one stamped
+        after it is taken at ``now`` (``ahead``)."""
         self._sample_estop()
         self._sample_events()
         for item in self._poses.drain():
@@ -223,7 +246,7 @@ class ControllerNode:
             m = item.msg
             if self._skewed(m.t, now):
                 continue
-            res = self.est.measure_robot(rid, m.t, m.x, m.y, m.theta)
+            res = self.est.measure_robot(rid, self._stamp(m.t, now), m.x, m.y, m.theta)
             self.counters.poses += 1
             self.counters.rejected += res == "rejected"
             self.counters.out_of_order += res == "out_of_order"
@@ -231,7 +254,7 @@ class ControllerNode:
             m = item.msg
             if self._skewed(m.t, now):
                 continue
-            self.est.measure_object(m.t, m.x, m.y, m.theta)
+            self.est.measure_object(self._stamp(m.t, now), m.x, m.y, m.theta)
             self.counters.object_poses += 1
 
     def _robot_id(self, key: str) -> str:
@@ -416,6 +439,7 @@ class ControllerNode:
             counters={**vars(self.counters), **self.drops()},
             plan_latency_s={} if self.planners is None else self.planners.summary(),
             tick_ms=self._tick_percentiles(),
+            controller=self.ident,
         )
 
     def _tick_percentiles(self) -> dict[str, float]:

@@ -58,7 +58,7 @@ def test_garbage_payloads_are_counted_and_dropped(port):
     ep = f"tcp/127.0.0.1:{port}"
     with (
         Bus(ZenohSection(), "g", listen=[ep], connect=[]) as a,
-        Bus(ZenohSection(), "g", listen=[], connect=[ep]) as b,
+        Bus(ZenohSection(inbox_depth=64), "g", listen=[], connect=[ep]) as b,  # a 41-burst
     ):
         inbox = b.subscribe_topic("robot_cmd")  # wildcard over robots
         key = a.key("robot_cmd", id="r1")
@@ -104,3 +104,31 @@ def test_status_queryable_answers(port):
         assert present.wait(10.0)
         replies = b.query("status", wire.FleetStatus, timeout=5.0)
         assert [r.phase for r in replies] == ["approach"]
+
+
+def test_oversized_payloads_are_dropped_unread_and_a_flood_keeps_the_newest(port):
+    ep = f"tcp/127.0.0.1:{port}"
+    section = ZenohSection(max_payload=65536, inbox_depth=8)
+    with (
+        Bus(section, "f", listen=[ep], connect=[]) as ctl,
+        Bus(ZenohSection(), "f", listen=[], connect=[ep]) as rob,
+    ):
+        poses = ctl.subscribe_topic("robot_pose")
+        raw: list[str] = []
+        ctl.subscribe_raw(wire.fleet_prefix("f"), lambda k, p, t: raw.append(k))
+        key = rob.key("robot_pose", id="r1")
+        pub = rob.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+        wait_for(lambda: pub.matching_status.matching, 10.0, "the subscriber to match")
+        huge = b'{"t": 1.0, "seq": 1, "x": 0, "y": 0, "theta": 0, "pad": "' + b"x" * (4 << 20)
+        for _ in range(3):
+            pub.put(huge + b'"}')
+        n = 200
+        for i in range(n):
+            pub.put(wire.encode(wire.PoseMeasurement(t=float(i), seq=i, x=0.0, y=0.0, theta=0.0)))
+        wait_for(lambda: len(raw) == n, 10.0, "every small sample at the raw tap")
+        wait_for(lambda: ctl.drops()["inbox_overflow"] + poses.qsize() == n, 10.0, "decoded")
+        drops = ctl.drops()
+        assert drops["oversize_payloads"] == 3 and drops["bad_payloads"] == 3  # once, not twice
+        assert drops["inbox_overflow"] == n - 8
+        assert [r.msg.seq for r in poses.drain()] == list(range(n - 8, n))  # the newest
+        assert ctl.drops_by_key()["overflow"] == {key: n - 8}

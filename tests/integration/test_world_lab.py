@@ -50,7 +50,7 @@ class Truth:
     """The world's ground truth of every robot, as it arrives: (t, x, y, theta) per robot."""
 
     def __init__(self, bus: Bus) -> None:
-        self.inbox = bus.subscribe_topic("truth_robot")
+        self.inbox = bus.subscribe_topic("truth_robot", lossless=True)  # the whole history
         self.tracks: dict[str, list[tuple[float, float, float, float]]] = {r: [] for r in ROBOTS}
 
     def take(self) -> float:
@@ -150,8 +150,8 @@ def test_world_daemon_drivers_arrest_kill_restart(tmp_path, port):
         bus = connect_client(port, "the world")
         with bus:
             truth = Truth(bus)
-            phases = bus.subscribe_topic("plan", what="phase")
-            cmds = bus.subscribe_topic("world_cmd")
+            phases = bus.subscribe_topic("plan", lossless=True, what="phase")
+            cmds = bus.subscribe_topic("world_cmd", lossless=True)  # read as a history
             wait_for(lambda: truth.take() > 0, 20, "the world's truth")
             d1 = daemon(1, "capture")
             agents = [spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ROBOTS]
@@ -207,7 +207,7 @@ def test_a_driver_killed_mid_approach_is_lost_replanned_and_the_rest_arrest(tmp_
     procs = [world]
     try:
         with connect_client(port, "the world") as bus:
-            plans = bus.subscribe_topic("plan", what="*")
+            plans = bus.subscribe_topic("plan", lossless=True, what="*")
             truth = Truth(bus)
             wait_for(lambda: truth.take() > 0, 20, "the world's truth")
             procs.append(spawn(tmp_path / "d.txt", "daemon", "--config", c, "--mission",
