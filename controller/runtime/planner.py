@@ -20,7 +20,9 @@ tables) is sent to the worker process once and lives there; each job sends its i
 kB) and gets its plan back. Jobs are pure functions of those, in submission order: the worker
 computes what an in-process run would (``DeferredPlanners`` replays a dry run's log exactly).
 Latencies (wall s from submit to result) are kept per kind for ``fleet status`` and the run
-summary (``plan_latency_s``).
+summary (``plan_latency_s``). The worker is spawned, never forked (the daemon has zenoh's
+threads): a script that builds one must guard its top level with ``if __name__ ==
+"__main__":`` as multiprocessing asks (the ``fleet`` entry point and the benches do).
 """
 
 from __future__ import annotations
