@@ -367,7 +367,11 @@ class SimSection:
     outlier_rate: float = _rule(0.0, min=0, max=1)
     outlier_magnitude: float = _rule(0.5, min=0, max=100)
     realtime: bool = _rule(False)
-    tick_timeout: float = _rule(2.0, gt=0, max=600)
+    # s of wall time the lockstep clock waits for the controller's answer (and the controller
+    # for the measurements) before it counts a missed tick: a missed tick changes the run, so
+    # it is long enough that only a hung controller misses one (at a load of 14 on 2 cores a
+    # tick took over 2 s)
+    tick_timeout: float = _rule(10.0, gt=0, max=600)
     max_time: float = _rule(300.0, gt=0, max=1e6)
     # the pybullet object as it really is, against what [object] tells the controller (the
     # robustness sweep of bench/transport.py; 1, 1 and (0, 0): the same object)
