@@ -7,9 +7,13 @@ drift-free rate keeper, runs the mission, serves ``fleet status`` and obeys ``fl
 seconds, or when the mission ends (robots then stop by their own watchdogs after one last zero
 command for everyone).
 
-The e-stop latch: at start, and after the loop was held up (a hung process, SIGSTOP), the
-controller asks every holder (hub, agents) for the latched e-stop and commands zero until one
-answers, so a restarted or resumed daemon never drives robots through an e-stop it missed.
+The e-stop latch (``controller.latch``): at start, and after the loop was held up (a hung
+process, SIGSTOP), the controller asks every holder (hub, agents) for the latched e-stop and
+commands zero until one answers, so a restarted or resumed daemon never drives robots through an
+e-stop it missed. It starts "fail closed": joined to a hub, its latch is unknown (stopped) until
+it learns it (the hub's answer, any engaged answer) or an operator releases it; without a hub it
+is the keeper itself: it reads the latch's file at start (``runtime.estop.LatchFile``; no file:
+unknown) and writes it on every change.
 """
 
 from __future__ import annotations
@@ -25,14 +29,18 @@ from controller.config import FleetConfig
 from controller.io.bus import Bus, BusError
 from controller.io.ratekeeper import Ratekeeper
 from controller.mission.types import Mission
+from controller.runtime.estop import LatchFile, LatchKeeper
 from controller.runtime.node import ControllerNode
 from controller.runtime.recording import open_recorder
 from controller.runtime.wiring import make_estimator
 
 log = logging.getLogger(__name__)
 
-LATCH_WAIT_AT_START = 2.0  # s: nobody answers the latch query at start → go on released
+# s: nobody answers the latch query at start → stop waiting: the latch stays what it is (from
+# the file, or unknown: stopped until an operator's release), asked again every LATCH_UNKNOWN
+LATCH_WAIT_AT_START = 2.0
 LATCH_RETRY = 0.5  # s between latch queries while one is pending
+LATCH_UNKNOWN = 2.0  # s between latch queries while the latch is unknown
 # s: a loop held up this long (a hung process) re-reads the latch before commanding again
 GAP = 1.0
 
@@ -58,10 +66,12 @@ def open_daemon_bus(cfg: FleetConfig) -> tuple[Bus, str]:
 
 
 class LatchWatch:
-    """When the controller must (re-)read the latched e-stop, and for how long it waits."""
+    """When the controller must (re-)read the latched e-stop, and for how long it waits; with
+    a ``keeper`` (no hub: the daemon keeps the latch), the latch written on every change."""
 
-    def __init__(self, node: ControllerNode) -> None:
+    def __init__(self, node: ControllerNode, keeper: LatchKeeper | None = None) -> None:
         self.node = node
+        self.keeper = keeper
         self.give_up_at: float | None = None  # None: wait as long as it takes
         self.next_query = 0.0
 
@@ -71,10 +81,16 @@ class LatchWatch:
         self.next_query = mono + LATCH_RETRY
 
     def poll(self, mono: float) -> None:
+        if self.keeper is not None:
+            self.keeper.poll()
         if not self.node.latch_pending:
+            if not self.node.latch.known and mono >= self.next_query:
+                self.node.ask_latch(timeout=LATCH_RETRY)
+                self.next_query = mono + LATCH_UNKNOWN
             return
         if self.give_up_at is not None and mono >= self.give_up_at:
             self.node.release_latch()
+            self.next_query = mono + LATCH_UNKNOWN
         elif mono >= self.next_query:
             self.node.expect_latch(timeout=LATCH_RETRY)
             self.next_query = mono + LATCH_RETRY
@@ -97,6 +113,8 @@ def run_daemon(
         bus, how = open_daemon_bus(cfg)
         with bus:
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
+            # without a hub the daemon keeps the latch (its file); with one it learns it
+            file = LatchFile(cfg) if how == "listening" else None
             node = ControllerNode(
                 cfg,
                 bus,
@@ -104,8 +122,9 @@ def run_daemon(
                 make_estimator(cfg),
                 extra_drops=recorder.drops,
                 clock=time.monotonic,
+                latch_at_start=None if file is None else file.load(),
             )
-            latch = LatchWatch(node)
+            latch = LatchWatch(node, None if file is None else LatchKeeper(node.latch, file))
             latch.start(time.monotonic(), LATCH_WAIT_AT_START)
             rk = Ratekeeper(cfg.fleet.rate_hz)
             print(
@@ -142,6 +161,7 @@ def run_daemon(
                 if duration and now - t0 >= duration:
                     break
             node.hold(time.time())
+            latch.poll(time.monotonic())  # the last change of the latch written too
     finally:
         recorder.close()
     print(

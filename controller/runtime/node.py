@@ -30,6 +30,7 @@ import numpy as np
 from controller import wire
 from controller.config import FleetConfig
 from controller.io.bus import Inbox
+from controller.latch import FRESH_WORLD, Latch, note_latch, role_of
 from controller.mission.types import FleetView, Mission, MissionOutput
 
 log = logging.getLogger(__name__)
@@ -73,9 +74,13 @@ class ControllerNode:
         lossless_commands: bool = False,
         extra_drops: Callable[[], dict[str, int]] | None = None,
         clock: Callable[[], float] | None = None,
+        latch_at_start: wire.EStop | None = FRESH_WORLD,
     ) -> None:
         """``clock`` (s, monotonic) only times the stages; ``extra_drops`` adds drop counters
-        of other parts (the recorder) to ``fleet status``."""
+        of other parts (the recorder) to ``fleet status``. ``latch_at_start``: the e-stop latch
+        this node starts with - a fresh world's release (the dry run, replay, tests: the
+        default), the latch's file, or None: unknown, commanding zero until it learns the latch
+        or an operator releases it (the lab daemon)."""
         self.clock = clock
         self.timings: dict[str, list[float]] = {k: [] for k in STAGES}
         self.cfg = cfg
@@ -87,8 +92,7 @@ class ControllerNode:
         self.index = {rid: i for i, rid in enumerate(self.ids)}
         self.counters = NodeCounters()
         self.phase = "init"
-        self.estop = False
-        self.estop_msg: wire.EStop | None = None  # the message that set the e-stop state
+        self.latch = Latch("controller/main", latch_at_start)
         # True from ``expect_latch`` until a holder answers: every command is zero meanwhile
         self.latch_pending = False
         self.present = np.zeros(len(self.ids), dtype=bool)
@@ -130,48 +134,49 @@ class ControllerNode:
         self.present[i] = alive
 
     # -- the latched e-stop
-    def latch_state(self) -> wire.EStop:
+    @property
+    def estop(self) -> bool:
+        """Whether the robots are held stopped: an e-stop latched, or the latch unknown."""
+        return self.latch.stopped
+
+    def latch_state(self) -> wire.EStop | None:
         """The controller's latched e-stop, answered on ``estop/state/controller/main`` (zenoh's
-        thread). Never latched: released at t = 0, which any real message outranks."""
-        held = self.estop_msg
-        if held is not None:
-            return held
-        return wire.EStop(t=0.0, engaged=False, source="controller/main")
+        thread); None (no answer) while unknown."""
+        return self.latch.state()
 
     def expect_latch(self, timeout: float = 1.0) -> None:
         """Ask every holder of the latched e-stop (hub, agents) and command zero until one
         answers (a start, or a resume after the loop was hung): the controller must not command
         robots on a state it may have missed. ``release_latch`` ends the wait unanswered."""
         self.latch_pending = True
+        self.ask_latch(timeout)
+
+    def ask_latch(self, timeout: float = 1.0) -> None:
+        """Ask every holder of the latched e-stop without holding the commands (an unknown
+        latch holds them anyway); the answers are applied in the next tick's sample stage."""
         self.bus.query_async(
             self.bus.estop_wildcard(), wire.EStop, self._latch_replies, timeout=timeout
         )
 
     def release_latch(self) -> None:
-        """Nobody answered the latch query (no hub, no agent): go on with what this node holds."""
+        """Nobody answered the latch query (no hub, no agent): go on with what this node holds
+        (an unknown latch stays stopped until an operator's release)."""
         if self.latch_pending:
             log.warning("no holder answered the e-stop latch query; e-stop %s", self.estop)
         self.latch_pending = False
 
-    def _set_estop(self, msg: wire.EStop, how: str) -> None:
-        if self.estop != msg.engaged:
-            state = "engaged" if msg.engaged else "released"
-            log.warning("e-stop %s by %s (%s)", state, msg.source, how)
-        self.estop = bool(msg.engaged)
-        self.estop_msg = msg
-
     def _sample_estop(self) -> None:
-        replies = [i.msg for i in self._latch_replies.drain() if i.key != self._latch_key]
+        fleet = self.cfg.fleet.name
+        replies = [
+            (role_of(i.key, fleet), i.msg)
+            for i in self._latch_replies.drain()
+            if i.key != self._latch_key
+        ]
         if replies:
             self.latch_pending = False
-            newest = wire.newest_estop(replies)
-            held = self.estop_msg
-            if newest is not None and (
-                held is None or wire.newest_estop([held, newest]) is not held
-            ):
-                self._set_estop(newest, "latch query")
+            note_latch("controller", self.latch.answers(replies))
         for item in self._estops.drain():
-            self._set_estop(item.msg, "live")
+            note_latch("controller", self.latch.operator(item.msg))
 
     def _sample_events(self) -> None:
         for item in self._robot_events.drain():
@@ -402,8 +407,18 @@ class ControllerNode:
             phase=self.phase,
             estop=self.estop,
             robots=robots,
-            counters={**vars(self.counters), **self.drops()},
+            counters={**vars(self.counters), **self.drops(), **self._latch_counters()},
         )
+
+    def _latch_counters(self) -> dict[str, int]:
+        """The latch in ``fleet status``: its epoch, 1 while unknown, refusals so far."""
+        c = self.latch.counters
+        return {
+            "estop_epoch": self.latch.epoch,
+            "estop_unknown": int(not self.latch.known),
+            "estop_replays_refused": c.replays_refused,
+            "estop_answers_refused": c.answers_refused,
+        }
 
 
 def _known(estimate: Any) -> Any:

@@ -73,11 +73,11 @@ def test_a_tick_takes_in_poses_and_publishes_one_command_per_robot(rig):
 
 def test_an_engaged_estop_zeroes_every_command_until_released(rig):
     cfg, bus, _, node = rig
-    bus.deliver("estop", wire.EStop(t=0.0, engaged=True, source="op"))
+    bus.deliver("estop", wire.EStop(t=0.0, engaged=True, source="op", epoch=1))
     node.tick(1.0)
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.0 for r in cfg.robots)
     assert node.status().estop is True
-    bus.deliver("estop", wire.EStop(t=0.0, engaged=False, source="op"))
+    bus.deliver("estop", wire.EStop(t=0.0, engaged=False, source="op", epoch=2))
     node.tick(1.05)
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.2 for r in cfg.robots)
 
@@ -159,19 +159,19 @@ def test_commands_are_zero_while_the_latch_is_unread_and_a_newer_latch_engages(r
     replies.put(Received(0.0, "fleet/lab/estop/state/controller/main", own))
     node.tick(1.05)
     assert node.latch_pending
-    engaged = wire.EStop(t=5.0, engaged=True, source="op")
+    engaged = wire.EStop(t=5.0, engaged=True, source="op", epoch=3)
     replies.put(Received(0.0, "fleet/lab/estop/state/robot/r1", engaged))
     node.tick(1.1)
     assert not node.latch_pending and node.estop and node.status().estop
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.0 for r in cfg.robots)
     assert node.latch_state() == engaged
-    # an older released answer does not lift it; only a (newer) resume does
+    # a released answer does not lift it, even at a newer epoch; only an operator's resume does
     node.expect_latch()
-    old = wire.EStop(t=1.0, engaged=False, source="op")
-    bus.queries[-1][1].put(Received(0.0, "fleet/lab/estop/state/hub/main", old))
+    newer = wire.EStop(t=1.0, engaged=False, source="op", epoch=4)
+    bus.queries[-1][1].put(Received(0.0, "fleet/lab/estop/state/hub/main", newer))
     node.tick(1.15)
     assert node.estop
-    bus.deliver("estop", wire.EStop(t=6.0, engaged=False, source="op"))
+    bus.deliver("estop", wire.EStop(t=6.0, engaged=False, source="op", epoch=4))
     node.tick(1.2)
     assert not node.estop
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.2 for r in cfg.robots)
