@@ -165,8 +165,8 @@ class ZenohIdentity:
 @dataclass(frozen=True, kw_only=True)
 class LogSection:
     dir: str = _rule("runs")
-    # where the hub (or, without a hub, the daemon) keeps the latched e-stop across restarts
-    # (``estop-<fleet>.json``); empty: ``dir``
+    # where the hub and the daemon keep the latched e-stop across restarts
+    # (``estop-<fleet>-hub.json``, ``estop-<fleet>-controller.json``); empty: ``dir``
     state_dir: str = _rule("")
     flush_interval: float = _rule(0.5, gt=0, max=10)
     scene_hz: float = _rule(10.0, min=0, max=100)  # Foxglove scene channels per second (0: none)

@@ -10,10 +10,10 @@ command for everyone).
 The e-stop latch (``controller.latch``): at start, and after the loop was held up (a hung
 process, SIGSTOP), the controller asks every holder (hub, agents) for the latched e-stop and
 commands zero until one answers, so a restarted or resumed daemon never drives robots through an
-e-stop it missed. It starts "fail closed": joined to a hub, its latch is unknown (stopped) until
-it learns it (the hub's answer, any engaged answer) or an operator releases it; without a hub it
-is the keeper itself: it reads the latch's file at start (``runtime.estop.LatchFile``; no file:
-unknown) and writes it on every change.
+e-stop it missed. It keeps its latch in a file (``runtime.estop.LatchFile``), read at start and
+written on every change, so without a hub a restarted daemon, or a full restart, comes up with
+the latch it left. Without a file it starts "fail closed": unknown (stopped) until it learns the
+latch (the hub's answer, any engaged answer) or an operator releases it.
 """
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ def open_daemon_bus(cfg: FleetConfig) -> tuple[Bus, str]:
 
 class LatchWatch:
     """When the controller must (re-)read the latched e-stop, and for how long it waits; with
-    a ``keeper`` (no hub: the daemon keeps the latch), the latch written on every change."""
+    a ``keeper``, the latch written to its file on every change."""
 
     def __init__(self, node: ControllerNode, keeper: LatchKeeper | None = None) -> None:
         self.node = node
@@ -113,8 +113,8 @@ def run_daemon(
         bus, how = open_daemon_bus(cfg)
         with bus:
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
-            # without a hub the daemon keeps the latch (its file); with one it learns it
-            file = LatchFile(cfg) if how == "listening" else None
+            # the latch it left (without a hub it is the keeper; with one it learns from it too)
+            file = LatchFile(cfg, "controller")
             node = ControllerNode(
                 cfg,
                 bus,
@@ -122,9 +122,9 @@ def run_daemon(
                 make_estimator(cfg),
                 extra_drops=recorder.drops,
                 clock=time.monotonic,
-                latch_at_start=None if file is None else file.load(),
+                latch_at_start=file.load(),
             )
-            latch = LatchWatch(node, None if file is None else LatchKeeper(node.latch, file))
+            latch = LatchWatch(node, LatchKeeper(node.latch, file))
             latch.start(time.monotonic(), LATCH_WAIT_AT_START)
             rk = Ratekeeper(cfg.fleet.rate_hz)
             print(

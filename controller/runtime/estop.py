@@ -10,10 +10,11 @@ with the new state at that epoch or above. An unconfirmed e-stop is put again ev
 (it is latched: a repeat is harmless), one epoch above any holder that refused it. Nothing here
 waits for the daemon.
 
-``LatchFile``: the hub (or a daemon without a hub) keeps its latch in
-``<log.state_dir or log.dir>/estop-<fleet>.json`` (written to a temporary file, fsynced, renamed
-over the old one, directory fsynced) and reads it back at start: a full restart comes up with the
-latch it left. A file that is missing or unreadable leaves the latch unknown (stopped).
+``LatchFile``: the hub and the daemon each keep their latch in
+``<log.state_dir or log.dir>/estop-<fleet>-<holder>.json`` (written to a temporary file, fsynced,
+renamed over the old one, directory fsynced) and read it back at start: a restarted hub or daemon,
+and a full restart, come up with the latch they left. A file that is missing or unreadable leaves
+the latch unknown (stopped).
 """
 
 from __future__ import annotations
@@ -139,9 +140,10 @@ def _refused(msg: wire.EStop, st: wire.EStop) -> bool:
 class LatchFile:
     """The latch kept in one small JSON file (an ``EStop``), replaced atomically."""
 
-    def __init__(self, cfg: FleetConfig) -> None:
+    def __init__(self, cfg: FleetConfig, holder: str) -> None:
+        """``holder``: "hub" or "controller" (each keeps its own file)."""
         folder = Path(cfg.log.state_dir or cfg.log.dir)
-        self.path = folder / f"estop-{cfg.fleet.name}.json"
+        self.path = folder / f"estop-{cfg.fleet.name}-{holder}.json"
 
     def load(self) -> wire.EStop | None:
         """The latch last written, or None (no file, or unreadable: logged) - unknown."""

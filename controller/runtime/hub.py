@@ -44,7 +44,7 @@ class _Answers:
 
 def run_hub(cfg: FleetConfig, stop: threading.Event, duration: float = 0.0) -> int:
     """Serve until ``stop`` (or ``duration`` s). Exit 0; a BusError (endpoints taken) → 1."""
-    file = LatchFile(cfg)
+    file = LatchFile(cfg, "hub")
     latch = Latch("hub/main", file.load())
     keeper = LatchKeeper(latch, file)
     with Bus(

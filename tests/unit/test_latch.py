@@ -116,8 +116,8 @@ def test_thread_safe_under_concurrent_engages_and_releases():
 
 def test_the_latch_file_round_trips_and_a_corrupt_file_is_unknown(tmp_path):
     cfg = make_config({"log": {"dir": str(tmp_path / "runs")}})
-    file = LatchFile(cfg)
-    assert file.path == tmp_path / "runs" / "estop-lab.json"
+    file = LatchFile(cfg, "hub")
+    assert file.path == tmp_path / "runs" / "estop-lab-hub.json"
     assert file.load() is None  # no file: unknown
     latch = Latch("hub/main", None)
     keeper = LatchKeeper(latch, file)
@@ -132,5 +132,5 @@ def test_the_latch_file_round_trips_and_a_corrupt_file_is_unknown(tmp_path):
 
 def test_state_dir_overrides_the_log_dir(tmp_path):
     cfg = make_config({"log": {"dir": str(tmp_path / "runs"), "state_dir": str(tmp_path / "s")}})
-    assert LatchFile(cfg).path == tmp_path / "s" / "estop-lab.json"
+    assert LatchFile(cfg, "controller").path == tmp_path / "s" / "estop-lab-controller.json"
     assert LogSection().state_dir == ""
