@@ -59,6 +59,8 @@ def main() -> int:
             code, st = fleet_json("status", "--config", c, "--timeout", "1")
             if code == 0 and all(r["present"] for r in st["robots"]):
                 break
+        # a fresh lab fails closed: the operator's first resume (not timed)
+        fleet_json("resume", "--config", c, "--timeout", "20")
         out["alive"] = tries(cfg)
         daemon.send_signal(signal.SIGSTOP)
         out["hung"] = tries(cfg)

@@ -35,6 +35,8 @@ from controller.mission.types import FleetView, Mission, MissionOutput
 
 log = logging.getLogger(__name__)
 
+# s (in ticks): how long a robot's link event may wait for its liveliness token to agree
+EVENT_GRACE = 1.0
 STAGES = ("sample", "plan", "safety", "publish")  # timed: sample+estimate, plan, safety, publish
 
 
@@ -60,6 +62,7 @@ class NodeCounters:
     link_events: int = 0
     link_restored: int = 0
     skewed: int = 0  # poses stamped further than fleet.max_clock_skew from the tick time
+    spoofed_events: int = 0  # link events the robot's liveliness token did not bear out
 
 
 class ControllerNode:
@@ -97,6 +100,7 @@ class ControllerNode:
         self.latch_pending = False
         self.present = np.zeros(len(self.ids), dtype=bool)
         self.link_lost = np.zeros(len(self.ids), dtype=bool)
+        self._events_pending: dict[str, tuple[wire.PlanEvent, int]] = {}
         self.arrested = False
         self.last_output: MissionOutput | None = None
         self.last_tick = 0.0
@@ -179,19 +183,41 @@ class ControllerNode:
             note_latch("controller", self.latch.operator(item.msg))
 
     def _sample_events(self) -> None:
+        """Robot events, believed only when the robot's liveliness token agrees: its agent
+        withdraws the token before it reports ``link_lost`` and declares it before
+        ``link_restored``. An event the token does not bear out within ``EVENT_GRACE`` s of
+        ticks is ignored and counted (``spoofed_events``): on the open default anyone may put
+        on a robot's event key (under the lab ACL only that robot's agent may)."""
         for item in self._robot_events.drain():
             rid = self._robot_id(item.key)
-            if rid not in self.index:
-                continue
-            if item.msg.kind == "link_lost":
-                self.link_lost[self.index[rid]] = True
-                self.counters.link_events += 1
-                log.error("robot %s reports a lost link: %s", rid, item.msg.data.get("detail"))
-            elif item.msg.kind == "link_restored":
-                if self.link_lost[self.index[rid]]:
-                    log.warning("robot %s: link restored (%s)", rid, item.msg.data.get("detail"))
-                self.link_lost[self.index[rid]] = False
-                self.counters.link_restored += 1
+            if rid in self.index and item.msg.kind in ("link_lost", "link_restored"):
+                until = self.counters.ticks + max(1, round(EVENT_GRACE * self.cfg.fleet.rate_hz))
+                self._events_pending[rid] = (item.msg, until)
+        for rid, (msg, until) in list(self._events_pending.items()):
+            i = self.index[rid]
+            if bool(self.present[i]) == (msg.kind == "link_restored"):
+                del self._events_pending[rid]
+                self._apply_event(rid, msg)
+            elif self.counters.ticks >= until:
+                del self._events_pending[rid]
+                self.counters.spoofed_events += 1
+                log.warning(
+                    "robot %s: %s ignored: its liveliness token says otherwise (not its agent)",
+                    rid,
+                    msg.kind,
+                )
+
+    def _apply_event(self, rid: str, msg: wire.PlanEvent) -> None:
+        i = self.index[rid]
+        if msg.kind == "link_lost":
+            self.link_lost[i] = True
+            self.counters.link_events += 1
+            log.error("robot %s reports a lost link: %s", rid, msg.data.get("detail"))
+        else:
+            if self.link_lost[i]:
+                log.warning("robot %s: link restored (%s)", rid, msg.data.get("detail"))
+            self.link_lost[i] = False
+            self.counters.link_restored += 1
 
     def _skewed(self, t: float, now: float | None) -> bool:
         if now is None or abs(t - now) <= self.cfg.fleet.max_clock_skew:

@@ -85,6 +85,7 @@ def test_an_engaged_estop_zeroes_every_command_until_released(rig):
 def test_a_lost_link_or_a_missing_token_takes_the_robot_out_of_the_view(rig):
     cfg, bus, mission, node = rig
     r1, r2 = cfg.robot_ids[:2]
+    bus.alive_cb["robot"](r1, False)  # r1's agent withdraws its token, then reports
     bus.deliver("robot_event", wire.PlanEvent(t=0.0, kind="link_lost"), id=r1)
     bus.alive_cb["robot"](r2, False)
     node.tick(1.0)
@@ -93,6 +94,26 @@ def test_a_lost_link_or_a_missing_token_takes_the_robot_out_of_the_view(rig):
     assert sum(present.values()) == len(cfg.robots) - 2
     st = node.status()
     assert [r["link_lost"] for r in st.robots if r["id"] == r1] == [True]
+
+
+def test_a_link_event_its_robots_token_does_not_bear_out_is_ignored(rig):
+    """Issue 22: a spoofed ``link_lost`` (anyone may put on a robot's event key on the open
+    default) while the robot's agent is alive, and a spoofed ``link_restored`` while it is gone,
+    change nothing; each is counted after ``EVENT_GRACE`` s of ticks."""
+    from controller.runtime.node import EVENT_GRACE
+
+    cfg, bus, mission, node = rig
+    r1, r2 = cfg.robot_ids[:2]
+    bus.deliver("robot_event", wire.PlanEvent(t=0.0, kind="link_lost"), id=r1)
+    bus.alive_cb["robot"](r2, False)
+    bus.deliver("robot_event", wire.PlanEvent(t=0.0, kind="link_restored"), id=r2)
+    n = round(EVENT_GRACE * cfg.fleet.rate_hz) + 1
+    for k in range(n):
+        node.tick(1.0 + k / cfg.fleet.rate_hz)
+        present = dict(zip(cfg.robot_ids, mission.views[-1].present, strict=True))
+        assert present[r1] and not present[r2]
+    assert node.counters.link_events == 0 and node.counters.link_restored == 0
+    assert node.status().counters["spoofed_events"] == 2
 
 
 def test_status_reports_every_drop_counter(rig):
@@ -135,9 +156,11 @@ def test_a_pose_stamped_far_in_the_future_is_dropped_and_counted_not_freezing_th
 def test_link_restored_clears_link_lost(rig):
     cfg, bus, mission, node = rig
     r1 = cfg.robot_ids[0]
+    bus.alive_cb["robot"](r1, False)  # the agent withdraws its token, then reports
     bus.deliver("robot_event", wire.PlanEvent(t=0.0, kind="link_lost"), id=r1)
     node.tick(1.0)
     assert not mission.views[-1].present[0]
+    bus.alive_cb["robot"](r1, True)  # ... declares it again, then reports
     bus.deliver("robot_event", wire.PlanEvent(t=1.0, kind="link_restored"), id=r1)
     node.tick(1.05)
     assert mission.views[-1].present[0]
