@@ -156,7 +156,7 @@ def test_world_daemon_drivers_arrest_kill_restart(tmp_path, port):
             d1 = daemon(1, "capture")
             agents = [spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ROBOTS]
             procs += agents
-            release(cfg, timeout=30)  # a fresh lab: stopped until an operator's first resume
+            release(cfg, timeout=90)  # a fresh lab: stopped until an operator's first resume
             seen: list[str] = []
             wait_for(lambda: _arrested(phases, seen), 45, "the daemon's arrest")
             assert seen[0] == "approach" and "hold" in seen, seen
@@ -215,7 +215,7 @@ def test_a_driver_killed_mid_approach_is_lost_replanned_and_the_rest_arrest(tmp_
                                "capture", "--out", str(tmp_path / "d.mcap")))  # fmt: skip
             agents = {r: spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ids}
             procs += list(agents.values())
-            release(c, timeout=30)  # a fresh lab: stopped until an operator's first resume
+            release(c, timeout=90)  # a fresh lab: stopped until an operator's first resume
             events: list = []
 
             def seen(kind: str) -> list:
