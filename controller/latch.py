@@ -12,7 +12,8 @@ stopped ("fail closed") and answers no latch query. The rules:
 - an **operator's** message (put on ``fleet/<fleet>/estop``: under the lab ACL only operator
   identities and the controller may put there) is obeyed when it engages, whatever its epoch
   (the epoch is raised to it); a release is obeyed only when its epoch is greater than the
-  latch's (an old release replayed, or re-put by a stale tool, is refused);
+  latch's (an old release replayed, or re-put by a stale tool, is refused while engaged, and
+  is a no-op while released: ``fleet resume`` repeats its release until every agent has it);
 - another **holder's answer** to a latch query (``estop/state/<role>/<id>``) can only engage:
   an engaged answer at the latch's epoch or above engages it. A released answer never releases
   a latch. The one exception is a fresh holder: an *unknown* latch adopts the newest answer of
@@ -112,6 +113,8 @@ class Latch:
                 self._set(dataclasses.replace(msg, epoch=epoch))
                 return Change(before, "engaged", "operator", msg)
             if held is not None and msg.epoch <= held.epoch:
+                if not held.engaged:  # already released (a repeat of its own release): no-op
+                    return Change(before, before, "already released", msg)
                 self.counters.replays_refused += 1
                 return Change(before, before, "refused: release at an old epoch", msg)
             self._set(msg)

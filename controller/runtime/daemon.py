@@ -19,6 +19,7 @@ latch (the hub's answer, any engaged answer) or an operator releases it.
 from __future__ import annotations
 
 import logging
+import subprocess
 import sys
 import threading
 import time
@@ -30,6 +31,7 @@ from controller.io.bus import Bus, BusError
 from controller.io.ratekeeper import Ratekeeper
 from controller.mission.types import Mission
 from controller.runtime.estop import LatchFile, LatchKeeper
+from controller.runtime.hub import HUB_START, start_hub_process, stop_hub_process
 from controller.runtime.node import ControllerNode
 from controller.runtime.recording import open_recorder
 from controller.runtime.wiring import make_estimator
@@ -96,6 +98,41 @@ class LatchWatch:
             self.next_query = mono + LATCH_RETRY
 
 
+def open_daemon_session(cfg: FleetConfig) -> tuple[Bus, str, subprocess.Popen | None]:
+    """The daemon's session: a client of the ``fleet hub`` (or world) already listening on
+    ``zenoh.listen``; else a client of a hub it starts itself as a child process, so that
+    ``fleet estop`` still reaches the agents while the daemon is hung (its own listening session
+    would hang with it); else, if that hub does not come up, listening itself as before.
+    Returns (bus, how, the hub it started or None)."""
+    try:
+        return _client_of_hub(cfg), "joined the hub", None
+    except BusError:
+        pass
+    child = start_hub_process(cfg)
+    deadline = time.monotonic() + HUB_START
+    while child is not None and child.poll() is None and time.monotonic() < deadline:
+        try:
+            return _client_of_hub(cfg), "joined the hub it started", child
+        except BusError:
+            time.sleep(0.1)  # polling for the child hub to listen (a handshake, retried)
+    if child is not None:
+        log.error("the hub this daemon started did not come up: listening itself")
+        stop_hub_process(child)
+    bus, how = open_daemon_bus(cfg)
+    return bus, how, None
+
+
+def _client_of_hub(cfg: FleetConfig) -> Bus:
+    return Bus(
+        cfg.zenoh,
+        cfg.fleet.name,
+        mode="client",
+        listen=[],
+        connect=list(cfg.zenoh.listen),
+        lease_s=cfg.fleet.liveliness_lease,
+    )
+
+
 def run_daemon(
     cfg: FleetConfig,
     mission: Mission,
@@ -109,8 +146,9 @@ def run_daemon(
     recorded messages live to Foxglove on 127.0.0.1."""
     recorder = open_recorder(cfg, out, f"daemon/{mission_kind}", viz=viz, who="fleet daemon")
     status = 0
+    own_hub = None
     try:
-        bus, how = open_daemon_bus(cfg)
+        bus, how, own_hub = open_daemon_session(cfg)
         with bus:
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
             # the latch it left (without a hub it is the keeper; with one it learns from it too)
@@ -164,6 +202,7 @@ def run_daemon(
             latch.poll(time.monotonic())  # the last change of the latch written too
     finally:
         recorder.close()
+        stop_hub_process(own_hub)
     print(
         f"fleet daemon: stopped; {recorder.written} messages in {recorder.location}",
         file=sys.stderr,

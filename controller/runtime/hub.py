@@ -13,7 +13,10 @@ seconds it asks the other holders too: an engaged answer at its epoch or above e
 
 from __future__ import annotations
 
+import ctypes
 import logging
+import signal
+import subprocess
 import sys
 import threading
 import time
@@ -82,3 +85,42 @@ def run_hub(cfg: FleetConfig, stop: threading.Event, duration: float = 0.0) -> i
 
 def _describe(msg: wire.EStop) -> str:
     return f"{'ENGAGED' if msg.engaged else 'released'} (epoch {msg.epoch}, by {msg.source})"
+
+
+HUB_START = 20.0  # s a daemon waits for the hub it started to listen
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    """PR_SET_PDEATHSIG: the child hub gets SIGTERM when the daemon that started it dies."""
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)
+    except OSError:
+        pass  # not Linux: the daemon still stops it when it ends normally
+
+
+def start_hub_process(cfg: FleetConfig) -> subprocess.Popen | None:
+    """``fleet hub`` on the daemon's config as a child process of its own session (a SIGSTOP or
+    a terminal's Ctrl-Z to the daemon does not reach it; it ends with the daemon). None when the
+    config has no file to hand it (a config built in-process)."""
+    if not cfg.source:
+        return None
+    argv = [sys.executable, "-m", "controller.cli", "hub", "--config", str(cfg.source)]
+    try:
+        return subprocess.Popen(  # noqa: S603 - our own CLI, no shell
+            argv, stdin=subprocess.DEVNULL, start_new_session=True, preexec_fn=_die_with_parent
+        )
+    except OSError as exc:
+        log.error("cannot start a hub: %s", exc)
+        return None
+
+
+def stop_hub_process(proc: subprocess.Popen | None) -> None:
+    """End a hub started by ``start_hub_process`` (SIGTERM, then SIGKILL after 10 s)."""
+    if proc is None or proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()

@@ -13,6 +13,8 @@ on 127.0.0.1 (``fleet hub``, the daemon, robot agents, the ``fleet estop|resume`
 
 from __future__ import annotations
 
+import signal
+import socket
 import threading
 import time
 
@@ -67,13 +69,13 @@ def _holders_engaged(bus, names) -> bool:
 
 
 def _resume(cfg, *extra: str) -> dict:
-    code, out = fleet_json("resume", "--config", str(cfg), "--timeout", "10", *extra)
+    code, out = fleet_json("resume", "--config", str(cfg), "--timeout", "30", *extra)
     assert code == 0 and out["confirmed"] is True, out
     return out
 
 
 def _estop(cfg, *extra: str) -> dict:
-    code, out = fleet_json("estop", "--config", str(cfg), "--timeout", "10", *extra)
+    code, out = fleet_json("estop", "--config", str(cfg), "--timeout", "30", *extra)
     assert code == 0 and out["confirmed"] is True, out
     return out
 
@@ -300,3 +302,39 @@ def test_a_fresh_daemon_without_holders_stays_stopped_and_keeps_the_latch(tmp_pa
     finally:
         codes = stop_all(procs)
     assert all(code in (0, -9) for code in codes), (codes, [tail(p) for p in procs])
+
+
+def _listening(port: int) -> bool:
+    with socket.socket() as s:
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def test_without_a_hub_the_estop_reaches_the_agents_with_the_daemon_hung(tmp_path, port):
+    """No ``fleet hub`` started: the daemon starts one as its own child process and joins it,
+    so the e-stop goes through with the daemon hung (it failed after 10.5 s before); killed,
+    the daemon takes its hub with it."""
+    cfg = lab_config(tmp_path, port, robots=2)
+    c = str(cfg)
+    daemon = spawn(tmp_path / "d.txt", "daemon", "--config", c, "--mission", "hold",
+                   "--out", str(tmp_path / "d.mcap"))  # fmt: skip
+    procs = [daemon] + [
+        spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ("r1", "r2")
+    ]
+    try:
+        wait_for(lambda: status(cfg).get("ok"), 40, "the daemon")
+        _resume(cfg)
+        daemon.send_signal(signal.SIGSTOP)
+        out = _estop(cfg)
+        assert out["agents_confirmed"] == ["r1", "r2"] and out["hub_confirmed"], out
+        assert not out["daemon_confirmed"], out
+        daemon.send_signal(signal.SIGCONT)
+        wait_for(lambda: status(cfg).get("estop") is True, 15, "the resumed daemon stopped")
+        _resume(cfg)
+        _kill([daemon])
+        wait_for(lambda: not _listening(port), 10, "the daemon's hub gone with it")
+    finally:
+        codes = stop_all(procs)
+    assert codes[0] == -9 and all(code == 0 for code in codes[1:]), (
+        codes,
+        [tail(p) for p in procs],
+    )

@@ -41,16 +41,20 @@ OPERATOR = [
     ("engaged", (False, 5), "engaged", 5),  # a replayed release (same epoch): refused
     ("engaged", (False, 4), "engaged", 5),  # an older one: refused
     ("engaged", (True, 9), "engaged", 9),
-    ("released", (False, 5), "released", 5),
+    ("released", (False, 5), "released", 5),  # a repeat: no-op, not a refusal
+    ("released", (False, 3), "released", 5),
 ]
 
 
 @pytest.mark.parametrize(("first", "msg", "after", "epoch"), OPERATOR)
 def test_operator_messages(first, msg, after, epoch):
     latch = start(first)
-    latch.operator(op(*msg, t=FUTURE))
+    change = latch.operator(op(*msg, t=FUTURE))
     assert (word(latch), latch.epoch) == (after, epoch)
     assert latch.stopped == (after != "released")
+    refused = first == "engaged" and not msg[0] and msg[1] <= 5
+    assert change.how.startswith("refused") == refused
+    assert latch.counters.replays_refused == int(refused)
 
 
 # (start, [(answering role, engaged, epoch)], state after, epoch after)
