@@ -102,7 +102,9 @@ def run(args) -> int:
         if args.json:
             emit_json({"ok": True, **wire.to_dict(st)})
         else:
-            print(f"fleet {st.fleet}: phase {st.phase}, e-stop {'ENGAGED' if st.estop else 'off'}")
+            unknown = st.counters.get("estop_unknown")
+            latch = "UNKNOWN (stopped)" if unknown else ("ENGAGED" if st.estop else "off")
+            print(f"fleet {st.fleet}: phase {st.phase}, e-stop {latch}")
             for r in st.robots:
                 print(
                     f"  {r['id']}: {'present' if r['present'] else 'absent'}"
