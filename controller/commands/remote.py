@@ -3,9 +3,10 @@
 ``status`` queries the daemon's status queryable (exit 1 when no daemon answers). ``estop``
 publishes a latched emergency stop straight to the agents (through the hub: ``fleet hub``, or
 the one a daemon starts when none runs): every agent stops its robot and refuses commands until
-an operator's ``resume``. Both then ask every holder of the latch (``estop/state/<role>/<id>``) until each known agent
-(the config's robots and every robot liveliness token) answers with the new state; exit 0 when
-all did, 1 otherwise, naming those that did not. The daemon's answer is reported, not needed.
+an operator's ``resume``. Both then ask every holder of the latch (``estop/state/<role>/<id>``)
+until each known agent (the config's robots and every robot liveliness token) answers with the
+new state; exit 0 when all did, 1 otherwise, naming those that did not. The daemon's answer is
+reported, not needed.
 """
 
 from __future__ import annotations
