@@ -31,11 +31,11 @@ def tries(cfg: Path) -> dict:
     el, wall, res = [], [], []
     for _ in range(N):
         t0 = time.monotonic()
-        code, out = fleet_json("estop", "--config", str(cfg), "--timeout", "5")
+        code, out = fleet_json("estop", "--config", str(cfg), "--timeout", "30")
         wall.append(time.monotonic() - t0)
         assert code == 0, out
         el.append(out["elapsed_s"])
-        code, out = fleet_json("resume", "--config", str(cfg), "--timeout", "5")
+        code, out = fleet_json("resume", "--config", str(cfg), "--timeout", "30")
         assert code == 0, out
         res.append(out["elapsed_s"])
     return {

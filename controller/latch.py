@@ -194,7 +194,12 @@ def note_latch(holder: str, change: Change | None) -> None:
     elif change.changed:
         how = change.how
         log.warning(
-            "%s: e-stop %s by %s (epoch %d, %s)", holder, change.after, m.source, m.epoch, how
+            "%s: e-stop %s by %s (message epoch %d, %s)",
+            holder,
+            change.after,
+            m.source,
+            m.epoch,
+            how,
         )
 
 
