@@ -47,6 +47,15 @@ def tries(cfg: Path) -> dict:
     }
 
 
+def up(c: str) -> None:
+    """Until the daemon answers and sees every robot (60 s at most)."""
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        code, st = fleet_json("status", "--config", c, "--timeout", "1")
+        if code == 0 and all(r["present"] for r in st["robots"]):
+            return
+
+
 def no_hub_hung(tmp: Path) -> dict:
     """No ``fleet hub``: the daemon starts its own; the e-stop with the daemon hung."""
     tmp.mkdir()
@@ -56,6 +65,7 @@ def no_hub_hung(tmp: Path) -> dict:
                    str(tmp / "d.mcap"))  # fmt: skip
     agents = [spawn(tmp / f"{r}.txt", "driver", r, "--config", c) for r in ("r1", "r2", "r3")]
     try:
+        up(c)
         fleet_json("resume", "--config", c, "--timeout", "60")  # the first resume (not timed)
         daemon.send_signal(signal.SIGSTOP)
         return tries(cfg)
@@ -76,11 +86,7 @@ def main() -> int:
                        str(tmp / "d.mcap"))  # fmt: skip
         procs.append(daemon)
         procs += [spawn(tmp / f"{r}.txt", "driver", r, "--config", c) for r in ("r1", "r2", "r3")]
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            code, st = fleet_json("status", "--config", c, "--timeout", "1")
-            if code == 0 and all(r["present"] for r in st["robots"]):
-                break
+        up(c)
         # a fresh lab fails closed: the operator's first resume (not timed)
         fleet_json("resume", "--config", c, "--timeout", "20")
         out["alive"] = tries(cfg)
