@@ -121,11 +121,17 @@ class PlanEvent(Message):
 
 @dataclass(frozen=True, kw_only=True)
 class EStop(Message):
-    """Latched emergency stop (``engaged`` true) or its explicit release (``engaged`` false)."""
+    """Latched emergency stop (``engaged`` true) or its explicit release (``engaged`` false).
+
+    ``source`` names who set it (the operator's identity); ``epoch`` orders operators' actions:
+    a counter only they advance (the latch, ``controller.latch``, refuses a release at or below
+    the epoch it holds). ``t`` is the sender's clock, logged and never used to order e-stops.
+    """
 
     engaged: bool
     source: str = ""
     reason: str = ""
+    epoch: int = field(default=0, metadata={"min": 0})
 
     TYPE: ClassVar[str] = "fleet.EStop"
 
@@ -186,16 +192,6 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         TickDone,
     )
 }
-
-
-def newest_estop(msgs: typing.Iterable[EStop]) -> EStop | None:
-    """The newest of several latched e-stop states (greatest ``t``, the operator's stamp; an
-    engage wins a tie, so two holders that disagree at one instant resolve to stopped)."""
-    best: EStop | None = None
-    for m in msgs:
-        if best is None or (m.t, m.engaged) > (best.t, best.engaged):
-            best = m
-    return best
 
 
 # --------------------------------------------------------------------------- codec
@@ -387,7 +383,8 @@ TOPICS: dict[str, Topic] = {
         Topic("plan", "fleet/{fleet}/plan/{what}", PlanEvent, 0.0),
         Topic("estop", "fleet/{fleet}/estop", EStop, 0.0),
         # the latched e-stop as each holder (hub, controller, every agent) knows it: a queryable
-        # per holder, so a late agent or a restarted daemon asks them all (QueryTarget.ALL)
+        # per holder, so a late agent or a restarted daemon asks them all (QueryTarget.ALL); an
+        # answer can only engage another holder's latch (``controller.latch``)
         Topic("estop_state", "fleet/{fleet}/estop/state/{role}/{id}", EStop, 0.0, logged=False),
         Topic("status", "fleet/{fleet}/status", FleetStatus, 0.0, logged=False),
         Topic("sim_clock", "fleet/{fleet}/sim/clock", SimTick, 20.0),

@@ -8,10 +8,13 @@ and the robot-side safety layer that does not trust the network:
   gets vy dropped (counted);
 - **watchdog**: no valid command for ``cmd_ttl`` (or the command's own shorter ``ttl``) → stop
   the robot; it resumes on the next command;
-- **e-stop**: a latched stop on the ``estop`` key, released only by an explicit resume. The agent
-  holds the latch itself and answers queries for it (``estop/state/robot/<id>``, its latched
-  ``EStop``): a late agent asks every holder (hub, controller, other agents) and comes up
-  stopped when the newest says engaged, and ``fleet estop`` reads each agent's answer as its
+- **e-stop**: a latched stop on the ``estop`` key, released only by an operator's resume
+  (``controller.latch``: the one latch of every holder; a release at or below the latch's epoch
+  is refused). The agent holds the latch itself and answers queries for it
+  (``estop/state/robot/<id>``): a late agent asks every holder (hub, controller, other agents);
+  any engaged answer at its epoch stops it, a released one never releases it, and a fresh agent
+  (the lab: ``latch_at_start`` None) stays stopped until it learns the latch from the hub or the
+  controller, or an operator releases it. ``fleet estop`` reads each agent's answer as its
   confirmation;
 - **stamps**: a command stamped further than ``max_clock_skew`` from the agent's clock (the same
   domain: wall time in the lab, sim time in the dry run) is dropped and counted (``skewed``);
@@ -32,6 +35,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from controller import wire
+from controller.latch import FRESH_WORLD, Latch, note_latch, role_of
 from drivers.base import Capabilities, DriverError, RobotDriver
 
 log = logging.getLogger(__name__)
@@ -67,9 +71,9 @@ class AgentCore:
     caps: Capabilities
     cmd_ttl: float
     counters: AgentCounters = field(default_factory=AgentCounters)
-    estop: bool = False
     max_clock_skew: float = math.inf
-    latched: wire.EStop | None = None  # the message that set the e-stop state, if any
+    # the latched e-stop (a fresh world's release unless given; None in it: unknown, stopped)
+    latch: Latch = field(default_factory=lambda: Latch("robot", FRESH_WORLD))
     last_cmd: wire.Twist2D | None = None
     last_cmd_time: float = -math.inf
     stopped_by_watchdog: bool = True
@@ -108,18 +112,10 @@ class AgentCore:
         self.stopped_by_watchdog = False
         return self.last_cmd
 
-    def on_estop(self, msg: wire.EStop) -> None:
-        """A live e-stop or resume: applied in arrival order."""
-        self.estop = bool(msg.engaged)
-        self.latched = msg
-
-    def on_latch(self, msg: wire.EStop) -> bool:
-        """Another holder's latched state (a query's answer): applied only when newer than what
-        this agent holds (``wire.newest_estop``). Returns whether it was applied."""
-        if self.latched is not None and wire.newest_estop([self.latched, msg]) is self.latched:
-            return False
-        self.on_estop(msg)
-        return True
+    @property
+    def estop(self) -> bool:
+        """Whether the robot is held stopped by the latch (engaged, or unknown)."""
+        return self.latch.stopped
 
     def expired(self, now: float) -> bool:
         """Whether the watchdog must stop the robot at ``now``."""
@@ -159,13 +155,19 @@ class Agent:
         driver: RobotDriver,
         params: AgentParams,
         commands_arrived: threading.Condition | None = None,
+        latch_at_start: wire.EStop | None = FRESH_WORLD,
     ) -> None:
-        """``commands_arrived`` is notified when a command arrives (the lockstep waits on it)."""
+        """``commands_arrived`` is notified when a command arrives (the lockstep waits on it).
+        ``latch_at_start``: the e-stop latch the agent starts with - a fresh world's release (the
+        dry run, tests: the default) or None: unknown, the robot stopped (``fleet driver``)."""
         self.bus = bus
         self.driver = driver
         self.params = params
         self.core = AgentCore(
-            driver.capabilities, params.cmd_ttl, max_clock_skew=params.max_clock_skew
+            driver.capabilities,
+            params.cmd_ttl,
+            max_clock_skew=params.max_clock_skew,
+            latch=Latch(f"robot/{params.robot_id}", latch_at_start),
         )
         rid = params.robot_id
         # lossless: the lockstep handshake counts every command, and no e-stop may be lost
@@ -181,17 +183,14 @@ class Agent:
         self._seq = 0
         self._stopped_sent = False
 
-    def latch_state(self) -> wire.EStop:
+    def latch_state(self) -> wire.EStop | None:
         """This agent's latched e-stop (answered on ``estop/state/robot/<id>``; runs on zenoh's
-        thread). Never latched: released at t = 0, which any real message outranks."""
-        held = self.core.latched
-        if held is not None:
-            return held
-        return wire.EStop(t=0.0, engaged=False, source=f"robot/{self.params.robot_id}")
+        thread); None (no answer) while unknown."""
+        return self.core.latch.state()
 
     def request_latch(self, timeout: float = 1.0) -> None:
         """Ask every holder for the latched e-stop without waiting; the answers are applied by
-        ``handle_inputs`` (newest wins)."""
+        ``handle_inputs``."""
         self.bus.query_async(
             self.bus.estop_wildcard(), wire.EStop, self._latch_replies, timeout=timeout
         )
@@ -199,12 +198,12 @@ class Agent:
     def sync_latch(self, timeout: float) -> bool:
         """Ask every holder for the latched e-stop until one (not this agent) answers or
         ``timeout`` s pass (a session just opened may not yet see the holders' queryables);
-        applies the newest answer. Returns whether anyone answered."""
+        applies the answers (``Latch.answers``). Returns whether anyone answered."""
         deadline = time.monotonic() + timeout
         while True:
             left = deadline - time.monotonic()
             got = [
-                msg
+                (role_of(k, self.params.fleet), msg)
                 for k, msg in self.bus.query_replies(
                     self.bus.estop_wildcard(), wire.EStop, timeout=max(0.05, min(0.5, left))
                 )
@@ -212,18 +211,19 @@ class Agent:
             ]
             if got:
                 self.latch_answered = True
-                self._apply_latch(wire.newest_estop(got), "latch query")
+                self._apply_answers(got)
                 return True
             if time.monotonic() >= deadline:
                 return False
             time.sleep(0.05)  # polling: nobody answered yet (a retry, not a handshake stand-in)
 
-    def _apply_latch(self, msg: wire.EStop | None, how: str) -> None:
-        if msg is None:
-            return
+    def _apply_answers(self, answers: list[tuple[str, wire.EStop]]) -> None:
         before = self.core.estop
-        if self.core.on_latch(msg):
-            self._note_estop(before, msg, how)
+        self._note_estop(before, self.core.latch.answers(answers))
+
+    def _apply_operator(self, msg: wire.EStop) -> None:
+        before = self.core.estop
+        self._note_estop(before, self.core.latch.operator(msg))
 
     @property
     def pose_publisher(self):
@@ -245,14 +245,17 @@ class Agent:
     def handle_inputs(self, now: float) -> None:
         """Apply e-stops (live ones in arrival order, latch answers when newer) and commands
         received since the last call."""
-        replies = [i.msg for i in self._latch_replies.drain() if i.key != self._latch_key]
+        fleet = self.params.fleet
+        replies = [
+            (role_of(i.key, fleet), i.msg)
+            for i in self._latch_replies.drain()
+            if i.key != self._latch_key
+        ]
         if replies:
             self.latch_answered = True
-            self._apply_latch(wire.newest_estop(replies), "latch query")
+            self._apply_answers(replies)
         for item in self._estops.drain():
-            before = self.core.estop
-            self.core.on_estop(item.msg)
-            self._note_estop(before, item.msg, "live")
+            self._apply_operator(item.msg)
         latest = None
         for item in self._cmds.drain():
             out = self.core.on_command(now, item.msg)
@@ -265,11 +268,10 @@ class Agent:
             except DriverError as exc:
                 self._lose_link(now, str(exc))
 
-    def _note_estop(self, before: bool, msg: wire.EStop, how: str) -> None:
+    def _note_estop(self, before: bool, change) -> None:
+        note_latch(f"robot {self.params.robot_id}", change)
         if self.core.estop == before:
             return
-        state = "engaged" if self.core.estop else "released"
-        log.warning("robot %s: e-stop %s by %s (%s)", self.params.robot_id, state, msg.source, how)
         if self.core.estop:
             self.driver.stop()
             self._stopped_sent = True

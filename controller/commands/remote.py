@@ -2,11 +2,12 @@
 
 ``status`` queries the daemon's status queryable (exit 1 when no daemon answers) and names
 the controller that answers (``controller``; ``controllers``: every one that answered). ``estop``
-publishes a latched emergency stop straight to the agents (through the hub, or the daemon's
-session when no hub runs): every agent stops its robot and refuses commands until ``resume``.
-Both then ask every holder of the latch (``estop/state/<role>/<id>``) until each known agent
-(the config's robots and every robot liveliness token) answers with the new state; exit 0 when
-all did, 1 otherwise, naming those that did not. The daemon's answer is reported, not needed.
+publishes a latched emergency stop straight to the agents (through the hub: ``fleet hub``, or
+the one a daemon starts when none runs): every agent stops its robot and refuses commands until
+an operator's ``resume``. Both then ask every holder of the latch (``estop/state/<role>/<id>``)
+until each known agent (the config's robots and every robot liveliness token) answers with the
+new state; exit 0 when all did, 1 otherwise, naming those that did not. The daemon's answer is
+reported, not needed.
 """
 
 from __future__ import annotations
@@ -106,8 +107,10 @@ def run(args) -> int:
         if args.json:
             emit_json({"ok": True, **wire.to_dict(st), "controllers": [st.controller, *others]})
         else:
+            unknown = st.counters.get("estop_unknown")
+            latch = "UNKNOWN (stopped)" if unknown else ("ENGAGED" if st.estop else "off")
             print(
-                f"fleet {st.fleet}: phase {st.phase}, e-stop {'ENGAGED' if st.estop else 'off'}"
+                f"fleet {st.fleet}: phase {st.phase}, e-stop {latch}"
                 f" (controller {st.controller or 'unnamed'})"
             )
             if others:

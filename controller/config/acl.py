@@ -20,6 +20,11 @@ The profile (``default_permission: deny``):
   also puts ``sim/world/X/cmd`` and is sent ``sim/world/X/pose`` (its link to ``fleet world``,
   which runs as the controller's identity).
 
+The e-stop: only operators and the controller's identity put ``estop`` (engage and resume);
+a robot's own latch answers can only engage another holder's latch (``controller.latch``, a
+check in code), and only the controller's identity answers on ``estop/state/hub/*`` and
+``estop/state/controller/*`` (the answers a fresh holder may adopt, released too).
+
 Blocked traffic is dropped silently (zenoh logs nothing per message). Pure: no I/O but
 :func:`write_acl`. The command line is ``python -m controller.acl`` (controller/acl.py).
 """

@@ -180,6 +180,9 @@ class ZenohIdentity:
 @dataclass(frozen=True, kw_only=True)
 class LogSection:
     dir: str = _rule("runs")
+    # where the hub and the daemon keep the latched e-stop across restarts
+    # (``estop-<fleet>-hub.json``, ``estop-<fleet>-controller.json``); empty: ``dir``
+    state_dir: str = _rule("")
     flush_interval: float = _rule(0.5, gt=0, max=10)
     scene_hz: float = _rule(10.0, min=0, max=100)  # Foxglove scene channels per second (0: none)
     split_s: float = _rule(0.0, min=0, max=86400)  # a new indexed segment every S s (0: one file)

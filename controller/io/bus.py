@@ -181,6 +181,9 @@ def zenoh_config(
     return conf
 
 
+_EVERY_REPLY = zenoh.ConsolidationMode.NONE  # queries: every reply, none merged by key
+
+
 @dataclass(frozen=True)
 class Received:
     """One decoded sample: receive time (s, ``time.time()``), key and message."""
@@ -705,7 +708,11 @@ class Bus:
         """Ask every replier on ``key_expr`` (QueryTarget.ALL): (replier's key, message) as the
         replies come, until all answered or ``timeout``. The caller may stop early (a hung
         replier then costs nothing)."""
-        replies = self.session.get(key_expr, target=zenoh.QueryTarget.ALL, timeout=timeout)
+        # no consolidation: every replier's answer, also two on one key (an e-stop latch key
+        # answered by an impostor as well as by its holder must not hide the holder's answer)
+        replies = self.session.get(
+            key_expr, target=zenoh.QueryTarget.ALL, consolidation=_EVERY_REPLY, timeout=timeout
+        )
         for reply in replies:
             if reply.ok is None:
                 continue
@@ -734,7 +741,9 @@ class Bus:
                 return
             inbox.put(Received(time.time(), k, msg))
 
-        self.session.get(key_expr, cb, target=zenoh.QueryTarget.ALL, timeout=timeout)
+        self.session.get(
+            key_expr, cb, target=zenoh.QueryTarget.ALL, consolidation=_EVERY_REPLY, timeout=timeout
+        )
 
     # -- the latched e-stop
     def serve_estop(self, role: str, ident: str, responder: Callable[[], wire.EStop]) -> str:

@@ -147,16 +147,20 @@ def _serve(
     from controller.io.ratekeeper import Ratekeeper
 
     params = AgentParams(robot.id, cfg.fleet.name, cfg.fleet.cmd_ttl, cfg.fleet.max_clock_skew)
-    agent = Agent(bus, driver, params)
-    # the latched e-stop first: a robot started after an e-stop comes up stopped
+    # the latched e-stop first: a fresh agent is stopped ("fail closed") until it learns the
+    # latch (an engaged answer, or the hub's or the controller's) or an operator releases it
+    agent = Agent(bus, driver, params, latch_at_start=None)
     if not agent.sync_latch(LATCH_WAIT):
         log.warning("robot %s: nobody answered the e-stop latch query", robot.id)
+    state = agent.core.latch.state()
     log.info(
         "robot %s: agent up (%s driver%s), e-stop %s",
         robot.id,
         robot.driver,
         ", shared world process" if uses_world_process(cfg, robot) else "",
-        "ENGAGED" if agent.core.estop else "off",
+        "unknown: STOPPED until an operator's resume"
+        if state is None
+        else ("ENGAGED" if state.engaged else "off"),
     )
     agent.announce(time.time())
     rk = Ratekeeper(max(cfg.fleet.rate_hz, 20.0))

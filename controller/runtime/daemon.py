@@ -11,14 +11,21 @@ One controller per fleet (``controller.runtime.claim``): a daemon that finds ano
 controller's liveliness token refuses to start unless told to take over; a running one that
 sees a newer controller stops commanding and exits 1 naming it.
 
-The e-stop latch: at start, and after the loop was held up (a hung process, SIGSTOP), the
-controller asks every holder (hub, agents) for the latched e-stop and commands zero until one
-answers, so a restarted or resumed daemon never drives robots through an e-stop it missed.
+The e-stop latch (``controller.latch``): at start, and after the loop was held up (a hung
+process, SIGSTOP), the controller asks every holder (hub, agents) for the latched e-stop and
+commands zero until one answers, so a restarted or resumed daemon never drives robots through an
+e-stop it missed. It keeps its latch in a file (``runtime.estop.LatchFile``), read at start and
+written on every change, so without a hub a restarted daemon, or a full restart, comes up with
+the latch it left. Without a file it starts "fail closed": unknown (stopped) until it learns the
+latch (the hub's answer, any engaged answer) or an operator releases it.
+
+The slow plans run off the loop in the planner worker (``controller.runtime.planner``).
 """
 
 from __future__ import annotations
 
 import logging
+import subprocess
 import sys
 import threading
 import time
@@ -30,6 +37,8 @@ from controller.io.bus import Bus, BusError
 from controller.io.ratekeeper import Ratekeeper
 from controller.mission.types import Mission
 from controller.runtime.claim import ROLE, Claim, make_ident, wait_until_alone
+from controller.runtime.estop import LatchFile, LatchKeeper
+from controller.runtime.hub import HUB_START, start_hub_process, stop_hub_process
 from controller.runtime.node import ControllerNode
 from controller.runtime.planner import PlannerWorker
 from controller.runtime.recording import open_recorder
@@ -37,8 +46,11 @@ from controller.runtime.wiring import make_estimator
 
 log = logging.getLogger(__name__)
 
-LATCH_WAIT_AT_START = 2.0  # s: nobody answers the latch query at start → go on released
+# s: nobody answers the latch query at start → stop waiting: the latch stays what it is (from
+# the file, or unknown: stopped until an operator's release), asked again every LATCH_UNKNOWN
+LATCH_WAIT_AT_START = 2.0
 LATCH_RETRY = 0.5  # s between latch queries while one is pending
+LATCH_UNKNOWN = 2.0  # s between latch queries while the latch is unknown
 # s: a loop held up this long (a hung process) re-reads the latch before commanding again
 GAP = 1.0
 FIND_TIMEOUT = 1.0  # s: the look-up of other controllers' tokens at start
@@ -68,13 +80,13 @@ def open_daemon_bus(cfg: FleetConfig) -> tuple[Bus, str]:
         return bus, "joined the hub"
 
 
-def _reopen(cfg: FleetConfig, stop: threading.Event) -> tuple[Bus, str]:
-    """The daemon's session again, once the controller taken over from is gone (it may have
-    been the one listening on the endpoints)."""
+def _reopen(cfg: FleetConfig, stop: threading.Event) -> tuple[Bus, str, subprocess.Popen | None]:
+    """The daemon's session again (``open_daemon_session``), once the controller taken over
+    from is gone (it may have been the one listening on the endpoints)."""
     deadline = time.monotonic() + REOPEN_WAIT
     while True:
         try:
-            return open_daemon_bus(cfg)
+            return open_daemon_session(cfg)
         except BusError:
             if time.monotonic() >= deadline or stop.is_set():
                 raise
@@ -83,19 +95,21 @@ def _reopen(cfg: FleetConfig, stop: threading.Event) -> tuple[Bus, str]:
 
 def claim_fleet(
     cfg: FleetConfig, take_over: bool, stop: threading.Event
-) -> tuple[Bus, str, Claim] | int:
-    """Open the daemon's session and claim the fleet (``controller.runtime.claim``): the bus,
-    how it joined and the claim; or exit 1 when another controller runs (without
-    ``take_over``) or would not stop (with it)."""
-    bus, how = open_daemon_bus(cfg)
+) -> tuple[Bus, str, Claim, subprocess.Popen | None] | int:
+    """Open the daemon's session (``open_daemon_session``) and claim the fleet
+    (``controller.runtime.claim``): the bus, how it joined, the claim and the hub it started
+    (or None); or exit 1 when another controller runs (without ``take_over``) or would not
+    stop (with it)."""
+    bus, how, own_hub = open_daemon_session(cfg)
     try:
         found = bus.alive_ids(ROLE, timeout=FIND_TIMEOUT)
     except BaseException:
         bus.close()
+        stop_hub_process(own_hub)
         raise
     claim = Claim(make_ident(int(time.time() * 1e3), found), found)
     if not found:
-        return bus, how, claim
+        return bus, how, claim, own_hub
     name = cfg.fleet.name
     with bus:
         if not take_over:
@@ -104,6 +118,7 @@ def claim_fleet(
                 f"({', '.join(found)}): not starting (fleet daemon --take-over replaces it)",
                 file=sys.stderr,
             )
+            stop_hub_process(own_hub)
             return 1
         claim.watch(bus)
         bus.declare_alive(ROLE, claim.ident)
@@ -118,16 +133,19 @@ def claim_fleet(
                 "not starting (nothing was commanded)",
                 file=sys.stderr,
             )
+            stop_hub_process(own_hub)
             return 1
-    bus, how = _reopen(cfg, stop)
-    return bus, how, claim
+    bus, how, again = _reopen(cfg, stop)
+    return bus, how, claim, own_hub or again
 
 
 class LatchWatch:
-    """When the controller must (re-)read the latched e-stop, and for how long it waits."""
+    """When the controller must (re-)read the latched e-stop, and for how long it waits; with
+    a ``keeper``, the latch written to its file on every change."""
 
-    def __init__(self, node: ControllerNode) -> None:
+    def __init__(self, node: ControllerNode, keeper: LatchKeeper | None = None) -> None:
         self.node = node
+        self.keeper = keeper
         self.give_up_at: float | None = None  # None: wait as long as it takes
         self.next_query = 0.0
 
@@ -137,10 +155,16 @@ class LatchWatch:
         self.next_query = mono + LATCH_RETRY
 
     def poll(self, mono: float) -> None:
+        if self.keeper is not None:
+            self.keeper.poll()
         if not self.node.latch_pending:
+            if not self.node.latch.known and mono >= self.next_query:
+                self.node.ask_latch(timeout=LATCH_RETRY)
+                self.next_query = mono + LATCH_UNKNOWN
             return
         if self.give_up_at is not None and mono >= self.give_up_at:
             self.node.release_latch()
+            self.next_query = mono + LATCH_UNKNOWN
         elif mono >= self.next_query:
             self.node.expect_latch(timeout=LATCH_RETRY)
             self.next_query = mono + LATCH_RETRY
@@ -169,6 +193,41 @@ class TickBudget:
             )
 
 
+def open_daemon_session(cfg: FleetConfig) -> tuple[Bus, str, subprocess.Popen | None]:
+    """The daemon's session: a client of the ``fleet hub`` (or world) already listening on
+    ``zenoh.listen``; else a client of a hub it starts itself as a child process, so that
+    ``fleet estop`` still reaches the agents while the daemon is hung (its own listening session
+    would hang with it); else, if that hub does not come up, listening itself as before.
+    Returns (bus, how, the hub it started or None)."""
+    try:
+        return _client_of_hub(cfg), "joined the hub", None
+    except BusError:
+        pass
+    child = start_hub_process(cfg)
+    deadline = time.monotonic() + HUB_START
+    while child is not None and child.poll() is None and time.monotonic() < deadline:
+        try:
+            return _client_of_hub(cfg), "joined the hub it started", child
+        except BusError:
+            time.sleep(0.1)  # polling for the child hub to listen (a handshake, retried)
+    if child is not None:
+        log.error("the hub this daemon started did not come up: listening itself")
+        stop_hub_process(child)
+    bus, how = open_daemon_bus(cfg)
+    return bus, how, None
+
+
+def _client_of_hub(cfg: FleetConfig) -> Bus:
+    return Bus(
+        cfg.zenoh,
+        cfg.fleet.name,
+        mode="client",
+        listen=[],
+        connect=list(cfg.zenoh.listen),
+        lease_s=cfg.fleet.liveliness_lease,
+    )
+
+
 def run_daemon(
     cfg: FleetConfig,
     mission: Mission,
@@ -189,7 +248,7 @@ def run_daemon(
         if planners is not None:
             planners.close()
         return claimed
-    bus, how, claim = claimed
+    bus, how, claim, own_hub = claimed
     recorder = open_recorder(cfg, out, f"daemon/{mission_kind}", viz=viz, who="fleet daemon")
     status = 0
     health = ""
@@ -198,6 +257,8 @@ def run_daemon(
             claim.watch(bus)
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
             rk = Ratekeeper(cfg.fleet.rate_hz)
+            # the latch it left (without a hub it is the keeper; with one it learns from it too)
+            file = LatchFile(cfg, "controller")
             node = ControllerNode(
                 cfg,
                 bus,
@@ -212,8 +273,9 @@ def run_daemon(
                 clock=time.monotonic,
                 planners=planners,
                 ident=claim.ident,
+                latch_at_start=file.load(),
             )
-            latch = LatchWatch(node)
+            latch = LatchWatch(node, LatchKeeper(node.latch, file))
             latch.start(time.monotonic(), LATCH_WAIT_AT_START)
             print(
                 f"fleet daemon: fleet {cfg.fleet.name!r} on {list(cfg.zenoh.listen)} ({how}), "
@@ -261,6 +323,7 @@ def run_daemon(
                     break
             if not claim.yielded.is_set():
                 node.hold(time.time())
+            latch.poll(time.monotonic())  # the last change of the latch written too
             ticks = node.status().tick_ms
             health = (
                 f"; {node.counters.ticks} ticks, {rk.lagged} late, {budget.over} over the "
@@ -269,6 +332,7 @@ def run_daemon(
             )
     finally:
         recorder.close()
+        stop_hub_process(own_hub)
         if planners is not None:
             planners.close()
     print(

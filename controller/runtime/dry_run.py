@@ -19,6 +19,7 @@ import numpy as np
 from controller import geometry, wire
 from controller.config import FleetConfig
 from controller.io.bus import Bus
+from controller.latch import released_at_start
 from controller.mission.types import Mission, Reason
 from controller.runtime.lockstep import ControllerLockstep, LockstepCoordinator
 from controller.runtime.node import ControllerNode
@@ -342,6 +343,9 @@ class DryRun:
     def _run(self, hub, recorder, ctl_bus: Bus, robot_bus: Bus, wall0: float) -> dict[str, Any]:
         cfg = self.cfg
         ctl_bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
+        # a fresh world with no operator and no e-stop history: the run itself releases the
+        # latch at epoch 0 (any operator's `fleet estop` on its bus still stops it)
+        fresh = released_at_start("fleet run")
         node = ControllerNode(
             cfg,
             ctl_bus,
@@ -350,6 +354,7 @@ class DryRun:
             lossless_commands=True,
             extra_drops=recorder.drops,
             clock=time.perf_counter,
+            latch_at_start=fresh,
         )
         drivers, emulators = make_sim_drivers(cfg, hub)
         commands_arrived = threading.Condition()
@@ -359,6 +364,7 @@ class DryRun:
                 drv,
                 AgentParams(r.id, cfg.fleet.name, cfg.fleet.cmd_ttl, cfg.fleet.max_clock_skew),
                 commands_arrived,
+                latch_at_start=fresh,
             )
             for r, drv in zip(cfg.robots, drivers, strict=True)
         ]

@@ -1,20 +1,37 @@
-"""``fleet estop`` / ``fleet resume``: the e-stop put straight to the agents, and confirmed.
+"""``fleet estop`` / ``fleet resume``: the e-stop put straight to the agents, and confirmed;
+and the latch's file (the controller side's only e-stop I/O besides the bus).
 
-The ``EStop`` goes out on ``estop`` (every agent, the hub and the controller subscribe); then
-every holder of the latch is asked (``estop/state/<role>/<id>``, QueryTarget.ALL, replies read
-as they come so a hung daemon costs nothing) until each known agent (the config's robots and
-every robot liveliness token) answers with the new state. An unconfirmed e-stop is put again
-every ``REPUT`` s (it is latched: a repeat is harmless). Nothing here waits for the daemon.
+The ``EStop`` goes out on ``estop`` (every agent, the hub and the controller subscribe) with the
+next ``epoch``: one above the greatest any holder answers (``controller.latch`` refuses a release
+at or below the epoch it holds). Then every holder of the latch is asked
+(``estop/state/<role>/<id>``, QueryTarget.ALL, replies read as they come so a hung daemon costs
+nothing) until each known agent (the config's robots and every robot liveliness token) answers
+with the new state at that epoch or above. An unconfirmed e-stop is put again every ``REPUT`` s
+(it is latched: a repeat is harmless), one epoch above any holder that refused it. Nothing here
+waits for the daemon.
+
+``LatchFile``: the hub and the daemon each keep their latch in
+``<log.state_dir or log.dir>/estop-<fleet>-<holder>.json`` (written to a temporary file, fsynced,
+renamed over the old one, directory fsynced) and read it back at start: a restarted hub or daemon,
+and a full restart, come up with the latch they left. A file that is missing or unreadable leaves
+the latch unknown (stopped).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import logging
+import os
 import time
+from pathlib import Path
 from typing import Any
 
 from controller import wire
 from controller.config import FleetConfig
 
+log = logging.getLogger(__name__)
+
+EPOCH_WAIT = 0.3  # s: how long the tool gathers the holders' epochs before it puts
 REPUT = 0.25  # s between repeats of an unconfirmed e-stop
 
 
@@ -24,18 +41,21 @@ def put_estop(
     """Engage (``word`` "estop") or release ("resume") and wait at most ``timeout`` s for the
     confirmations. Returns the ``--json`` object (``confirmed``: every known agent did)."""
     engaged = word == "estop"
-    msg = wire.EStop(t=time.time(), engaged=engaged, source=source, reason=reason)
     t0 = time.monotonic()
     deadline = t0 + timeout
     pub = bus.publisher("estop")
     tokens: list[str] = []  # robot liveliness tokens, appended as the replies come
     bus.alive_ids_async("robot", tokens, timeout=min(1.0, timeout))
+    # an engage goes out at once (any epoch latches; a holder at a greater one makes the
+    # confirmation put it again above); a release must exceed every holder's epoch: ask first
+    epoch = 1 if engaged else held_epoch(bus, min(EPOCH_WAIT, timeout / 3)) + 1
+    msg = wire.EStop(t=time.time(), engaged=engaged, source=source, reason=reason, epoch=epoch)
     while not pub.matching() and time.monotonic() < deadline:
         time.sleep(0.005)  # polling for the subscribers' declarations (a handshake)
     pub.put(msg)
     sent = time.monotonic()
     known = set(cfg.robot_ids)
-    agents, holders, elapsed = _confirmations(bus, msg, known, tokens, deadline, pub, t0)
+    agents, holders, elapsed, last = _confirmations(bus, msg, known, tokens, deadline, pub, t0)
     known |= set(tokens[:])
     status = None
     for _, st in bus.query_replies(bus.key("status"), wire.FleetStatus, timeout=0.3):
@@ -54,7 +74,16 @@ def put_estop(
         "hub_confirmed": "hub" in holders,
         "elapsed_s": None if missing or elapsed is None else round(elapsed, 4),
         "sent_after_s": round(sent - t0, 4),
+        "epoch": last.epoch,
     }
+
+
+def held_epoch(bus, timeout: float) -> int:
+    """The greatest epoch any holder answers within ``timeout`` s (0 when none answers)."""
+    best = 0
+    for _, st in bus.query_replies(bus.estop_wildcard(), wire.EStop, timeout):
+        best = max(best, st.epoch)
+    return best
 
 
 def _confirmations(
@@ -62,8 +91,10 @@ def _confirmations(
 ):
     """Ask every latch holder until every known agent (the ``config``'s robots and the robot
     ``tokens`` seen so far, which the liveliness look-up fills meanwhile) holds ``msg``'s state
-    (stamped no older) or the deadline. Returns (agents that confirmed, roles of the other
-    holders that did, seconds from ``t0`` to the last agent's confirmation or None)."""
+    at its epoch or above, or the deadline. A holder that answers a greater epoch (or the same
+    epoch in the other state) refused it: ``msg`` is put again one epoch above. Returns (agents
+    that confirmed, roles of the other holders that did, seconds from ``t0`` to the last
+    agent's confirmation or None, the message last put)."""
     agents: set[str] = set()
     holders: set[str] = set()
     elapsed = None
@@ -73,7 +104,14 @@ def _confirmations(
         left = deadline - time.monotonic()
         for key, st in bus.query_replies(bus.estop_wildcard(), wire.EStop, min(0.3, left)):
             parsed = wire.parse_key(key, bus.fleet)
-            if parsed is None or st.engaged != msg.engaged or st.t < msg.t:
+            if parsed is None:
+                continue
+            if _refused(msg, st):
+                msg = dataclasses.replace(msg, epoch=st.epoch + 1)
+                pub.put(msg)
+                next_put = time.monotonic() + REPUT
+                continue
+            if st.engaged != msg.engaged or st.epoch < msg.epoch:
                 continue
             if parsed.parts.get("role") == "robot":
                 agents.add(parsed.id)
@@ -89,4 +127,78 @@ def _confirmations(
             next_put = time.monotonic() + REPUT
         if not known <= agents:
             time.sleep(0.005)  # between rounds of a poll (each round is a real check)
-    return agents, holders, elapsed
+    return agents, holders, elapsed, msg
+
+
+def _refused(msg: wire.EStop, st: wire.EStop) -> bool:
+    """Whether a holder's answer ``st`` shows it holds an epoch ``msg`` cannot change."""
+    if st.epoch > msg.epoch:
+        return st.engaged != msg.engaged or msg.engaged
+    return st.epoch == msg.epoch and st.engaged != msg.engaged
+
+
+class LatchFile:
+    """The latch kept in one small JSON file (an ``EStop``), replaced atomically."""
+
+    def __init__(self, cfg: FleetConfig, holder: str) -> None:
+        """``holder``: "hub" or "controller" (each keeps its own file)."""
+        folder = Path(cfg.log.state_dir or cfg.log.dir)
+        self.path = folder / f"estop-{cfg.fleet.name}-{holder}.json"
+
+    def load(self) -> wire.EStop | None:
+        """The latch last written, or None (no file, or unreadable: logged) - unknown."""
+        try:
+            raw = self.path.read_bytes()
+        except FileNotFoundError:
+            log.warning("no e-stop latch file %s: the latch is unknown (stopped)", self.path)
+            return None
+        except OSError as exc:
+            log.error("e-stop latch file %s unreadable (%s): the latch is unknown", self.path, exc)
+            return None
+        try:
+            msg = wire.decode(wire.EStop, raw)
+        except wire.WireError as exc:
+            log.error("e-stop latch file %s is corrupt (%s): the latch is unknown", self.path, exc)
+            return None
+        return msg if isinstance(msg, wire.EStop) else None
+
+    def save(self, msg: wire.EStop) -> None:
+        """Write ``msg``: a temporary file, fsync, rename over the old one, fsync the folder."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        with open(tmp, "wb") as f:
+            f.write(wire.encode(msg))
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, self.path)
+        fd = os.open(self.path.parent, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+class LatchKeeper:
+    """Writes a latch to its ``LatchFile`` whenever it changed (``poll`` from a loop thread,
+    never from a zenoh callback). Write errors are logged, once per kind, and retried."""
+
+    def __init__(self, latch, file: LatchFile) -> None:
+        self.latch, self.file = latch, file
+        self.saved = latch.version
+        self._failing = False
+
+    def poll(self) -> bool:
+        """Save if the latch changed since the last save; returns whether it wrote."""
+        version, msg = self.latch.version, self.latch.state()
+        if version == self.saved or msg is None:
+            return False
+        try:
+            self.file.save(msg)
+        except OSError as exc:
+            if not self._failing:
+                log.error("cannot keep the e-stop latch in %s: %s", self.file.path, exc)
+            self._failing = True
+            return False
+        self._failing = False
+        self.saved = version
+        return True

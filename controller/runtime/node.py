@@ -31,6 +31,7 @@ import numpy as np
 from controller import wire
 from controller.config import FleetConfig
 from controller.io.bus import Inbox
+from controller.latch import FRESH_WORLD, Latch, note_latch, role_of
 from controller.mission.types import FleetView, Mission, MissionOutput
 
 log = logging.getLogger(__name__)
@@ -38,6 +39,8 @@ log = logging.getLogger(__name__)
 # s: a pose stamped at most this after the tick is taken as stamped (float rounding of sim time,
 # sub-tick sensor timing); later stamps are taken at the tick
 AHEAD_TOLERANCE = 1e-3
+# s (in ticks): how long a robot's link event may wait for its liveliness token to agree
+EVENT_GRACE = 1.0
 STAGES = ("sample", "plan", "safety", "publish")  # timed: sample+estimate, plan, safety, publish
 TIMINGS = 200_000  # ticks of stage timings kept (the run summary's; about 3 h at 20 Hz)
 
@@ -66,6 +69,7 @@ class NodeCounters:
     skewed: int = 0  # poses stamped further than fleet.max_clock_skew from the tick time
     over_budget: int = 0  # lab ticks that took longer than fleet.tick_budget
     ahead: int = 0  # poses stamped > 1 ms after the tick time (within the skew): taken at the tick
+    spoofed_events: int = 0  # link events the robot's liveliness token did not bear out
 
 
 class ControllerNode:
@@ -82,11 +86,15 @@ class ControllerNode:
         clock: Callable[[], float] | None = None,
         planners: Any = None,
         ident: str = "main",
+        latch_at_start: wire.EStop | None = FRESH_WORLD,
     ) -> None:
         """``clock`` (s, monotonic) only times the stages; ``extra_drops`` adds drop counters
         of other parts (the recorder) to ``fleet status``; ``planners`` (the planner worker)
         adds its plan latencies (``plan_latency_s``); ``ident`` is the controller's liveliness
-        id (``alive/controller/<ident>``, named in ``fleet status``)."""
+        id (``alive/controller/<ident>``, named in ``fleet status``). ``latch_at_start``: the
+        e-stop latch this node starts with - a fresh world's release (the dry run, replay,
+        tests: the default), the latch's file, or None: unknown, commanding zero until it
+        learns the latch or an operator releases it (the lab daemon)."""
         self.ident = ident
         self.clock = clock
         self.planners = planners
@@ -103,12 +111,12 @@ class ControllerNode:
         self.index = {rid: i for i, rid in enumerate(self.ids)}
         self.counters = NodeCounters()
         self.phase = "init"
-        self.estop = False
-        self.estop_msg: wire.EStop | None = None  # the message that set the e-stop state
+        self.latch = Latch("controller/main", latch_at_start)
         # True from ``expect_latch`` until a holder answers: every command is zero meanwhile
         self.latch_pending = False
         self.present = np.zeros(len(self.ids), dtype=bool)
         self.link_lost = np.zeros(len(self.ids), dtype=bool)
+        self._events_pending: dict[str, tuple[wire.PlanEvent, int]] = {}
         self.arrested = False
         self.last_output: MissionOutput | None = None
         self.last_tick = 0.0
@@ -151,63 +159,86 @@ class ControllerNode:
         self.present[i] = alive
 
     # -- the latched e-stop
-    def latch_state(self) -> wire.EStop:
+    @property
+    def estop(self) -> bool:
+        """Whether the robots are held stopped: an e-stop latched, or the latch unknown."""
+        return self.latch.stopped
+
+    def latch_state(self) -> wire.EStop | None:
         """The controller's latched e-stop, answered on ``estop/state/controller/main`` (zenoh's
-        thread). Never latched: released at t = 0, which any real message outranks."""
-        held = self.estop_msg
-        if held is not None:
-            return held
-        return wire.EStop(t=0.0, engaged=False, source="controller/main")
+        thread); None (no answer) while unknown."""
+        return self.latch.state()
 
     def expect_latch(self, timeout: float = 1.0) -> None:
         """Ask every holder of the latched e-stop (hub, agents) and command zero until one
         answers (a start, or a resume after the loop was hung): the controller must not command
         robots on a state it may have missed. ``release_latch`` ends the wait unanswered."""
         self.latch_pending = True
+        self.ask_latch(timeout)
+
+    def ask_latch(self, timeout: float = 1.0) -> None:
+        """Ask every holder of the latched e-stop without holding the commands (an unknown
+        latch holds them anyway); the answers are applied in the next tick's sample stage."""
         self.bus.query_async(
             self.bus.estop_wildcard(), wire.EStop, self._latch_replies, timeout=timeout
         )
 
     def release_latch(self) -> None:
-        """Nobody answered the latch query (no hub, no agent): go on with what this node holds."""
+        """Nobody answered the latch query (no hub, no agent): go on with what this node holds
+        (an unknown latch stays stopped until an operator's release)."""
         if self.latch_pending:
             log.warning("no holder answered the e-stop latch query; e-stop %s", self.estop)
         self.latch_pending = False
 
-    def _set_estop(self, msg: wire.EStop, how: str) -> None:
-        if self.estop != msg.engaged:
-            state = "engaged" if msg.engaged else "released"
-            log.warning("e-stop %s by %s (%s)", state, msg.source, how)
-        self.estop = bool(msg.engaged)
-        self.estop_msg = msg
-
     def _sample_estop(self) -> None:
-        replies = [i.msg for i in self._latch_replies.drain() if i.key != self._latch_key]
+        fleet = self.cfg.fleet.name
+        replies = [
+            (role_of(i.key, fleet), i.msg)
+            for i in self._latch_replies.drain()
+            if i.key != self._latch_key
+        ]
         if replies:
             self.latch_pending = False
-            newest = wire.newest_estop(replies)
-            held = self.estop_msg
-            if newest is not None and (
-                held is None or wire.newest_estop([held, newest]) is not held
-            ):
-                self._set_estop(newest, "latch query")
+            note_latch("controller", self.latch.answers(replies))
         for item in self._estops.drain():
-            self._set_estop(item.msg, "live")
+            note_latch("controller", self.latch.operator(item.msg))
 
     def _sample_events(self) -> None:
+        """Robot events, believed only when the robot's liveliness token agrees: its agent
+        withdraws the token before it reports ``link_lost`` and declares it before
+        ``link_restored``. An event the token does not bear out within ``EVENT_GRACE`` s of
+        ticks is ignored and counted (``spoofed_events``): on the open default anyone may put
+        on a robot's event key (under the lab ACL only that robot's agent may)."""
         for item in self._robot_events.drain():
             rid = self._robot_id(item.key)
-            if rid not in self.index:
-                continue
-            if item.msg.kind == "link_lost":
-                self.link_lost[self.index[rid]] = True
-                self.counters.link_events += 1
-                log.error("robot %s reports a lost link: %s", rid, item.msg.data.get("detail"))
-            elif item.msg.kind == "link_restored":
-                if self.link_lost[self.index[rid]]:
-                    log.warning("robot %s: link restored (%s)", rid, item.msg.data.get("detail"))
-                self.link_lost[self.index[rid]] = False
-                self.counters.link_restored += 1
+            if rid in self.index and item.msg.kind in ("link_lost", "link_restored"):
+                until = self.counters.ticks + max(1, round(EVENT_GRACE * self.cfg.fleet.rate_hz))
+                self._events_pending[rid] = (item.msg, until)
+        for rid, (msg, until) in list(self._events_pending.items()):
+            i = self.index[rid]
+            if bool(self.present[i]) == (msg.kind == "link_restored"):
+                del self._events_pending[rid]
+                self._apply_event(rid, msg)
+            elif self.counters.ticks >= until:
+                del self._events_pending[rid]
+                self.counters.spoofed_events += 1
+                log.warning(
+                    "robot %s: %s ignored: its liveliness token says otherwise (not its agent)",
+                    rid,
+                    msg.kind,
+                )
+
+    def _apply_event(self, rid: str, msg: wire.PlanEvent) -> None:
+        i = self.index[rid]
+        if msg.kind == "link_lost":
+            self.link_lost[i] = True
+            self.counters.link_events += 1
+            log.error("robot %s reports a lost link: %s", rid, msg.data.get("detail"))
+        else:
+            if self.link_lost[i]:
+                log.warning("robot %s: link restored (%s)", rid, msg.data.get("detail"))
+            self.link_lost[i] = False
+            self.counters.link_restored += 1
 
     def _skewed(self, t: float, now: float | None) -> bool:
         if now is None or abs(t - now) <= self.cfg.fleet.max_clock_skew:
@@ -436,7 +467,7 @@ class ControllerNode:
             phase=self.phase,
             estop=self.estop,
             robots=robots,
-            counters={**vars(self.counters), **self.drops()},
+            counters={**vars(self.counters), **self.drops(), **self._latch_counters()},
             plan_latency_s={} if self.planners is None else self.planners.summary(),
             tick_ms=self._tick_percentiles(),
             controller=self.ident,
@@ -451,6 +482,16 @@ class ControllerNode:
             "p50": float(np.median(total) * 1e3),
             "p99": float(np.percentile(total, 99) * 1e3),
             "max": float(total.max() * 1e3),
+        }
+
+    def _latch_counters(self) -> dict[str, int]:
+        """The latch in ``fleet status``: its epoch, 1 while unknown, refusals so far."""
+        c = self.latch.counters
+        return {
+            "estop_epoch": self.latch.epoch,
+            "estop_unknown": int(not self.latch.known),
+            "estop_replays_refused": c.replays_refused,
+            "estop_answers_refused": c.answers_refused,
         }
 
 

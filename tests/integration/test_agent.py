@@ -96,14 +96,18 @@ def test_estop_is_latched_until_resume(rig):
     agent.step(0.0)
     hub.advance_to(TICK)
     assert speed(w) > 0.1
-    deliver(rig["estop"], agent, wire.EStop(t=0.05, engaged=True, source="test"), "_estops")
+    deliver(
+        rig["estop"], agent, wire.EStop(t=0.05, engaged=True, source="test", epoch=1), "_estops"
+    )
     for k in range(1, 6):  # commands keep coming but are refused
         deliver(rig["cmd"], agent, wire.Twist2D(t=k * TICK, seq=k + 1, vx=0.2))
         agent.step(k * TICK)
         hub.advance_to((k + 1) * TICK)
         assert speed(w) == 0.0
     assert agent.counters.estop_rejected == 5
-    deliver(rig["estop"], agent, wire.EStop(t=0.4, engaged=False, source="test"), "_estops")
+    deliver(
+        rig["estop"], agent, wire.EStop(t=0.4, engaged=False, source="test", epoch=2), "_estops"
+    )
     agent.step(0.4)
     hub.advance_to(0.45)
     assert speed(w) == 0.0  # released, but nothing moves until a new command
@@ -171,7 +175,7 @@ def test_a_command_stamped_far_from_the_agents_clock_is_dropped_and_counted(rig)
 
 def test_a_late_agent_reads_the_latch_from_another_holder_and_comes_up_stopped(rig):
     agent, hub = rig["agent"], rig["hub"]
-    deliver(rig["estop"], agent, wire.EStop(t=5.0, engaged=True, source="op"), "_estops")
+    deliver(rig["estop"], agent, wire.EStop(t=5.0, engaged=True, source="op", epoch=1), "_estops")
     agent.step(0.0)
     assert agent.latch_state().engaged
     r2 = Capabilities("omni", True, 0.5, 2.0, 0.15)

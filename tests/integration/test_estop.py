@@ -57,6 +57,9 @@ def test_estop_reaches_agents_with_daemon_alive_hung_dead_and_stays_latched(tmp_
                 40,
                 "the daemon seeing r1 and r2",
             )
+            # a fresh lab fails closed until an operator's first resume (r3 is not running)
+            code, out = _estop(cfg, "resume", timeout=1.0)
+            assert out["agents_confirmed"] == ["r1", "r2"] and out["agents_missing"] == ["r3"]
             wait_for(lambda: _all_hold(bus, ("r1", "r2"), False), 10, "the agents' latches")
 
             # daemon alive; r3 is in the config but not running: named, exit 1

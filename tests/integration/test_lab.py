@@ -9,7 +9,7 @@ import pytest
 
 from controller.io.recorder import read_log
 from tests.support.config import base_config_dict, write_toml
-from tests.support.lab import fleet, spawn, status, stop_all
+from tests.support.lab import fleet, release, spawn, status, stop_all
 
 
 @pytest.fixture
@@ -50,7 +50,10 @@ def test_daemon_agent_status_estop_resume(lab_config, tmp_path):
             ):
                 break
         assert st.get("ok"), "the daemon never answered fleet status"
-        assert st["phase"] == "hold" and st["estop"] is False
+        # a fresh lab fails closed: the latch unknown, the robots stopped, until an operator
+        assert st["phase"] == "hold" and st["estop"] is True and st["counters"]["estop_unknown"]
+        release(lab_config)
+        assert status(lab_config)["estop"] is False
         assert any(r["id"] == "r1" and r["present"] for r in st["robots"])
         assert st["counters"]["poses"] > 0, st  # r1's poses reach the daemon
         est = fleet("estop", "--config", str(lab_config), "--json", "--reason", "test")

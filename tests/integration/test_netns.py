@@ -113,6 +113,9 @@ def test_agents_in_another_namespace_stop_on_a_cut_link_are_lost_and_rejoin(tmp_
             return present(st) == set(ROBOTS) and st["counters"]["poses"] > after
 
         wait_for(lambda: up(0), 10, "fleet status: the robots present, their poses arriving")
+        # a fresh lab fails closed: the operator's first resume lets the commands through
+        res = fleet_in(pair, pair.a, "resume", "--config", str(path), "--json", "--timeout", "10")
+        assert res.returncode == 0 and json.loads(res.stdout)["confirmed"], res.stdout
         poses_before = seen["st"]["counters"]["poses"]
 
         # cut: the agents' end of the link goes down

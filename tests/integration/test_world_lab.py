@@ -14,7 +14,7 @@ import time
 from controller import wire
 from controller.io.bus import Bus
 from tests.support.config import base_config_dict, write_toml
-from tests.support.lab import connect_client, fleet_json, spawn, stop_all, tail
+from tests.support.lab import connect_client, fleet_json, release, spawn, stop_all, tail
 from tests.support.wait import wait_for
 
 ROBOTS = ("r1", "r2", "r3", "r4")
@@ -156,6 +156,7 @@ def test_world_daemon_drivers_arrest_kill_restart(tmp_path, port):
             d1 = daemon(1, "capture")
             agents = [spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ROBOTS]
             procs += agents
+            release(cfg, timeout=90)  # a fresh lab: stopped until an operator's first resume
             seen: list[str] = []
             wait_for(lambda: _arrested(phases, seen), 45, "the daemon's arrest")
             assert seen[0] == "approach" and "hold" in seen, seen
@@ -214,6 +215,7 @@ def test_a_driver_killed_mid_approach_is_lost_replanned_and_the_rest_arrest(tmp_
                                "capture", "--out", str(tmp_path / "d.mcap")))  # fmt: skip
             agents = {r: spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ids}
             procs += list(agents.values())
+            release(c, timeout=90)  # a fresh lab: stopped until an operator's first resume
             events: list = []
 
             def seen(kind: str) -> list:

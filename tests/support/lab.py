@@ -68,6 +68,14 @@ def stop_all(procs: list[subprocess.Popen]) -> list[int]:
     return codes
 
 
+def release(cfg, *identity: str, timeout: float = 10.0) -> dict[str, Any]:
+    """The operator's first ``fleet resume`` of a fresh lab: its processes start with the e-stop
+    latch unknown, robots stopped, until an operator releases it. Returns its JSON."""
+    code, out = fleet_json("resume", "--config", str(cfg), "--timeout", str(timeout), *identity)
+    assert code == 0 and out["confirmed"] is True, out
+    return out
+
+
 def tail(p: subprocess.Popen, n: int = 2000) -> str:
     return Path(p.log_path).read_text()[-n:]  # type: ignore[attr-defined]
 

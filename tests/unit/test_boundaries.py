@@ -8,7 +8,9 @@
   ``controller/viz.py`` the only importer of matplotlib;
 - ``controller/runtime`` is the only part of ``controller/`` that imports ``drivers`` or
   ``sim_backend``;
-- ``drivers/`` imports nothing of ``controller/`` but the wire contract (``controller.wire``);
+- ``drivers/`` imports nothing of ``controller/`` but the wire contract (``controller.wire``)
+  and the e-stop latch built on it (``controller.latch``: the one latch of every holder, agents
+  included), which in turn imports only ``controller.wire`` and the standard library, no clock;
 - ``sim_backend/`` knows nothing of the bus (no zenoh, no ``controller.io`` or
   ``controller.wire``) and nothing of the drivers, with one listed exception: the MAVLink
   vehicle emulator shares the NED conversions of ``drivers/mavlink/convert.py``;
@@ -130,13 +132,26 @@ def test_only_runtime_imports_the_robot_side(path):
     assert not bad, f"{rel(path)} imports {sorted(bad)} outside controller/runtime/"
 
 
+# what drivers/ may import of controller/: the wire contract and the e-stop latch on it
+DRIVERS_MAY_IMPORT = ("controller.wire", "controller.latch")
+
+
 @pytest.mark.parametrize("path", files("drivers"), ids=rel)
 def test_drivers_import_only_the_wire_contract(path):
     ours = {n for n in imports_of(path) if n.split(".")[0] == "controller"}
-    allowed = {"controller", "controller.wire"} | {
-        n for n in ours if n.startswith("controller.wire.")
+    allowed = {"controller", *DRIVERS_MAY_IMPORT} | {
+        n for n in ours if n.startswith(tuple(f"{m}." for m in DRIVERS_MAY_IMPORT))
     }
     assert ours <= allowed, f"{rel(path)} imports {sorted(ours - allowed)} of controller/"
+
+
+def test_the_latch_imports_only_the_wire_contract_and_no_clock():
+    path = ROOT / "controller" / "latch.py"
+    names = imports_of(path)
+    ours = {n for n in names if n.split(".")[0] == "controller"}
+    assert ours <= {"controller", "controller.wire"}, sorted(ours)
+    assert not top(names) & (FORBIDDEN_STDLIB - {"threading"}), sorted(names)
+    assert not top(names) & {"zenoh", "numpy"}
 
 
 @pytest.mark.parametrize("path", files("sim_backend"), ids=rel)

@@ -73,11 +73,11 @@ def test_a_tick_takes_in_poses_and_publishes_one_command_per_robot(rig):
 
 def test_an_engaged_estop_zeroes_every_command_until_released(rig):
     cfg, bus, _, node = rig
-    bus.deliver("estop", wire.EStop(t=0.0, engaged=True, source="op"))
+    bus.deliver("estop", wire.EStop(t=0.0, engaged=True, source="op", epoch=1))
     node.tick(1.0)
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.0 for r in cfg.robots)
     assert node.status().estop is True
-    bus.deliver("estop", wire.EStop(t=0.0, engaged=False, source="op"))
+    bus.deliver("estop", wire.EStop(t=0.0, engaged=False, source="op", epoch=2))
     node.tick(1.05)
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.2 for r in cfg.robots)
 
@@ -85,6 +85,7 @@ def test_an_engaged_estop_zeroes_every_command_until_released(rig):
 def test_a_lost_link_or_a_missing_token_takes_the_robot_out_of_the_view(rig):
     cfg, bus, mission, node = rig
     r1, r2 = cfg.robot_ids[:2]
+    bus.alive_cb["robot"](r1, False)  # r1's agent withdraws its token, then reports
     bus.deliver("robot_event", wire.PlanEvent(t=0.0, kind="link_lost"), id=r1)
     bus.alive_cb["robot"](r2, False)
     node.tick(1.0)
@@ -93,6 +94,26 @@ def test_a_lost_link_or_a_missing_token_takes_the_robot_out_of_the_view(rig):
     assert sum(present.values()) == len(cfg.robots) - 2
     st = node.status()
     assert [r["link_lost"] for r in st.robots if r["id"] == r1] == [True]
+
+
+def test_a_link_event_its_robots_token_does_not_bear_out_is_ignored(rig):
+    """Issue 22: a spoofed ``link_lost`` (anyone may put on a robot's event key on the open
+    default) while the robot's agent is alive, and a spoofed ``link_restored`` while it is gone,
+    change nothing; each is counted after ``EVENT_GRACE`` s of ticks."""
+    from controller.runtime.node import EVENT_GRACE
+
+    cfg, bus, mission, node = rig
+    r1, r2 = cfg.robot_ids[:2]
+    bus.deliver("robot_event", wire.PlanEvent(t=0.0, kind="link_lost"), id=r1)
+    bus.alive_cb["robot"](r2, False)
+    bus.deliver("robot_event", wire.PlanEvent(t=0.0, kind="link_restored"), id=r2)
+    n = round(EVENT_GRACE * cfg.fleet.rate_hz) + 1
+    for k in range(n):
+        node.tick(1.0 + k / cfg.fleet.rate_hz)
+        present = dict(zip(cfg.robot_ids, mission.views[-1].present, strict=True))
+        assert present[r1] and not present[r2]
+    assert node.counters.link_events == 0 and node.counters.link_restored == 0
+    assert node.status().counters["spoofed_events"] == 2
 
 
 def test_status_reports_every_drop_counter(rig):
@@ -186,9 +207,11 @@ def test_poses_stamped_ahead_inside_the_skew_cannot_move_the_estimate():
 def test_link_restored_clears_link_lost(rig):
     cfg, bus, mission, node = rig
     r1 = cfg.robot_ids[0]
+    bus.alive_cb["robot"](r1, False)  # the agent withdraws its token, then reports
     bus.deliver("robot_event", wire.PlanEvent(t=0.0, kind="link_lost"), id=r1)
     node.tick(1.0)
     assert not mission.views[-1].present[0]
+    bus.alive_cb["robot"](r1, True)  # ... declares it again, then reports
     bus.deliver("robot_event", wire.PlanEvent(t=1.0, kind="link_restored"), id=r1)
     node.tick(1.05)
     assert mission.views[-1].present[0]
@@ -210,19 +233,19 @@ def test_commands_are_zero_while_the_latch_is_unread_and_a_newer_latch_engages(r
     replies.put(Received(0.0, "fleet/lab/estop/state/controller/main", own))
     node.tick(1.05)
     assert node.latch_pending
-    engaged = wire.EStop(t=5.0, engaged=True, source="op")
+    engaged = wire.EStop(t=5.0, engaged=True, source="op", epoch=3)
     replies.put(Received(0.0, "fleet/lab/estop/state/robot/r1", engaged))
     node.tick(1.1)
     assert not node.latch_pending and node.estop and node.status().estop
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.0 for r in cfg.robots)
     assert node.latch_state() == engaged
-    # an older released answer does not lift it; only a (newer) resume does
+    # a released answer does not lift it, even at a newer epoch; only an operator's resume does
     node.expect_latch()
-    old = wire.EStop(t=1.0, engaged=False, source="op")
-    bus.queries[-1][1].put(Received(0.0, "fleet/lab/estop/state/hub/main", old))
+    newer = wire.EStop(t=1.0, engaged=False, source="op", epoch=4)
+    bus.queries[-1][1].put(Received(0.0, "fleet/lab/estop/state/hub/main", newer))
     node.tick(1.15)
     assert node.estop
-    bus.deliver("estop", wire.EStop(t=6.0, engaged=False, source="op"))
+    bus.deliver("estop", wire.EStop(t=6.0, engaged=False, source="op", epoch=4))
     node.tick(1.2)
     assert not node.estop
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.2 for r in cfg.robots)
