@@ -15,7 +15,7 @@ import tomllib
 import pytest
 
 from tests.support.config import ROOT, write_toml
-from tests.support.lab import spawn, stop_all, tail
+from tests.support.lab import release, spawn, stop_all, tail
 from tests.support.wait import wait_for
 
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]
@@ -48,6 +48,7 @@ def test_the_whole_job_delivers_in_real_time_under_world_daemon_and_drivers(tmp_
         daemon = spawn(dlog, "daemon", "--config", c, "--mission", "capture", "--out", str(out))
         procs.append(daemon)
         procs += [spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ids]
+        release(cfg, timeout=90)  # a fresh lab: stopped until an operator's first resume
         wait_for(lambda: daemon.poll() is not None, JOB_S, "the daemon's end of the job")
         wall = time.monotonic() - t0
     finally:
