@@ -39,10 +39,12 @@ from controller.config import FleetConfig
 from controller.mission.guard import SafetyStage
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.contact_lp import ContactForceLP, required_wrench
+from controller.planning.serpentine import passive_velocity
 from controller.planning.transport import TransportPlanner
 from controller.planning.transport_model import ObjectModel, relocation_path
 from controller.planning.transport_types import (
     ATTACHED,
+    FOLLOW,
     PUSH,
     RELOCATE,
     SLIDE_LEFT,
@@ -379,6 +381,9 @@ class TransportMission:
         cfg, m = self.cfg, self.model
         weakest = min(cfg.robots[i].max_force for i in self._active())
         twist_v = twist * self.params.speed
+        if self.params.strategy == "serpentine":  # Sharma §4.1: Eq. 5 for every robot, alone
+            n = len(self._active())
+            return (*self._pushing_set(d, n), n, "eq5")
         if abs(twist[2]) * m.mean_radius <= 0.3:  # the turn's share of the unit twist
             friction = m.floor_friction * m.mass * 9.81
             fleet = len(self._active())
@@ -739,6 +744,13 @@ class TransportMission:
                 continue
             r = self.cfg.robots[i].radius
             centre = geometry.transform((c.point - r * c.inward)[None], pose)[0]
+            if code == FOLLOW and plan.strategy == "serpentine":  # §4.3: passive, zero force
+                vel[i] = passive_velocity(
+                    centre, view.poses[i, :2], rot @ c.inward, pose, view.object_velocity,
+                    self.s.contact_gain, self.cfg.robots[i].max_speed,
+                )  # fmt: skip
+                touch[i] = True
+                continue
             rel = centre - centroid
             v = twist[:2] + twist[2] * np.array([-rel[1], rel[0]])
             v = v + self.s.contact_gain * (centre - view.poses[i, :2])
