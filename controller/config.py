@@ -356,6 +356,10 @@ class SimSection:
     object_mass_scale: float = _rule(1.0, gt=0, max=100)
     object_friction_scale: float = _rule(1.0, min=0, max=100)
     object_com_offset: Point = _rule((0.0, 0.0))
+    # robot motion errors (Yamashita et al. Table 1: ±0.04 m, ±0.01 m): each robot's pose
+    # reports are off its true pose by a fixed offset drawn U(−x, x), U(−y, y) per run, world
+    # frame (m); the controller steers the robot that far off where it means it to be
+    robot_position_error: Point = _rule((0.0, 0.0))
 
 
 @dataclass(frozen=True, kw_only=True)
