@@ -36,6 +36,7 @@ DRIVERS = ("sim", "mavlink")
 MAVLINK_PROFILES = ("ardurover", "px4")
 MOTION_KINDS = ("line", "sine", "evade", "static", "inert")  # inert: no drive, limp from t = 0
 CLOSURE_MODES = ("exact", "paper")
+CAPTURE_GAS = ("ours", "paper")  # capture.ga: our GA + local search, or Sharma's as published
 HEURISTICS = ("euclid", "wavefront", "skeleton", "cost_to_go")
 #: Grid budgets: object route states (cells x heading bins) and robot route cells. Above them a
 #: plan takes minutes and gigabytes (512 x 512 x 36 states take about 5 s and 0.6 GB).
@@ -232,6 +233,7 @@ class CaptureSection:
     generations: int = _rule(600, min=1, max=1000000)
     seed: int = _rule(0, min=0)
     closure: str = _rule("exact", choices=CLOSURE_MODES)
+    ga: str = _rule("ours", choices=CAPTURE_GAS)
     # N: the largest push of the object the robots must resist at their contacts (and that force
     # times its radius of gyration in torque), with every robot at most its max_force; points
     # are added to the GA's set until it holds; 0: no check
