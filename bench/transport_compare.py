@@ -216,7 +216,13 @@ def aggregate(rows: list[dict], strategies, rng: np.random.Generator) -> dict:
             keys = sorted(set(ra) & set(rb))
             both = [k for k in keys if ra[k]["success"] and rb[k]["success"]]
             p = {"paired_runs": len(keys), "both_delivered": len(both)}
-            p["success"] = signed_rank([rb[k]["success"] - ra[k]["success"] for k in keys])
+            wins = [int(ra[k]["success"]) - int(rb[k]["success"]) for k in keys]
+            p["success"] = {
+                "pairs": len(keys),
+                "only_a_delivered": wins.count(1),
+                "only_b_delivered": wins.count(-1),
+                "wilcoxon_p": signed_rank(wins)["wilcoxon_p"],
+            }
             for key in ("transport_time_s", "impulse_ns"):
                 good = [k for k in both if ra[k][key] and rb[k][key]]
                 p[key] = signed_rank([ra[k][key] - rb[k][key] for k in good])
