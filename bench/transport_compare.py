@@ -242,8 +242,59 @@ def run_all(jobs: list[tuple], workers: int) -> list[dict]:
         return list(pool.map(run_case, jobs))
 
 
+def _num(v: float) -> str:
+    return f"{v:.0f}" if abs(v) >= 100 else f"{v:.3g}"
+
+
+def _ci(x: dict, key: str, unit: str = "") -> str:
+    if x.get(key) is None:
+        return "–"
+    lo, hi = x["ci95"]
+    return f"{_num(x[key])}{unit} [{_num(lo)}, {_num(hi)}]"
+
+
+def table(out: dict) -> str:
+    """The README's comparison table (markdown) from this script's JSON."""
+    lines = []
+    for sec, label in (("closed_loop", "suite"), ("robustness", "robustness")):
+        if sec not in out:
+            continue
+        for s, r in out[sec].items():
+            if s == "paired":
+                continue
+            ok, paper = r["success"], r["success_paper_criterion"]
+            lines.append(
+                f"| {label} | `{s}` | {r['runs']} | {_ci({**ok, 'rate': ok['rate']}, 'rate')} "
+                f"| {_ci(paper, 'rate')} | {_ci(r['transport_time_s'], 'median', ' s')} "
+                f"| {_ci(r['impulse_ns'], 'median', ' N·s')} |"
+            )
+        for pair, p in out[sec]["paired"].items():
+            w = p["success"]
+            parts = [
+                f"success: only first {w.get('only_a_delivered', w.get('a_lower'))}, only "
+                f"second {w.get('only_b_delivered', w.get('a_higher'))} (p = {w['wilcoxon_p']})"
+            ]
+            for key, name in (("transport_time_s", "time"), ("impulse_ns", "impulse")):
+                q = p[key]
+                parts.append(
+                    f"{name}: ratio {q['median_ratio_a_over_b']}, first lower in "
+                    f"{q['a_lower']}/{q['pairs']} (p = {q['wilcoxon_p']})"
+                )
+            lines.append(
+                f"| {label} | {pair.replace('_vs_', ' vs ')} | paired | "
+                + "; ".join(parts)
+                + " | | | |"
+            )
+    head = (
+        "| set | strategy | runs | success (ours) [95 % CI] | success (Sharma: CG only) "
+        "| time, median [CI] | impulse, median [CI] |"
+    )
+    return "\n".join([head, "|---|---|---|---|---|---|---|", *lines])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--table", nargs="+", metavar="JSON", help="print the README table")
     ap.add_argument("--seeds", type=int, default=5, help="closed-loop seeds per scenario")
     ap.add_argument("--scenarios", type=int, default=2)
     ap.add_argument("--strategies", default=",".join(STRATEGIES))
@@ -253,6 +304,12 @@ def main() -> None:
     ap.add_argument("--planner-seeds", type=int, default=10)
     ap.add_argument("--minima-checks", type=int, default=40)
     args = ap.parse_args()
+    if args.table:
+        merged: dict = {}
+        for path in args.table:
+            merged.update(json.loads(Path(path).read_text()))
+        print(table(merged))
+        return
     strategies = tuple(args.strategies.split(","))
     rng = np.random.default_rng(2024)
     t0 = time.perf_counter()
