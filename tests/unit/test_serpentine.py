@@ -65,3 +65,22 @@ def test_passive_robot_moves_with_the_object_and_never_into_it():
         np.linalg.norm(passive_velocity(centre, centre - 5 * inward, inward, pose, vel, 2.0, 0.3))
         <= 0.3 + 1e-12
     )
+
+
+def test_mission_gives_every_robot_an_eq5_point_under_serpentine():
+    """§4.1: the pushing set is Eq. 5's for as many pushers as robots (no capture contact is
+    kept beside it), and every robot is assigned one of its points."""
+    from controller.mission.guard import SafetyStage
+    from controller.mission.transport import TransportMission
+    from tests.support.transport_scenarios import CRATE, Scenario, scenario_config
+
+    sc = Scenario("open", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0))
+    sc = Scenario(**{**sc.__dict__, "patch": {"transport": {"strategy": "serpentine"}}})
+    cfg = scenario_config(sc)
+    m = TransportMission(cfg, np.random.default_rng(0), SafetyStage(cfg), [], [], [])
+    push = np.array([1.0, 0.0, 0.0])
+    pts, nrm, _value, n, basis = m._new_set(push, push[:2])
+    assert basis == "eq5" and n == len(pts) == len(cfg.robots)
+    forward = -nrm @ D
+    assert np.all(forward > -1e-9)  # nobody pulls (side points add nothing: they stay passive)
+    assert np.sum(forward > 0.26) >= 2  # forward pushers for the two groups
