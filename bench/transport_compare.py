@@ -83,7 +83,7 @@ def signed_rank(diffs) -> dict:
     out = {"pairs": len(d), "a_lower": int(np.sum(d < 0)), "a_higher": int(np.sum(d > 0))}
     if len(d) == 0 or not np.any(d != 0):
         return {**out, "wilcoxon_p": None}
-    return {**out, "wilcoxon_p": round(float(wilcoxon(d, zero_method="zsplit").pvalue), 4)}
+    return {**out, "wilcoxon_p": float(f"{wilcoxon(d, zero_method='zsplit').pvalue:.3g}")}
 
 
 # --------------------------------------------------------------------------- 1. the planner
@@ -246,6 +246,10 @@ def _num(v: float) -> str:
     return f"{v:.0f}" if abs(v) >= 100 else f"{v:.3g}"
 
 
+def _p(v: float | None) -> str:
+    return "–" if v is None else ("< 1e-4" if v < 1e-4 else f"{v:.2g}")
+
+
 def _ci(x: dict, key: str, unit: str = "") -> str:
     if x.get(key) is None:
         return "–"
@@ -272,13 +276,13 @@ def table(out: dict) -> str:
             w = p["success"]
             parts = [
                 f"success: only first {w.get('only_a_delivered', w.get('a_lower'))}, only "
-                f"second {w.get('only_b_delivered', w.get('a_higher'))} (p = {w['wilcoxon_p']})"
+                f"second {w.get('only_b_delivered', w.get('a_higher'))} (p {_p(w['wilcoxon_p'])})"
             ]
             for key, name in (("transport_time_s", "time"), ("impulse_ns", "impulse")):
                 q = p[key]
                 parts.append(
                     f"{name}: ratio {q['median_ratio_a_over_b']}, first lower in "
-                    f"{q['a_lower']}/{q['pairs']} (p = {q['wilcoxon_p']})"
+                    f"{q['a_lower']}/{q['pairs']} (p {_p(q['wilcoxon_p'])})"
                 )
             lines.append(
                 f"| {label} | {pair.replace('_vs_', ' vs ')} | paired | "
