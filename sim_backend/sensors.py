@@ -44,6 +44,7 @@ class PoseSensor:
         rng: np.random.Generator,
         jitter: float = 0.0,
         phase: float = 0.0,
+        bias: tuple[float, float] = (0.0, 0.0),
     ):
         if rate_hz <= 0:
             raise ValueError(f"rate_hz must be > 0, got {rate_hz}")
@@ -60,6 +61,7 @@ class PoseSensor:
         self.outlier_rate = outlier_rate
         self.outlier_magnitude = outlier_magnitude
         self.jitter = jitter
+        self.bias = (float(bias[0]), float(bias[1]))  # m, a fixed offset (motion error)
         self._rng = rng
         self._k = 0  # index of the next nominal sample instant
         self._phase = phase  # s, the first nominal instant
@@ -90,8 +92,8 @@ class PoseSensor:
         if u_drop < self.dropout:
             self.dropped += 1
             return []
-        x = float(true_pose[0]) + self.sigma_xy * noise[0]
-        y = float(true_pose[1]) + self.sigma_xy * noise[1]
+        x = float(true_pose[0]) + self.bias[0] + self.sigma_xy * noise[0]
+        y = float(true_pose[1]) + self.bias[1] + self.sigma_xy * noise[1]
         th = float(true_pose[2]) + self.sigma_theta * noise[2]
         if u_out < self.outlier_rate:
             self.outliers += 1
@@ -117,7 +119,10 @@ def make_sensors(cfg: FleetConfig, jitter: float = 0.0) -> SensorSet:
     s = cfg.sim
     children = np.random.SeedSequence(s.seed).spawn(len(cfg.robots) + 1)
 
-    def build(rate: float, seq: np.random.SeedSequence) -> PoseSensor:
+    err = np.abs(np.asarray(s.robot_position_error, float))
+    biases = np.random.default_rng([s.seed, 4040]).uniform(-1.0, 1.0, (len(cfg.robots), 2)) * err
+
+    def build(rate: float, seq: np.random.SeedSequence, bias=(0.0, 0.0)) -> PoseSensor:
         return PoseSensor(
             rate,
             s.pose_noise.xy,
@@ -127,9 +132,11 @@ def make_sensors(cfg: FleetConfig, jitter: float = 0.0) -> SensorSet:
             s.outlier_magnitude,
             np.random.default_rng(seq),
             jitter=jitter,
+            bias=bias,
         )
 
     robots = {
-        r.id: build(s.pose_rate_hz, seq) for r, seq in zip(cfg.robots, children, strict=False)
+        r.id: build(s.pose_rate_hz, seq, tuple(b))
+        for r, seq, b in zip(cfg.robots, children, biases, strict=False)
     }
     return SensorSet(robots=robots, object=build(s.object_pose_rate_hz, children[-1]))

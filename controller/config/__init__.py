@@ -38,6 +38,7 @@ from controller.config.load import (
 )
 from controller.config.sections import (
     ACL_PROFILES,
+    CAPTURE_GAS,
     CAPTURE_NODE_BUDGET,
     CLOSURE_MODES,
     FILTERS,
@@ -104,6 +105,7 @@ __all__ = [
     "ACL_PROFILES",
     "ApproachSection",
     "CAPTURE_NODE_BUDGET",
+    "CAPTURE_GAS",
     "CLOSURE_MODES",
     "CaptureSection",
     "ConfigError",

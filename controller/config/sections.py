@@ -27,6 +27,7 @@ from controller.config.load import ConfigError, InputError, _rule
 ROBOT_KINDS = ("omni", "diff")
 MOTION_KINDS = ("line", "sine", "evade", "static", "inert")  # inert: no drive, limp from t = 0
 CLOSURE_MODES = ("exact", "paper")
+CAPTURE_GAS = ("ours", "paper")  # capture.ga: our GA + local search, or Sharma's as published
 HEURISTICS = ("euclid", "wavefront", "skeleton", "cost_to_go")
 #: Grid budgets: object route states (cells x heading bins) and robot route cells. Above them a
 #: plan takes minutes and gigabytes (512 x 512 x 36 states take about 5 s and 0.6 GB).
@@ -250,6 +251,7 @@ class CaptureSection:
     generations: int = _rule(600, min=1, max=1000000)
     seed: int = _rule(0, min=0)
     closure: str = _rule("exact", choices=CLOSURE_MODES)
+    ga: str = _rule("ours", choices=CAPTURE_GAS)
     # N: the largest push of the object the robots must resist at their contacts (and that force
     # times its radius of gyration in torque), with every robot at most its max_force; points
     # are added to the GA's set until it holds; 0: no check
@@ -381,6 +383,10 @@ class SimSection:
     object_mass_scale: float = _rule(1.0, gt=0, max=100)
     object_friction_scale: float = _rule(1.0, min=0, max=100)
     object_com_offset: Point = _rule((0.0, 0.0))
+    # robot motion errors (Yamashita et al. Table 1: ±0.04 m, ±0.01 m): each robot's pose
+    # reports are off its true pose by a fixed offset drawn U(−x, x), U(−y, y) per run, world
+    # frame (m); the controller steers the robot that far off where it means it to be
+    robot_position_error: Point = _rule((0.0, 0.0))
 
 
 @dataclass(frozen=True, kw_only=True)

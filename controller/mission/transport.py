@@ -48,10 +48,12 @@ from controller.mission.planners import (
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.arrangement import Arrangement, can_push, plan_arrangement
 from controller.planning.contact_lp import ContactForceLP
+from controller.planning.serpentine import passive_velocity
 from controller.planning.transport import TransportPlanner
 from controller.planning.transport_model import ObjectModel, relocation_path
 from controller.planning.transport_types import (
     ATTACHED,
+    FOLLOW,
     PUSH,
     RELOCATE,
     SLIDE_LEFT,
@@ -378,6 +380,7 @@ class TransportMission:
             len(active),
             self.s.turn_margin,
             spawn_rng(self.rng),
+            self.params.strategy,
         )
 
     def _arrange(self, view: FleetView, pose: np.ndarray, new: Arrangement, events: list[Event]):
@@ -781,6 +784,13 @@ class TransportMission:
                 continue
             r = self.cfg.robots[i].radius
             centre = geometry.transform((c.point - r * c.inward)[None], pose)[0]
+            if code == FOLLOW and plan.strategy == "serpentine":  # §4.3: passive, zero force
+                vel[i] = passive_velocity(
+                    centre, view.poses[i, :2], rot @ c.inward, pose, view.object_velocity,
+                    self.s.contact_gain, self.cfg.robots[i].max_speed,
+                )  # fmt: skip
+                touch[i] = True
+                continue
             rel = centre - centroid
             v = twist[:2] + twist[2] * np.array([-rel[1], rel[0]])
             v = v + self.s.contact_gain * (centre - view.poses[i, :2])

@@ -68,14 +68,19 @@ def plan_arrangement(
     robots: int,
     turn_margin: float,
     rng: np.random.Generator,
+    strategy: str = "",
 ) -> Arrangement:
     """The contact set for a segment whose unit twist is ``twist`` (object frame), pushed at
     ``speed`` m/s by ``robots`` robots whose weakest pushes ``weakest`` N: Sharma's Eq. 5 along
     the travel direction with the fewest pushers that overcome the floor friction (plus one for
     the torque), then one more, each confirmed by the contact-force LP at the weakest robot's
     limit; a segment that mostly turns the object, or one no Eq. 5 set can push, gets the
-    least-force set of the LP over all candidate nodes (:func:`wrench_set`)."""
+    least-force set of the LP over all candidate nodes (:func:`wrench_set`). ``strategy``
+    ``serpentine`` (Sharma §4.1 as published): Eq. 5 for every robot, nothing else."""
     d = twist[:2] if np.any(twist[:2]) else np.array([1.0, 0.0])
+    if strategy == "serpentine":  # Sharma §4.1: Eq. 5 for every robot, alone
+        pts, nrm, value = pushing_set(cfg, d, robots, rng)
+        return Arrangement(pts, nrm, value, robots, "eq5")
     lp = ContactForceLP(max(robots, 1), friction=model.contact_friction > 0)
     twist_v = twist * speed
     if abs(twist[2]) * model.mean_radius <= TURN_SHARE:

@@ -80,6 +80,7 @@ class CaptureParams:
     mutation: float = 0.12
     generations: int = 600
     closure: str = "exact"
+    ga: str = "ours"  # "paper": run_paper_ga, Sharma's GA as published (the baseline)
 
     @classmethod
     def from_config(cls, c) -> CaptureParams:
@@ -94,6 +95,7 @@ class CaptureParams:
             mutation=c.mutation,
             generations=c.generations,
             closure=c.closure,
+            ga=c.ga,
         )
 
     @property
@@ -607,6 +609,62 @@ def run_ga(
     return search.result(evals, history)
 
 
+def run_paper_ga(prob: Problem, rng: np.random.Generator) -> GAResult:
+    """Sharma et al.'s GA as published, the baseline for :func:`run_ga`: binary strings, the
+    penalty −1e20 on every infeasible string (no ranking among them), population
+    ``population`` (60), crossover fraction ``crossover`` (0.8), mutation ``mutation`` (0.12)
+    and ``population × generations`` evaluations (36 000), with the operators of the MATLAB
+    ``ga`` the paper ran (its defaults for bit strings): rank fitness scaling (1/√rank),
+    stochastic uniform selection, ``ceil(0.05 · population)`` elites, scattered (uniform)
+    crossover for that fraction of the other children, and for the rest a parent with every
+    bit flipped with probability ``mutation`` (mutation only on children not made by
+    crossover). No local search, no restarts. One deviation, stated: initial strings hold 3-6
+    robots like ours (a uniform random start, half the bits set, never reaches a feasible set).
+    """
+    p = prob.params
+    k = len(prob.cand.points)
+    hi = min(6, prob.max_robots or 6)
+    lo = min(3, hi)
+    n = p.population
+    n_elite = min(int(np.ceil(0.05 * n)), n)
+    n_cross = int(round(p.crossover * (n - n_elite)))
+    pop = _initial(k, n, rng, lo, hi)
+    f, v = evaluate(prob, pop)
+    search = _Search(k)
+    search.note(pop, f, v)
+    evals = n
+    history: list[float] = []
+    ranks = np.arange(1, n + 1)
+    scaled = 1.0 / np.sqrt(ranks)
+    while evals + n - n_elite <= n * p.generations:  # the budget: 36 000 at 60 × 600
+        order = np.argsort(-f, kind="stable")  # infeasible strings all tie at the penalty
+        expect = np.empty(n)
+        expect[order] = scaled * n / scaled.sum()
+        # stochastic uniform selection: one spin, equally spaced pointers
+        n_par = 2 * n_cross + (n - n_elite - n_cross)
+        step = n / n_par
+        ptr = rng.random() * step + step * np.arange(n_par)
+        parents = np.searchsorted(np.cumsum(expect), ptr, side="right").clip(0, n - 1)
+        parents = parents[rng.permutation(n_par)]
+        elite = pop[order[:n_elite]]
+        a, b = pop[parents[:n_cross]], pop[parents[n_cross : 2 * n_cross]]
+        cross = np.where(rng.random((n_cross, k)) < 0.5, a, b)
+        mut = pop[parents[2 * n_cross :]] ^ (rng.random((n - n_elite - n_cross, k)) < p.mutation)
+        new = np.vstack([cross, mut])
+        fn, vn = evaluate(prob, new)
+        evals += len(new)
+        search.note(new, fn, vn)
+        pop = np.vstack([elite, new])
+        f = np.concatenate([f[order[:n_elite]], fn])
+        history.append(search.best_f if np.isfinite(search.best_f) else PENALTY)
+    return search.result(evals, history)
+
+
+def ga_of(params: CaptureParams) -> Callable[[Problem, np.random.Generator], GAResult]:
+    """The GA ``capture.ga`` names: "ours" (:func:`run_ga`) or "paper" (:func:`run_paper_ga`)."""
+    return run_paper_ga if params.ga == "paper" else run_ga
+
+
 # --------------------------------------------------------------------------- results
 
 
@@ -834,7 +892,7 @@ def _retry_without_fleet(prob: Problem, rng: np.random.Generator) -> tuple[str, 
     fleet has gives the reason; one within the fleet after all is returned."""
     if prob.max_robots is None or prob.max_robots >= len(prob.cand.points):
         return "", None
-    res = run_ga(Problem(**{**prob.__dict__, "max_robots": None}), rng)
+    res = ga_of(prob.params)(Problem(**{**prob.__dict__, "max_robots": None}), rng)
     if not res.found:
         return "", None
     m = int(res.best.sum())
@@ -864,7 +922,7 @@ def plan_capture(
     reason, violated = structural_reason(prob)
     if reason:
         return describe(prob, np.zeros(len(prob.cand.points), bool), 0, [], reason, violated)
-    res = run_ga(prob, rng)
+    res = ga_of(params)(prob, rng)
     if not res.found:
         reason, retry = _retry_without_fleet(prob, rng)
         violated = ["fleet"] if reason else []

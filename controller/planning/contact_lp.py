@@ -36,7 +36,11 @@ re-solve*: the constraints osqp's dual marks active (else those its primal answe
 made equalities with the equilibrium rows and osqp's point is moved onto them by the least-norm
 correction; if that point is feasible, it satisfies complementary slackness with osqp's dual and
 is optimal to rounding error. When osqp is not sure (max iterations, inaccurate status) the
-problem goes to HiGHS (``scipy.optimize.linprog``) and the result says so (``solver``).
+problem is first *rescued*: a Farkas test on osqp's multipliers proves infeasibility, or the
+iterate is moved onto its active set and accepted when a Lagrangian dual bound proves it optimal
+(both exact, a few µs), once as it is and once after more iterations. Only what stays unproven
+goes to HiGHS (``scipy.optimize.linprog``) and the result says so (``solver``). With contact
+friction 0.3 this takes the HiGHS share from ≈ 17 % to < 1 % (bench/contact_lp.py).
 
 Infeasible is an answer: ``status == "infeasible"`` with ``reason`` one of
 
@@ -212,6 +216,62 @@ def _polish(sc: _Scaled, a: FloatArray, b: FloatArray, tol: float):
     return (np.clip(a2, 0.0, u), b2) if ok else None
 
 
+def _dual_bound(sc: _Scaled, y: FloatArray) -> float:
+    """A lower bound on the scaled LP's optimum from any multipliers ``y`` (3,) of the
+    equilibrium rows (Lagrangian duality): b·y + Σ u_i·min(0, r_i − μ|s_i|), with the reduced
+    costs r_i = 1 − n-column_i·y of the normal forces and s_i = t-column_i·y of the tangential
+    ones (the inner minimum over the box and the friction cone, contact by contact)."""
+    r = 1.0 - y @ sc.cols_n
+    s = np.abs(y @ sc.cols_t) if sc.mu > 0 else 0.0
+    return float(sc.rhs @ y + sc.upper @ np.minimum(0.0, r - sc.mu * s))
+
+
+def _active_dual(sc: _Scaled, a: FloatArray, b: FloatArray, tol: float) -> FloatArray:
+    """Equilibrium multipliers that zero the reduced costs of the forces strictly inside their
+    bounds (least squares): the dual of the active set the primal point sits on."""
+    u, mu = sc.upper, sc.mu
+    inside = (a > tol) & (a < u - tol)
+    rows, rhs = [], []
+    if mu > 0:
+        edge = np.where(b >= mu * a - tol, 1.0, np.where(b <= -mu * a + tol, -1.0, 0.0))
+        col = sc.cols_n + sc.cols_t * (edge * mu)[None]
+        rows += [col[:, inside].T, sc.cols_t[:, (edge == 0) & (a > tol)].T]
+        rhs += [np.ones(int(inside.sum())), np.zeros(int(((edge == 0) & (a > tol)).sum()))]
+    else:
+        rows.append(sc.cols_n[:, inside].T)
+        rhs.append(np.ones(int(inside.sum())))
+    m, v = np.vstack(rows), np.concatenate(rhs)
+    if m.shape[0] == 0:
+        return np.zeros(3)
+    return np.linalg.lstsq(m, v, rcond=None)[0]
+
+
+def farkas(sc: _Scaled, y: FloatArray) -> bool:
+    """Do the multipliers' direction prove the scaled LP infeasible? With zero costs the dual
+    bound b·y + Σ u_i·min(0, −n_i·y − μ|t_i·y|) is positive only if no forces within the box
+    and the cones make the wrench (Farkas)."""
+    norm = float(np.linalg.norm(y))
+    if norm <= 0:
+        return False
+    d = y / norm
+    s = np.abs(d @ sc.cols_t) if sc.mu > 0 else 0.0
+    return float(sc.rhs @ d + sc.upper @ np.minimum(0.0, -(d @ sc.cols_n) - sc.mu * s)) > 1e-9
+
+
+def certified(sc: _Scaled, a: FloatArray, b: FloatArray, y: FloatArray, tol: float) -> bool:
+    """Is the feasible scaled point (a, b) optimal within ``tol`` (relative gap)? Tries osqp's
+    multipliers and those of the point's own active set; either bound closing the gap proves it."""
+    total = float(a.sum())
+    for yy in (y, _active_dual(sc, a, b, 1e-7), _active_dual(sc, a, b, 1e-5)):
+        if total - _dual_bound(sc, yy) <= tol * max(total, 1e-9):
+            return True
+    return False
+
+
+#: active-set tolerances (scaled units) tried, in order, on an iterate osqp did not finish
+RESCUE_TOLERANCES = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2)
+
+
 class ContactForceLP:
     """The contact-force LP for up to ``max_contacts`` contacts, solved with a persistent osqp
     workspace (pattern built once, values updated, warm start).
@@ -220,7 +280,10 @@ class ContactForceLP:
     boxes 0 ≤ f ≤ max_force, and with friction 2·n_max cone rows μ·f − g ≥ 0, μ·f + g ≥ 0.
     Contacts beyond those passed, and inactive ones, have the box [0, 0].
     ``eps``: osqp's absolute and relative tolerance on the scaled problem; ``polish``: the
-    active-set re-solve; ``max_iter``: osqp iterations before the HiGHS fallback.
+    active-set re-solve; ``max_iter``: osqp iterations before the rescue; ``rescue``: when osqp
+    stops short (max iterations, inaccurate), prove its iterate infeasible (Farkas) or move it
+    onto its active set and prove that optimal (dual bound), first as it is, then after 3 ×
+    ``max_iter`` more iterations; only what stays unproven goes to HiGHS (``fallbacks``).
     """
 
     #: osqp settings (measured on random instances; alpha = 1 and a fixed rho interval cut the
@@ -243,6 +306,7 @@ class ContactForceLP:
         eps: float = 1e-6,
         max_iter: int = 1000,
         polish: bool = False,
+        rescue: bool = True,
     ):
         if max_contacts < 1:
             raise ValueError(f"max_contacts: expected >= 1, got {max_contacts}")
@@ -251,9 +315,11 @@ class ContactForceLP:
         self.eps = float(eps)
         self.max_iter = int(max_iter)
         self.polish = bool(polish)
+        self.rescue = bool(rescue)
         self.solves = 0  # osqp solves
         self.fallbacks = 0  # of which went to HiGHS
         self.polished = 0  # of which the active-set re-solve was accepted
+        self.rescued = 0  # stopped short, finished by the active set and proved optimal
         self._prob: osqp.OSQP | None = None
         nv = 2 * n if friction else n
         self._m = 3 + 3 * n if friction else 3 + n
@@ -346,8 +412,44 @@ class ContactForceLP:
             reason, binding = _reason(sc, np.asarray(res.prim_inf_cert, float))
             zero = np.zeros(n)
             return LPResult(INFEASIBLE, reason, zero, zero, math.nan, binding, "osqp", iters)
+        for extra in (0, 3):  # solved inaccurate, max iterations: try to finish it exactly
+            if status not in (2, 7) or not self.rescue:
+                break
+            if extra:  # osqp goes on from its last iterate (warm start) a while longer
+                self._prob.update_settings(max_iter=extra * self.max_iter)
+                res = self._prob.solve(raise_error=False)
+                self._prob.update_settings(max_iter=self.max_iter)
+                status, iters = int(res.info.status_val), iters + int(res.info.iter)
+                if status == 1:
+                    return self._optimal(sc, np.asarray(res.x, float), n, iters)
+            rescued = self._rescue(sc, res, n, iters)
+            if rescued is not None:
+                return rescued
         self.fallbacks += 1
         return solve_reference(pts, nrm, upper, np.ones(n, bool), w, mu)
+
+    def _rescue(self, sc: _Scaled, res, n: int, iters: int) -> LPResult | None:
+        """osqp stopped short (ADMM crawls on degenerate LPs, mostly with contact friction):
+        move its iterate onto the active set it points at (:func:`_polish`, loosening the
+        tolerance) and accept the point only if a dual bound proves it optimal to 1e-7."""
+        z = np.asarray(res.x, float)
+        y = -np.asarray(res.y, float)[:3]
+        if not np.all(np.isfinite(z)) or not np.all(np.isfinite(y)):
+            return None
+        if farkas(sc, y):  # the multipliers diverge along a proof of infeasibility
+            self.rescued += 1
+            reason, binding = _reason(sc, np.concatenate([y, np.ones(n)]))
+            zero = np.zeros(n)
+            return LPResult(INFEASIBLE, reason, zero, zero, math.nan, binding, "osqp", iters)
+        a = z[:n]
+        b = z[self.n_max : self.n_max + n] if self.friction else np.zeros(n)
+        for tol in RESCUE_TOLERANCES:
+            point = _polish(sc, a, b, tol)
+            if point is not None and certified(sc, point[0], point[1], y, 1e-7):
+                self.rescued += 1
+                f, g = point[0] * sc.scale, point[1] * sc.scale
+                return LPResult(OPTIMAL, "", f, g, float(f.sum()), (), "osqp", iters, True)
+        return None
 
     def _optimal(self, sc: _Scaled, z: FloatArray, n: int, iters: int) -> LPResult:
         a = z[:n]

@@ -15,12 +15,14 @@ filtered object pose (closed loop: the mission executes the first interval and p
   robot repeats its last action (one without: push if its push has a component along the
   force the object needs, else follow; idle without contact), or "random" (Code 1 line 2).
 - ``downhill``: the same proposals and energy, accepting only ΔE ≤ 0 (SA at T → 0; Vass §5).
-- ``serpentine`` (Sharma et al. §4.3): the robots in contact that push forward are split into
-  two groups, those pushing toward the left of the route and those pushing toward the right
-  (robots pushing straight along it even out the counts). One group pushes (every member at
-  its max_force along its normal), the other follows. The object moves along the normal of the
-  limit surface at the group's wrench (:func:`controller.planning.contact_lp.twist_for_wrench`)
-  at ``speed``; it moves only if that wrench reaches the limit surface (else the interval is
+- ``serpentine`` (Sharma et al. §4.3, as published: :mod:`controller.planning.serpentine`):
+  the Eq. 5 pushers that push forward (within ≈ 75° of the route) are split into two groups,
+  those pushing toward the left of the route and those pushing toward the right (robots
+  pushing straight along it even out the counts). One group pushes (every member at its
+  max_force along its normal), the other is passive: zero force in the LP, and in the mission
+  it moves with the measured object, a few millimetres off its contact. The object moves
+  along the normal of the limit surface at the group's wrench (``twist_for_wrench``) at
+  ``speed``; it moves only if that wrench reaches the limit surface (else the interval is
   infeasible). The groups switch when the centroid is more than
   h = max(h_min, h_0 · remaining / route length) to the side the active group pushes toward,
   h_0 = ``serpentine_deviation``, h_min = ``serpentine_min_deviation``: the threshold shrinks
@@ -40,6 +42,7 @@ import numpy as np
 
 from controller import geometry
 from controller.planning.contact_lp import ContactForceLP, twist_for_wrench
+from controller.planning.serpentine import split_groups
 from controller.planning.transport_model import Rollout, Trace, hold_matrix, lp_matrix
 from controller.planning.transport_types import (
     ACTIONS,
@@ -134,24 +137,18 @@ def anneal(
 
 def serpentine_groups(roll: Rollout) -> IntArray:
     """Per robot: 0 (pushes toward the left of the route), 1 (toward the right), −1 (no
-    contact, or its push has no forward component: it only follows)."""
+    contact, or its push is not forward enough: it never pushes, it stays passive);
+    :func:`controller.planning.serpentine.split_groups` at the start pose."""
     st, m = roll.start, roll.model
     d = roll.route.tangent(roll._q(st.pose))
-    left = np.array([-d[1], d[0]])
     rot = geometry.rot(st.pose[2])
-    groups = np.full(roll.k, -1, np.int64)
-    lateral = np.zeros(roll.k)
+    push = np.full((roll.k, 2), np.nan)
+    offset = np.zeros((roll.k, 2))
     for i, node in enumerate(st.nodes):
-        if node < 0:
-            continue
-        push = rot @ (-m.normals[node])
-        if push @ d <= 1e-6:
-            continue
-        lateral[i] = push @ left
-        groups[i] = 0 if lateral[i] > 1e-6 else (1 if lateral[i] < -1e-6 else 2)
-    for i in np.flatnonzero(groups == 2):  # straight pushers even out the counts
-        groups[i] = 0 if np.sum(groups == 0) <= np.sum(groups == 1) else 1
-    return groups
+        if node >= 0:
+            push[i] = rot @ (-m.normals[node])
+            offset[i] = rot @ (m.nodes[node] - m.centroid)
+    return split_groups(push, offset, d)
 
 
 def serpentine_threshold(roll: Rollout, s: float, params: TransportParams) -> float:

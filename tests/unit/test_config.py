@@ -127,6 +127,7 @@ CASES = {
     ),
     "zero_area": ({"object": {"polygon": [[0, 0], [1, 0], [2, 0]]}}, None, "object.polygon", ""),
     "missing_section": ({}, lambda d: d.pop("object"), "object", "missing"),
+    "unknown_capture_ga": ({"capture": {"ga": "matlab"}}, None, "capture.ga", "'paper'"),
 }
 
 

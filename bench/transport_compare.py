@@ -1,0 +1,363 @@
+"""SA vs downhill vs serpentine with spread: prints ONE JSON object on stdout (progress on stderr).
+
+1. ``planner``: the energy landscape under the default settings (``TransportParams()``, the
+   ``[transport]`` defaults). For every seeded planning case (``tests.support.transport_cases``
+   push cases of 4-8 robots, shuffled or not, and the diamond with its rear robots following)
+   and planner seed, ``sa`` and ``downhill`` plan from the same start; counted: SA's final
+   energy strictly lower, equal, higher. Then, for the downhill finals, whether they are local
+   minima of Code 1's neighbourhood (no single-entry change lowers the energy) and, of those,
+   how often SA found lower: that is what "SA escapes local minima" can mean here.
+2. ``closed_loop``: ``--seeds`` × ``--scenarios`` (the seeded suite of bench/transport_loop.py,
+   never tuned on) × strategies, each a whole ``fleet run --mission transport`` in lockstep on
+   ``--backend`` (pybullet by default: only it measures contact forces). Per strategy: success
+   on our criterion (delivered within the position *and* heading tolerance, clean verdict) and
+   on Sharma's (the CG within the position tolerance at the end, heading free), median
+   transport time and contact impulse Σ|f|·dt with 95 % bootstrap intervals (2000 resamples,
+   over the runs each strategy delivered). Paired per (scenario, seed): Wilcoxon signed-rank
+   (scipy) on success (0/1), on time and impulse (runs both delivered), the median paired ratio.
+3. ``--sweep N``: the robustness runs (one open-floor crate, 3 m) with Yamashita's robot motion
+   errors (``sim.robot_position_error`` = ±0.04 m, ±0.01 m) plus the world's object off
+   (mass, floor friction ×U(0.9, 1.1), CoM ±1 cm; pybullet only), N runs per strategy.
+
+Usage: ``python bench/transport_compare.py [--seeds 5] [--scenarios 2] [--sweep 0]
+[--workers 2] [--backend pybullet] [--planner-seeds 10]``. A closed-loop run takes about a
+minute of wall time on a quiet 2-core machine (more under load): size the run to the machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import wilcoxon
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from bench.transport_loop import draw_suite, sweep_suite  # noqa: E402
+from controller.planning.transport import plan_local  # noqa: E402
+from controller.planning.transport_model import Rollout  # noqa: E402
+from controller.planning.transport_types import ACTIONS, TransportParams  # noqa: E402
+from tests.support.transport_cases import diamond_case, push_case  # noqa: E402
+
+STRATEGIES = ("sa", "downhill", "serpentine")
+BOOT = 2000
+
+
+def log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+# --------------------------------------------------------------------------- statistics
+
+
+def boot_median(values, rng: np.random.Generator) -> dict:
+    """Median and its 95 % percentile-bootstrap interval (None when empty)."""
+    v = np.asarray([x for x in values if x is not None], float)
+    if len(v) == 0:
+        return {"n": 0, "median": None, "ci95": None}
+    meds = np.median(rng.choice(v, size=(BOOT, len(v)), replace=True), axis=1)
+    lo, hi = np.percentile(meds, [2.5, 97.5])
+    med = round(float(np.median(v)), 3)
+    return {"n": len(v), "median": med, "ci95": [round(lo, 3), round(hi, 3)]}
+
+
+def boot_rate(flags, rng: np.random.Generator) -> dict:
+    f = np.asarray(flags, float)
+    if len(f) == 0:
+        return {"n": 0, "rate": None, "ci95": None}
+    means = rng.choice(f, size=(BOOT, len(f)), replace=True).mean(axis=1)
+    lo, hi = np.percentile(means, [2.5, 97.5])
+    return {"n": len(f), "rate": round(float(f.mean()), 3), "ci95": [round(lo, 3), round(hi, 3)]}
+
+
+def signed_rank(diffs) -> dict:
+    d = np.asarray(diffs, float)
+    out = {"pairs": len(d), "a_lower": int(np.sum(d < 0)), "a_higher": int(np.sum(d > 0))}
+    if len(d) == 0 or not np.any(d != 0):
+        return {**out, "wilcoxon_p": None}
+    return {**out, "wilcoxon_p": float(f"{wilcoxon(d, zero_method='zsplit').pvalue:.3g}")}
+
+
+# --------------------------------------------------------------------------- 1. the planner
+
+
+def planner_cases() -> list[tuple[str, object]]:
+    from tests.unit.test_transport import with_actions
+
+    out = [("diamond-both-following", with_actions(diamond_case(), ["follow", "follow"]))]
+    for n in (4, 6, 8):
+        for seed in (None, 1, 2):
+            for fmax in (4.0, 8.0):
+                out.append((f"push-{n}-f{fmax:g}-s{seed}", push_case(n, max_force=fmax, seed=seed)))
+    return out
+
+
+def local_minimum(state, params: TransportParams, matrix: np.ndarray) -> bool:
+    """No single-entry change of ``matrix`` lowers the energy (Code 1's neighbourhood)."""
+    roll = Rollout(state, params)
+    trace = roll.run(matrix)
+    e0 = roll.energy(trace).total
+    n, k = matrix.shape
+    for j in range(n):
+        for i in range(k):
+            for x in range(len(ACTIONS)):
+                if x == matrix[j, i]:
+                    continue
+                m = matrix.copy()
+                m[j, i] = x
+                if roll.energy(roll.rerun(trace, m, j)).total < e0 - 1e-9:
+                    return False
+    return True
+
+
+def planner_bench(seeds: int, minima_checks: int) -> dict:
+    rows = []
+    for name, st in planner_cases():
+        for seed in range(seeds):
+            e = {}
+            for s in ("sa", "downhill"):
+                plan = plan_local(st, TransportParams(strategy=s), np.random.default_rng(seed))
+                e[s] = plan
+            rows.append((name, seed, st, e["sa"], e["downhill"]))
+    diffs = np.array([r[3].energy.total - r[4].energy.total for r in rows])
+    tol = 1e-9
+    out = {
+        "settings": "TransportParams() defaults (iterations 100, T0 0.3, cooling 0.95, lp start)",
+        "cases": len(planner_cases()),
+        "seeds_per_case": seeds,
+        "plans_each": len(rows),
+        "sa_lower": int(np.sum(diffs < -tol)),
+        "equal": int(np.sum(np.abs(diffs) <= tol)),
+        "sa_higher": int(np.sum(diffs > tol)),
+        "energy_diff_sa_minus_downhill": signed_rank(diffs),
+    }
+    log("  local-minimum checks ...")
+    checked = minima = sa_below_at_minimum = 0
+    for _name, _seed, st, sa, dh in rows[:minima_checks]:
+        checked += 1
+        if local_minimum(st, TransportParams(strategy="downhill"), dh.matrix):
+            minima += 1
+            sa_below_at_minimum += sa.energy.total < dh.energy.total - tol
+    out["downhill_finals_checked"] = checked
+    out["downhill_finals_at_a_local_minimum"] = minima
+    out["of_those_sa_lower"] = sa_below_at_minimum
+    return out
+
+
+# --------------------------------------------------------------------------- 2. closed loop
+
+
+def run_case(job: tuple) -> dict:
+    """One closed-loop run (in a worker process)."""
+    from controller.mission.factory import build_mission
+    from controller.runtime.dry_run import DryRun, judge
+    from tests.support.transport_scenarios import scenario_config
+
+    sc, strategy, seed, label = job
+    patch = {**sc.patch, "transport": {**sc.patch.get("transport", {}), "strategy": strategy}}
+    sc = dataclasses.replace(sc, patch=patch, seed=seed)
+    cfg = scenario_config(sc)
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        res = DryRun(cfg, build_mission(cfg, "transport"), Path(tmp) / "run.mcap").run()
+    clean = judge(res) == []
+    ours = bool(res.get("transported")) and res.get("status") == "ok" and clean
+    err = res.get("goal_error_m")
+    paper = clean and err is not None and err <= cfg.transport.tolerance
+    log(
+        f"  {label} {sc.name} seed {seed} {strategy}: {'ok' if ours else 'NOT'} "
+        f"(paper {'ok' if paper else 'NOT'}, {res.get('reason') or ''}) "
+        f"t={res.get('transport_time_s')} wall={time.perf_counter() - t0:.0f}s"
+    )
+    return {
+        "scenario": sc.name,
+        "seed": seed,
+        "strategy": strategy,
+        "success": ours,
+        "success_paper": bool(paper),
+        "reason": res.get("reason"),
+        "goal_error_m": err,
+        "goal_error_deg": res.get("goal_error_deg"),
+        "transport_time_s": res.get("transport_time_s"),
+        "impulse_ns": res.get("contact_impulse_ns"),
+        "lateral_deviation_rms_m": res.get("lateral_deviation_rms_m"),
+        "rearrangements": res.get("rearrangements"),
+        "wall_s": round(time.perf_counter() - t0, 1),
+    }
+
+
+def aggregate(rows: list[dict], strategies, rng: np.random.Generator) -> dict:
+    out: dict = {}
+    for s in strategies:
+        mine = [r for r in rows if r["strategy"] == s]
+        ok = [r for r in mine if r["success"]]
+        out[s] = {
+            "runs": len(mine),
+            "success": boot_rate([r["success"] for r in mine], rng),
+            "success_paper_criterion": boot_rate([r["success_paper"] for r in mine], rng),
+            "transport_time_s": boot_median([r["transport_time_s"] for r in ok], rng),
+            "impulse_ns": boot_median([r["impulse_ns"] for r in ok], rng),
+            "lateral_deviation_rms_m": boot_median([r["lateral_deviation_rms_m"] for r in ok], rng),
+            "failures": sorted({str(r["reason"]) for r in mine if not r["success"]}),
+        }
+    pairs: dict = {}
+    for i, a in enumerate(strategies):
+        for b in strategies[i + 1 :]:
+            ra = {(r["scenario"], r["seed"]): r for r in rows if r["strategy"] == a}
+            rb = {(r["scenario"], r["seed"]): r for r in rows if r["strategy"] == b}
+            keys = sorted(set(ra) & set(rb))
+            both = [k for k in keys if ra[k]["success"] and rb[k]["success"]]
+            p = {"paired_runs": len(keys), "both_delivered": len(both)}
+            wins = [int(ra[k]["success"]) - int(rb[k]["success"]) for k in keys]
+            p["success"] = {
+                "pairs": len(keys),
+                "only_a_delivered": wins.count(1),
+                "only_b_delivered": wins.count(-1),
+                "wilcoxon_p": signed_rank(wins)["wilcoxon_p"],
+            }
+            for key in ("transport_time_s", "impulse_ns"):
+                good = [k for k in both if ra[k][key] and rb[k][key]]
+                p[key] = signed_rank([ra[k][key] - rb[k][key] for k in good])
+                ratios = [ra[k][key] / rb[k][key] for k in good]
+                p[key]["median_ratio_a_over_b"] = (
+                    round(float(np.median(ratios)), 3) if ratios else None
+                )
+            pairs[f"{a}_vs_{b}"] = p
+    out["paired"] = pairs
+    return out
+
+
+def run_all(jobs: list[tuple], workers: int) -> list[dict]:
+    if workers <= 1:
+        return [run_case(j) for j in jobs]
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(run_case, jobs))
+
+
+def _num(v: float) -> str:
+    return f"{v:.0f}" if abs(v) >= 100 else f"{v:.3g}"
+
+
+def _p(v: float | None) -> str:
+    return "–" if v is None else ("< 1e-4" if v < 1e-4 else f"{v:.2g}")
+
+
+def _ci(x: dict, key: str, unit: str = "") -> str:
+    if x.get(key) is None:
+        return "–"
+    lo, hi = x["ci95"]
+    return f"{_num(x[key])}{unit} [{_num(lo)}, {_num(hi)}]"
+
+
+def table(out: dict) -> str:
+    """The README's comparison table (markdown) from this script's JSON."""
+    lines = []
+    for sec, label in (("closed_loop", "suite"), ("robustness", "robustness")):
+        if sec not in out:
+            continue
+        for s, r in out[sec].items():
+            if s == "paired":
+                continue
+            ok, paper = r["success"], r["success_paper_criterion"]
+            lines.append(
+                f"| {label} | `{s}` | {r['runs']} | {_ci({**ok, 'rate': ok['rate']}, 'rate')} "
+                f"| {_ci(paper, 'rate')} | {_ci(r['transport_time_s'], 'median', ' s')} "
+                f"| {_ci(r['impulse_ns'], 'median', ' N·s')} |"
+            )
+        for pair, p in out[sec]["paired"].items():
+            w = p["success"]
+            parts = [
+                f"success: only first {w.get('only_a_delivered', w.get('a_lower'))}, only "
+                f"second {w.get('only_b_delivered', w.get('a_higher'))} (p {_p(w['wilcoxon_p'])})"
+            ]
+            for key, name in (("transport_time_s", "time"), ("impulse_ns", "impulse")):
+                q = p[key]
+                parts.append(
+                    f"{name}: ratio {q['median_ratio_a_over_b']}, first lower in "
+                    f"{q['a_lower']}/{q['pairs']} (p {_p(q['wilcoxon_p'])})"
+                )
+            lines.append(
+                f"| {label} | {pair.replace('_vs_', ' vs ')} | paired | "
+                + "; ".join(parts)
+                + " | | | |"
+            )
+    head = (
+        "| set | strategy | runs | success (ours) [95 % CI] | success (Sharma: CG only) "
+        "| time, median [CI] | impulse, median [CI] |"
+    )
+    return "\n".join([head, "|---|---|---|---|---|---|---|", *lines])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--table", nargs="+", metavar="JSON", help="print the README table")
+    ap.add_argument("--seeds", type=int, default=5, help="closed-loop seeds per scenario")
+    ap.add_argument("--scenarios", type=int, default=2)
+    ap.add_argument("--strategies", default=",".join(STRATEGIES))
+    ap.add_argument("--backend", default="pybullet", choices=("pybullet", "ideal"))
+    ap.add_argument("--sweep", type=int, default=0, help="robustness runs per strategy")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--planner-seeds", type=int, default=10)
+    ap.add_argument("--minima-checks", type=int, default=40)
+    args = ap.parse_args()
+    if args.table:
+        merged: dict = {}
+        for path in args.table:
+            merged.update(json.loads(Path(path).read_text()))
+        print(table(merged))
+        return
+    strategies = tuple(args.strategies.split(","))
+    rng = np.random.default_rng(2024)
+    t0 = time.perf_counter()
+    out: dict = {
+        "bench": "transport_compare",
+        "load_average": [round(x, 2) for x in os.getloadavg()],
+        "size": {
+            "seeds": args.seeds,
+            "scenarios": args.scenarios,
+            "strategies": list(strategies),
+            "backend": args.backend,
+            "sweep_runs_per_strategy": args.sweep,
+            "planner_seeds": args.planner_seeds,
+        },
+    }
+    if args.planner_seeds:
+        log("planner: sa vs downhill from the same start, default settings ...")
+        out["planner"] = planner_bench(args.planner_seeds, args.minima_checks)
+    suite = [dataclasses.replace(s, backend=args.backend) for s in draw_suite(args.scenarios)]
+    jobs = [
+        (sc, strat, 100 + 17 * k + seed, "suite")
+        for k, sc in enumerate(suite)
+        for seed in range(args.seeds)
+        for strat in strategies
+    ]
+    if jobs:
+        log(f"closed loop: {len(jobs)} runs on {args.workers} workers ...")
+        rows = run_all(jobs, args.workers)
+        out["closed_loop"] = aggregate(rows, strategies, rng)
+        out["closed_loop_runs"] = rows
+    if args.sweep:
+        sweep = []
+        for k, sc in enumerate(sweep_suite(args.sweep)):
+            sim = {**sc.patch["sim"], "robot_position_error": [0.04, 0.01]}
+            sc = dataclasses.replace(sc, backend=args.backend, patch={**sc.patch, "sim": sim})
+            sweep += [(sc, strat, 200 + k, "sweep") for strat in strategies]
+        log(f"robustness: {len(sweep)} runs ...")
+        rows = run_all(sweep, args.workers)
+        out["robustness"] = aggregate(rows, strategies, rng)
+        out["robustness_runs"] = rows
+    out["wall_s"] = round(time.perf_counter() - t0, 1)
+    out["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+    print(json.dumps(out, indent=1, default=lambda x: None if x is None else float(x)))
+
+
+if __name__ == "__main__":
+    main()
