@@ -46,16 +46,16 @@ def put_estop(
     pub = bus.publisher("estop")
     tokens: list[str] = []  # robot liveliness tokens, appended as the replies come
     bus.alive_ids_async("robot", tokens, timeout=min(1.0, timeout))
-    # an engage goes out at once (any epoch latches; a holder at a greater one makes the
-    # confirmation put it again above); a release must exceed every holder's epoch: ask first
-    epoch = 1 if engaged else held_epoch(bus, min(EPOCH_WAIT, timeout / 3)) + 1
+    # an engage goes out at once (any epoch latches, at the holder's own epoch or above); a
+    # release must exceed every holder's epoch: ask them first
+    epoch = 0 if engaged else held_epoch(bus, min(EPOCH_WAIT, timeout / 3)) + 1
     msg = wire.EStop(t=time.time(), engaged=engaged, source=source, reason=reason, epoch=epoch)
     while not pub.matching() and time.monotonic() < deadline:
         time.sleep(0.005)  # polling for the subscribers' declarations (a handshake)
     pub.put(msg)
     sent = time.monotonic()
     known = set(cfg.robot_ids)
-    agents, holders, elapsed, last = _confirmations(bus, msg, known, tokens, deadline, pub, t0)
+    agents, holders, elapsed, epoch = _confirmations(bus, msg, known, tokens, deadline, pub, t0)
     known |= set(tokens[:])
     status = None
     for _, st in bus.query_replies(bus.key("status"), wire.FleetStatus, timeout=0.3):
@@ -74,7 +74,7 @@ def put_estop(
         "hub_confirmed": "hub" in holders,
         "elapsed_s": None if missing or elapsed is None else round(elapsed, 4),
         "sent_after_s": round(sent - t0, 4),
-        "epoch": last.epoch,
+        "epoch": epoch,
     }
 
 
@@ -91,13 +91,14 @@ def _confirmations(
 ):
     """Ask every latch holder until every known agent (the ``config``'s robots and the robot
     ``tokens`` seen so far, which the liveliness look-up fills meanwhile) holds ``msg``'s state
-    at its epoch or above, or the deadline. A holder that answers a greater epoch (or the same
-    epoch in the other state) refused it: ``msg`` is put again one epoch above. Returns (agents
-    that confirmed, roles of the other holders that did, seconds from ``t0`` to the last
-    agent's confirmation or None, the message last put)."""
+    (a release: at its epoch or above), or the deadline. A holder engaged at the release's epoch
+    or above refused it: it is put again one epoch above. Returns (agents that confirmed, roles
+    of the other holders that did, seconds from ``t0`` to the last agent's confirmation or None,
+    the greatest epoch a confirmation named)."""
     agents: set[str] = set()
     holders: set[str] = set()
     elapsed = None
+    epoch = msg.epoch
     next_put = time.monotonic() + REPUT
     known = config | set(tokens[:])
     while time.monotonic() < deadline and not known <= agents:
@@ -106,13 +107,14 @@ def _confirmations(
             parsed = wire.parse_key(key, bus.fleet)
             if parsed is None:
                 continue
-            if _refused(msg, st):
-                msg = dataclasses.replace(msg, epoch=st.epoch + 1)
+            if not msg.engaged and st.engaged and st.epoch >= msg.epoch:
+                msg = dataclasses.replace(msg, epoch=st.epoch + 1)  # refused: put it above
                 pub.put(msg)
                 next_put = time.monotonic() + REPUT
                 continue
             if st.engaged != msg.engaged or st.epoch < msg.epoch:
                 continue
+            epoch = max(epoch, st.epoch)
             if parsed.parts.get("role") == "robot":
                 agents.add(parsed.id)
             else:
@@ -127,14 +129,7 @@ def _confirmations(
             next_put = time.monotonic() + REPUT
         if not known <= agents:
             time.sleep(0.005)  # between rounds of a poll (each round is a real check)
-    return agents, holders, elapsed, msg
-
-
-def _refused(msg: wire.EStop, st: wire.EStop) -> bool:
-    """Whether a holder's answer ``st`` shows it holds an epoch ``msg`` cannot change."""
-    if st.epoch > msg.epoch:
-        return st.engaged != msg.engaged or msg.engaged
-    return st.epoch == msg.epoch and st.engaged != msg.engaged
+    return agents, holders, elapsed, epoch
 
 
 class LatchFile:
