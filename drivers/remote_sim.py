@@ -56,7 +56,9 @@ class RemoteSimDriver:
         self.link_timeout = link_timeout
         self.keepalive = keepalive
         self.vehicle_timeout = vehicle_timeout
-        self._poses = bus.subscribe_topic("world_pose", id=robot_id)
+        # lossless: the robot's own samples, counted for the handshake (samples_seen); only the
+        # world puts there (lab ACL), and the agent drains them every step
+        self._poses = bus.subscribe_topic("world_pose", lossless=True, id=robot_id)
         self._pub = bus.publisher("world_cmd", command=True, id=robot_id)
         self.pose_key = bus.key("world_pose", id=robot_id)
         self._pending: list[PoseMeasurement] = []
