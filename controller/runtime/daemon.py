@@ -58,6 +58,8 @@ FIND_TIMEOUT = 1.0  # s: the look-up of other controllers' tokens at start
 # until its transport lease, 10 s by default, expires)
 TAKE_OVER_WAIT = 15.0
 REOPEN_WAIT = 5.0  # s: the old controller's endpoint is freed when its process ends
+# s a take-over waits for the old controller's own hub (a child that ends with it) to go
+HUB_SETTLE = 5.0
 
 
 def open_daemon_bus(cfg: FleetConfig) -> tuple[Bus, str]:
@@ -135,8 +137,24 @@ def claim_fleet(
             )
             stop_hub_process(own_hub)
             return 1
+    _wait_for_its_hub_to_go(cfg, stop)
     bus, how, again = _reopen(cfg, stop)
     return bus, how, claim, own_hub or again
+
+
+def _wait_for_its_hub_to_go(cfg: FleetConfig, stop: threading.Event) -> None:
+    """The controller taken over from may have run the fleet's hub as its own child, which ends
+    with it a moment after its token: joining that hub now would leave this daemon connected to
+    nothing. Wait (at most ``HUB_SETTLE`` s) until the endpoints refuse a client (its hub is
+    gone: this daemon starts its own) or keep answering (a ``fleet hub`` of its own, stays)."""
+    deadline = time.monotonic() + HUB_SETTLE
+    while time.monotonic() < deadline and not stop.is_set():
+        try:
+            probe = _client_of_hub(cfg)
+        except BusError:
+            return  # nobody listens: the old daemon's hub is gone
+        probe.close()
+        stop.wait(0.5)  # polling the endpoint while the old daemon's hub shuts down
 
 
 class LatchWatch:
