@@ -81,9 +81,9 @@ def _status(cfg) -> dict:
     return st if code == 0 else {"ok": False}
 
 
-def _all_present(st: dict) -> bool:
+def _all_present(st: dict, ids: set[str] = set(ROBOTS)) -> bool:  # noqa: B006 - read only
     present = {r["id"] for r in st.get("robots", []) if r.get("present")}
-    return bool(st.get("ok")) and present >= set(ROBOTS) and st["counters"].get("poses", 0) > 0
+    return bool(st.get("ok")) and present >= ids and st["counters"].get("poses", 0) > 0
 
 
 def _arrested(inbox, seen: list[str]) -> bool:
@@ -156,7 +156,10 @@ def test_world_daemon_drivers_arrest_kill_restart(tmp_path, port):
             d1 = daemon(1, "capture")
             agents = [spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ROBOTS]
             procs += agents
-            release(cfg, timeout=90)  # a fresh lab: stopped until an operator's first resume
+            # a fresh lab is stopped until an operator's first resume; the daemon must be up to
+            # hear it (a holder's answer never releases a fresh daemon's latch)
+            wait_for(lambda: _all_present(_status(cfg)), 60, "the daemon and its robots")
+            release(cfg, timeout=90)
             seen: list[str] = []
             wait_for(lambda: _arrested(phases, seen), 45, "the daemon's arrest")
             assert seen[0] == "approach" and "hold" in seen, seen
@@ -215,7 +218,9 @@ def test_a_driver_killed_mid_approach_is_lost_replanned_and_the_rest_arrest(tmp_
                                "capture", "--out", str(tmp_path / "d.mcap")))  # fmt: skip
             agents = {r: spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ids}
             procs += list(agents.values())
-            release(c, timeout=90)  # a fresh lab: stopped until an operator's first resume
+            # the daemon up before the operator's first resume (see above)
+            wait_for(lambda: _all_present(_status(c), set(ids)), 60, "the daemon and its robots")
+            release(c, timeout=90)
             events: list = []
 
             def seen(kind: str) -> list:
