@@ -69,14 +69,7 @@ def open_daemon_bus(cfg: FleetConfig) -> tuple[Bus, str]:
         return Bus(cfg.zenoh, cfg.fleet.name), "listening"
     except BusError as listen_error:
         try:
-            bus = Bus(
-                cfg.zenoh,
-                cfg.fleet.name,
-                mode="client",
-                listen=[],
-                connect=list(cfg.zenoh.listen),
-                lease_s=cfg.fleet.liveliness_lease,
-            )
+            bus = _client_of_hub(cfg)
         except BusError:
             raise listen_error from None
         return bus, "joined the hub"
