@@ -91,11 +91,13 @@ def plan_arrangement(
             if can_push(lp, model, twist_v, pts, -nrm, np.full(len(pts), weakest)):
                 return Arrangement(pts, nrm, value, n, "eq5")
     pts, nrm, value, n = wrench_set(cfg, model, twist_v, weakest, robots, turn_margin)
-    if value * turn_margin >= 1.0 - 1e-9:
-        return Arrangement(pts, nrm, value, n, "lp_capacity")
-    # the best set the contacts allow (as many robots as fit where they push, all of them if
-    # need be) cannot overcome the floor friction: the LP says so before anyone pushes
     need = float(np.hypot(*required_wrench(twist_v, model.mass, model.floor_friction, 1.0)[:2]))
+    if value * turn_margin >= 1.0 - 1e-9 or need <= robots * weakest:
+        # it holds, or the fleet's summed force would do (a turn's set short of its margin, a
+        # local optimum of the set): pushed as before
+        return Arrangement(pts, nrm, value, n, "lp_capacity")
+    # the best set cannot move it and every robot at its limit would not overcome the floor
+    # friction: the LP says so before anyone pushes
     detail = (
         f"too heavy to push: the floor friction needs {need:.1f} N; the best set of contacts "
         f"({n} robots where they fit, {weakest:g} N each) reaches {100 * value * turn_margin:.0f}"
