@@ -197,6 +197,8 @@ class TransportMission:
         events: list[Event] = []
         if self.t0 is None:
             self.t0 = self.progress_t = view.t
+            # the carrying starts here (the route comes a few ticks later, planned off the tick)
+            events.append(("phase", {"phase": str(self.phase), "t": view.t}))
         dt = 0.0 if self._last_t is None else view.t - self._last_t
         self._last_t = view.t
         if self.phase not in (Phase.DONE, Phase.FAILED) and self._drop_lost(view, events):
