@@ -133,9 +133,11 @@ def run_sweep(
     out_dir: Path,
     max_time: float | None = None,
     backend: str | None = None,
-    progress: TextIO = sys.stderr,
+    progress: TextIO | None = None,
 ) -> list[dict[str, Any]]:
-    """Every config's dry run, in order; a row per run (see ``run_one``)."""
+    """Every config's dry run, in order; a row per run (see ``run_one``); progress lines to
+    ``progress`` (None: the stderr of the moment, not the one at import)."""
+    progress = sys.stderr if progress is None else progress
     cfgs = load_all(paths)
     if backend:
         cfgs = [
