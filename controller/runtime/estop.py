@@ -91,45 +91,65 @@ def _confirmations(
 ):
     """Ask every latch holder until every known agent (the ``config``'s robots and the robot
     ``tokens`` seen so far, which the liveliness look-up fills meanwhile) holds ``msg``'s state
-    (a release: at its epoch or above), or the deadline. A holder engaged at the release's epoch
+    (a release: at its epoch or above) and every other holder that answers at all (the hub, the
+    daemon) holds it too, or the deadline. A holder engaged at the release's epoch
     or above refused it: it is put again one epoch above. Returns (agents that confirmed, roles
     of the other holders that did, seconds from ``t0`` to the last agent's confirmation or None,
     the greatest epoch a confirmation named)."""
-    agents: set[str] = set()
-    holders: set[str] = set()
-    elapsed = None
-    epoch = msg.epoch
+    g = _Gather(msg, config, tokens, t0)
     next_put = time.monotonic() + REPUT
-    known = config | set(tokens[:])
-    while time.monotonic() < deadline and not known <= agents:
+    while time.monotonic() < deadline and not g.done():
         left = deadline - time.monotonic()
         for key, st in bus.query_replies(bus.estop_wildcard(), wire.EStop, min(0.3, left)):
             parsed = wire.parse_key(key, bus.fleet)
-            if parsed is None:
-                continue
-            if not msg.engaged and st.engaged and st.epoch >= msg.epoch:
-                msg = dataclasses.replace(msg, epoch=st.epoch + 1)  # refused: put it above
-                pub.put(msg)
+            if parsed is not None and g.take(parsed, st):  # refused: put it above
+                pub.put(g.msg)
                 next_put = time.monotonic() + REPUT
-                continue
-            if st.engaged != msg.engaged or st.epoch < msg.epoch:
-                continue
-            epoch = max(epoch, st.epoch)
-            if parsed.parts.get("role") == "robot":
-                agents.add(parsed.id)
-            else:
-                holders.add(parsed.parts.get("role", ""))
-            known = config | set(tokens[:])
-            if known <= agents:
-                elapsed = time.monotonic() - t0
+            if g.done():
                 break
-        known = config | set(tokens[:])
-        if not known <= agents and time.monotonic() >= next_put:
-            pub.put(msg)
+        if not g.done() and time.monotonic() >= next_put:
+            pub.put(g.msg)
             next_put = time.monotonic() + REPUT
-        if not known <= agents:
+        if not g.done():
             time.sleep(0.005)  # between rounds of a poll (each round is a real check)
-    return agents, holders, elapsed, epoch
+    return g.agents, g.holders, g.elapsed, g.epoch
+
+
+class _Gather:
+    """The confirmations of one put, as the holders' replies come."""
+
+    def __init__(self, msg: wire.EStop, config: set[str], tokens: list[str], t0: float) -> None:
+        self.msg, self.config, self.tokens, self.t0 = msg, config, tokens, t0
+        self.agents: set[str] = set()
+        self.holders: set[str] = set()
+        self.present: set[str] = set()  # the other holders' roles (hub, controller) that answer
+        self.elapsed: float | None = None
+        self.epoch = msg.epoch
+
+    def known(self) -> set[str]:
+        return self.config | set(self.tokens[:])
+
+    def done(self) -> bool:
+        return self.known() <= self.agents and self.present <= self.holders
+
+    def take(self, parsed, st: wire.EStop) -> bool:
+        """One holder's reply; True when it refused a release (``msg`` is now one above)."""
+        role = parsed.parts.get("role", "")
+        if role != "robot":
+            self.present.add(role)
+        if not self.msg.engaged and st.engaged and st.epoch >= self.msg.epoch:
+            self.msg = dataclasses.replace(self.msg, epoch=st.epoch + 1)
+            return True
+        if st.engaged != self.msg.engaged or st.epoch < self.msg.epoch:
+            return False
+        self.epoch = max(self.epoch, st.epoch)
+        if role == "robot":
+            self.agents.add(parsed.id)
+        else:
+            self.holders.add(role)
+        if self.elapsed is None and self.known() <= self.agents:
+            self.elapsed = time.monotonic() - self.t0
+        return False
 
 
 class LatchFile:
