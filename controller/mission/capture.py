@@ -45,6 +45,8 @@ import numpy as np
 from controller import geometry
 from controller.config import FleetConfig
 from controller.mission.guard import SafetyStage
+from controller.mission.sequence import CAPTURING, Cue, Failure, JobState, next_phase
+from controller.mission.sequence import Measures as SeqMeasures
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.approach import (
     STATION_GAP,
@@ -139,7 +141,7 @@ class Measures:
 class CaptureState:
     """The capture's phase and what it remembers (immutable; :func:`advance` returns a new one)."""
 
-    phase: str = Phase.APPROACH
+    job: JobState = JobState(Phase.APPROACH)  # the phase, moved by sequence.next_phase only
     t0: float | None = None
     contact_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     hold_t0: float | None = None
@@ -150,6 +152,10 @@ class CaptureState:
     arrival_spread: float | None = None
     escapes: int = 0
     releases: int = 0
+
+    @property
+    def phase(self) -> Phase:
+        return self.job.phase
 
 
 @dataclass(frozen=True)
@@ -165,17 +171,13 @@ class Step:
 
 
 def advance(st: CaptureState, m: Measures, s: CaptureSettings) -> Step:
-    """The capture's phase logic, pure: the next state and its events."""
+    """The capture's measures, pure: what it saw (a cue for :func:`sequence.next_phase`, which
+    moves the phase), what it remembers, and its events."""
     events: list[Event] = []
-    arrest = False
-
-    def go(state: CaptureState, phase: str) -> CaptureState:
-        events.append(("phase", {"phase": str(phase), "t": m.t}))
-        return replace(state, phase=phase)
-
+    cue: Cue | None = None
     if st.phase == Phase.APPROACH:
         if np.all(m.dist < s.envelope_tolerance) and not m.detouring:
-            st = go(st, Phase.CLOSE_IN)
+            cue = Cue.ON_ENVELOPE
     elif st.phase == Phase.CLOSE_IN:
         touching = m.gap < s.contact_tolerance
         contact_t = st.contact_t.copy()
@@ -183,18 +185,42 @@ def advance(st: CaptureState, m: Measures, s: CaptureSettings) -> Step:
         st = replace(st, contact_t=contact_t, cage=_recage(st.cage, touching, m.preload))
         if np.all(touching):
             st = replace(st, hold_t0=m.t, hold_polygon=m.polygon, hold_displacement=0.0)
-            st = go(st, Phase.HOLD)
+            cue = Cue.ALL_TOUCHING
     elif st.phase in CLOSED:
-        st, arrest = _hold(st, m, s, go, events)
-    done = st.phase == Phase.DONE
-    failed, reason = False, ""
-    if st.phase in (Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD) and m.t - st.t0 > s.timeout:
+        st, cue = _hold(st, m, s, events)
+    failure = None
+    if st.phase in CAPTURING and m.t - st.t0 > s.timeout:
         reason = Reason.ESCAPED if st.escapes else Reason.TIMEOUT
-        detail = _timeout_detail(st, m, s)
-        st = go(st, Phase.FAILED)
-        failed = True
-        events.append(("failure", {"reason": str(reason), "t": m.t, "detail": detail}))
-    return Step(st, events, arrest, done, failed, reason)
+        failure = Failure(reason, _timeout_detail(st, m, s))
+    step = next_phase(st.job, SeqMeasures(m.t, cue, failure))
+    if step.fired:
+        st = _entered(replace(st, job=step.state), m)
+    events += step.events
+    arrest = step.fired and st.phase == Phase.ARRESTED
+    if arrest:
+        events.append(_arrest_event(st, m))
+    failed = st.phase == Phase.FAILED
+    reason = step.state.failure.reason if failed and step.state.failure else ""
+    return Step(st, events, arrest, st.phase == Phase.DONE, failed, reason)
+
+
+def _entered(st: CaptureState, m: Measures) -> CaptureState:
+    """What the capture remembers of the phase it has just entered."""
+    if st.phase == Phase.ARRESTED:
+        spread = float(np.nanmax(st.contact_t) - np.nanmin(st.contact_t))
+        return replace(st, arrest_t=m.t, arrival_spread=spread)
+    return st
+
+
+def _arrest_event(st: CaptureState, m: Measures) -> Event:
+    data = {
+        "t": m.t,
+        "arrival_spread_s": st.arrival_spread,
+        "hold_s": m.t - st.hold_t0,
+        "hold_displacement_m": st.hold_displacement,
+        "gaps_m": m.gap.round(4).tolist(),
+    }
+    return ("arrest", data)
 
 
 def _recage(cage: np.ndarray | None, touching: np.ndarray, preload: np.ndarray) -> np.ndarray:
@@ -206,8 +232,9 @@ def _recage(cage: np.ndarray | None, touching: np.ndarray, preload: np.ndarray) 
     return out
 
 
-def _hold(st: CaptureState, m: Measures, s: CaptureSettings, go, events) -> tuple:
-    """Hold, arrested, done: contact kept and the object still, or back to closing in."""
+def _hold(st: CaptureState, m: Measures, s: CaptureSettings, events) -> tuple:
+    """Hold, arrested, done: contact kept and the object still (``held`` after ``hold_s``,
+    ``settled`` ``settle_s`` after the arrest), or contact lost or the object escaped."""
     moved = float(np.max(np.linalg.norm(m.polygon - st.hold_polygon, axis=1)))
     touching = m.gap < s.contact_tolerance
     st = replace(
@@ -217,29 +244,15 @@ def _hold(st: CaptureState, m: Measures, s: CaptureSettings, go, events) -> tupl
     )
     if np.any(m.gap > s.release_factor * s.contact_tolerance):
         events.append(("contact_lost", {"t": m.t, "gaps_m": m.gap.round(4).tolist()}))
-        return go(replace(st, releases=st.releases + 1, cage=None), Phase.CLOSE_IN), False
+        return replace(st, releases=st.releases + 1, cage=None), Cue.CONTACT_LOST
     if moved > s.hold_tolerance and st.phase == Phase.HOLD:
         events.append(("escape", {"t": m.t, "displacement_m": moved}))
-        return go(replace(st, escapes=st.escapes + 1, cage=None), Phase.CLOSE_IN), False
+        return replace(st, escapes=st.escapes + 1, cage=None), Cue.ESCAPED
     if st.phase == Phase.HOLD and m.t - st.hold_t0 >= s.hold_s and np.all(touching):
-        spread = float(np.nanmax(st.contact_t) - np.nanmin(st.contact_t))
-        st = go(replace(st, arrest_t=m.t, arrival_spread=spread), Phase.ARRESTED)
-        events.append(
-            (
-                "arrest",
-                {
-                    "t": m.t,
-                    "arrival_spread_s": spread,
-                    "hold_s": m.t - st.hold_t0,
-                    "hold_displacement_m": st.hold_displacement,
-                    "gaps_m": m.gap.round(4).tolist(),
-                },
-            )
-        )
-        return st, True
+        return st, Cue.HELD
     if st.phase == Phase.ARRESTED and m.t - st.arrest_t >= s.settle_s:
-        return go(st, Phase.DONE), False
-    return st, False
+        return st, Cue.SETTLED
+    return st, None
 
 
 def _timeout_detail(st: CaptureState, m: Measures, s: CaptureSettings) -> str:

@@ -1,0 +1,149 @@
+"""The job's phase sequence, pure: the one place a phase changes.
+
+    plan → approach → close_in → hold → arrested → route → rearrange ⇄ transport → done
+                                                                     any → failed(reason)
+
+The stages (the capture mission, the transport mission, the job's roster) measure and report
+what they saw this tick as a :class:`Cue` (at most one: the stage's checks come in their order
+of precedence), or a :class:`Failure`; :func:`next_phase` alone decides where that leads from
+the job's current :class:`JobState`, and writes the ``phase`` and ``failure`` events. A cue that
+leads nowhere from the current phase (a stage's report out of turn) leaves the phase as it is.
+A failure wins over a cue of the same tick: the job stops. ``done`` and ``failed`` are final.
+
+``fleet run --mission transport`` is the same job entered at ``route`` (:func:`entered_at`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from enum import StrEnum
+
+from controller.mission.types import Event, Phase, Reason
+
+
+class Cue(StrEnum):
+    """What a stage saw this tick that may move the phase."""
+
+    READY = "ready"  # plan: the object and the robots the capture needs are seen, assigned
+    ON_ENVELOPE = "on_envelope"  # approach: every assigned robot at its station
+    ALL_TOUCHING = "all_touching"  # close_in: every assigned robot in contact
+    CONTACT_LOST = "contact_lost"  # hold, arrested: a robot's gap opened past the release
+    ESCAPED = "escaped"  # hold: the object moved more than hold_tolerance
+    HELD = "held"  # hold: contact and stillness kept through hold_s
+    SETTLED = "settled"  # arrested, capture alone: settle_s more of holding
+    CARRY = "carry"  # arrested, with a goal: transport.start_after has passed
+    CAN_PUSH = "can_push"  # a new route segment the contacts can push along (the LP)
+    CANNOT_PUSH = "cannot_push"  # ... they cannot: new contacts are needed
+    ARRANGED = "arranged"  # rearrange: every mover at its new contact
+    RESET = "reset"  # rearrange: the set is given up (a mover blocked): another set
+    STUCK = "stuck"  # transport: the local plans keep re-positioning without pushing
+    OFF_ROUTE = "off_route"  # transport: the object left the route's corridor
+    DELIVERED = "delivered"  # route, rearrange, transport: the object inside the goal tolerance
+
+
+@dataclass(frozen=True)
+class Failure:
+    """A stage's verdict that the job cannot go on: the reason (``failure.reason`` in the run's
+    JSON) and the detail a person reads."""
+
+    reason: Reason
+    detail: str
+
+
+@dataclass(frozen=True)
+class JobState:
+    """Where the job is: its phase and since when (s), and the failure that ended it."""
+
+    phase: Phase = Phase.PLAN
+    since: float | None = None
+    failure: Failure | None = None
+
+    @property
+    def final(self) -> bool:
+        return self.phase in FINAL
+
+
+@dataclass(frozen=True)
+class Measures:
+    """One tick's report of the stage in charge: the time (s) and at most one cue or failure."""
+
+    t: float
+    cue: Cue | None = None
+    failure: Failure | None = None
+
+
+@dataclass(frozen=True)
+class Step:
+    """:func:`next_phase`'s answer: the new state and the events of the change (a ``phase``
+    event whenever a transition fires, the same phase again included: a new segment pushed
+    from the start; a ``failure`` event after the ``failed`` one)."""
+
+    state: JobState
+    events: tuple[Event, ...] = ()
+
+    @property
+    def fired(self) -> bool:
+        return bool(self.events)
+
+
+FINAL = frozenset({Phase.DONE, Phase.FAILED})
+CAPTURING = frozenset({Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD})
+
+#: (phase, cue) → the next phase: every way out of every phase but by failure
+TRANSITIONS: dict[tuple[Phase, Cue], Phase] = {
+    (Phase.PLAN, Cue.READY): Phase.APPROACH,
+    (Phase.APPROACH, Cue.ON_ENVELOPE): Phase.CLOSE_IN,
+    (Phase.CLOSE_IN, Cue.ALL_TOUCHING): Phase.HOLD,
+    (Phase.HOLD, Cue.CONTACT_LOST): Phase.CLOSE_IN,
+    (Phase.HOLD, Cue.ESCAPED): Phase.CLOSE_IN,
+    (Phase.HOLD, Cue.HELD): Phase.ARRESTED,
+    (Phase.ARRESTED, Cue.CONTACT_LOST): Phase.CLOSE_IN,
+    (Phase.ARRESTED, Cue.SETTLED): Phase.DONE,
+    (Phase.ARRESTED, Cue.CARRY): Phase.ROUTE,
+    (Phase.ROUTE, Cue.CAN_PUSH): Phase.TRANSPORT,
+    (Phase.ROUTE, Cue.CANNOT_PUSH): Phase.REARRANGE,
+    (Phase.REARRANGE, Cue.ARRANGED): Phase.TRANSPORT,
+    (Phase.REARRANGE, Cue.RESET): Phase.REARRANGE,
+    (Phase.REARRANGE, Cue.DELIVERED): Phase.DONE,
+    (Phase.TRANSPORT, Cue.CAN_PUSH): Phase.TRANSPORT,  # the next segment, pushed as they are
+    (Phase.TRANSPORT, Cue.CANNOT_PUSH): Phase.REARRANGE,  # the next segment, new contacts
+    (Phase.TRANSPORT, Cue.STUCK): Phase.REARRANGE,
+    (Phase.TRANSPORT, Cue.OFF_ROUTE): Phase.ROUTE,
+    (Phase.TRANSPORT, Cue.DELIVERED): Phase.DONE,
+}
+
+
+@dataclass(frozen=True)
+class SequenceSettings:
+    """What the sequence itself is configured by: whether the job carries the object on after
+    the arrest (``object.goal`` given) or ends holding it."""
+
+    carry: bool = False
+
+
+def next_phase(state: JobState, m: Measures, s: SequenceSettings | None = None) -> Step:
+    """The job's next state from one tick's report (pure)."""
+    if state.final:
+        return Step(state)
+    if m.failure is not None:
+        new = JobState(Phase.FAILED, m.t, m.failure)
+        failure = {"reason": str(m.failure.reason), "t": m.t, "detail": m.failure.detail}
+        return Step(new, (_phase_event(Phase.FAILED, m.t), ("failure", failure)))
+    if m.cue is None:
+        return Step(state)
+    nxt = TRANSITIONS.get((state.phase, m.cue))
+    if nxt is None or (m.cue == Cue.CARRY and s is not None and not s.carry):
+        return Step(state)
+    if m.cue == Cue.SETTLED and s is not None and s.carry:
+        return Step(state)  # a job with a goal holds on until it carries the object
+    return Step(replace(state, phase=nxt, since=m.t), (_phase_event(nxt, m.t),))
+
+
+def entered_at(phase: Phase, t: float | None = None) -> JobState:
+    """A job entered part way: ``--mission transport`` starts at ``route`` with the object
+    held (the capture done before, by the same job or by hand)."""
+    return JobState(phase, t)
+
+
+def _phase_event(phase: Phase, t: float) -> Event:
+    return ("phase", {"phase": str(phase), "t": t})
