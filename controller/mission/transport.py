@@ -45,6 +45,14 @@ from controller.mission.planners import (
     PlanSlot,
     spawn_rng,
 )
+from controller.mission.sequence import (
+    Cue,
+    Failure,
+    JobState,
+    Measures,
+    SequenceSettings,
+    next_phase,
+)
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.arrangement import Arrangement, can_push, plan_arrangement
 from controller.planning.contact_lp import ContactForceLP
@@ -65,6 +73,8 @@ from controller.planning.transport_types import (
     TransportState,
     action_code,
 )
+
+SEQUENCE = SequenceSettings(carry=True)  # the transport is the job carrying the object on
 
 
 @dataclass(frozen=True)
@@ -162,7 +172,8 @@ class TransportMission:
         for i, p, nv in zip(np.asarray(robots, int), points, normals, strict=True):
             self.contacts[int(i)] = Contact(np.asarray(p, float), -np.asarray(nv, float))
         self.actions: dict[int, str | None] = {int(i): None for i in self.robots}
-        self.phase = Phase.ROUTE
+        # the object held: the job goes on at ``route`` (sequence.next_phase moves the phase)
+        self.job = JobState(Phase.ARRESTED)
         self.t0: float | None = None
         self.route: Any = None
         self.subgoal = 0
@@ -198,7 +209,7 @@ class TransportMission:
         if self.t0 is None:
             self.t0 = self.progress_t = view.t
             # the carrying starts here (the route comes a few ticks later, planned off the tick)
-            events.append(("phase", {"phase": str(self.phase), "t": view.t}))
+            self._cue(Cue.CARRY, view.t, events)
         dt = 0.0 if self._last_t is None else view.t - self._last_t
         self._last_t = view.t
         if self.phase not in (Phase.DONE, Phase.FAILED) and self._drop_lost(view, events):
@@ -237,17 +248,23 @@ class TransportMission:
     def _active(self) -> list[int]:
         return [int(i) for i in self.robots if int(i) not in self.lost]
 
-    def _go(self, phase: str, t: float, events: list[Event]) -> None:
-        self.phase = phase
-        events.append(("phase", {"phase": str(phase), "t": t}))
+    @property
+    def phase(self) -> Phase:
+        return self.job.phase
+
+    def _cue(self, cue: Cue | None, t: float, events: list[Event], failure: Failure | None = None):
+        """Report what the transport saw: the sequence moves the phase (and writes its
+        events)."""
+        step = next_phase(self.job, Measures(t, cue, failure), SEQUENCE)
+        self.job = step.state
+        events.extend(step.events)
 
     def _fail(self, reason: str, detail: str, view: FleetView, events: list[Event]) -> Intent:
         if reason == Reason.STALLED and self.lost:
             lost = ", ".join(view.ids[i] for i in sorted(self.lost))
             reason, detail = Reason.ROBOT_LOST, f"{detail} (lost: {lost})"
-        self._go(Phase.FAILED, view.t, events)
+        self._cue(None, view.t, events, Failure(Reason(reason), detail))
         self.failure = {"reason": str(reason), "t": view.t, "detail": detail}
-        events.append(("failure", dict(self.failure)))
         return Intent(
             np.zeros((self.n, 2)), self.phase, events, stop=True, failed=True, reason=reason
         )
@@ -315,9 +332,9 @@ class TransportMission:
             self.subgoal += 1
         self._forget_plan()
         if self._can_push(pose):
-            self._go(Phase.TRANSPORT, view.t, events)
+            self._cue(Cue.CAN_PUSH, view.t, events)
             return self._transport(view, pose, events)
-        self._start_rearrangement(view, pose, events)
+        self._start_rearrangement(view, pose, events, Cue.CANNOT_PUSH)
         return self._rearrange(view, pose, events)
 
     def _segment(self) -> RouteSegment:
@@ -360,10 +377,11 @@ class TransportMission:
         return np.reshape(pts, (-1, 2)), np.reshape(nrm, (-1, 2)), np.asarray(fmax, float)
 
     # --- rearrange ----------------------------------------------------------------------------
-    def _start_rearrangement(self, view: FleetView, pose: np.ndarray, events: list[Event]):
+    def _start_rearrangement(self, view: FleetView, pose: np.ndarray, events: list[Event], cue):
         """Ask for new contacts for the segment (``planning.arrangement``, off the tick); the
-        robots hold until they come (:meth:`_arrange`)."""
-        self._go(Phase.REARRANGE, view.t, events)
+        robots hold until they come (:meth:`_arrange`). ``cue``: why (cannot push, stuck, a
+        set given up)."""
+        self._cue(cue, view.t, events)
         self.rearrangements += 1
         self.futile += 1
         self.rearrange_t = view.t
@@ -475,7 +493,7 @@ class TransportMission:
                 self.contacts[i] = c
             self.targets.clear()
             if self._can_push(pose) or self.futile < self.s.max_rearrangements:
-                self._go(Phase.TRANSPORT, view.t, events)
+                self._cue(Cue.ARRANGED, view.t, events)
                 return self._transport(view, pose, events)
             return self._fail(
                 Reason.STALLED, "the re-arranged contacts cannot push the object", view, events
@@ -484,7 +502,7 @@ class TransportMission:
             if self.futile >= self.s.max_rearrangements:
                 return self._fail(Reason.STALLED, "re-arrangement timed out", view, events)
             # a robot that cannot get to its contact (blocked by the others, a wall): a new set
-            self._start_rearrangement(view, pose, events)
+            self._start_rearrangement(view, pose, events, Cue.RESET)
         return self._intent(vel, events, pose, touch, hold)
 
     def _park(self, view: FleetView, pose: np.ndarray, vel: np.ndarray, hold: np.ndarray) -> None:
@@ -532,7 +550,7 @@ class TransportMission:
             if self.route_replans >= self.s.max_route_replans:
                 return self._fail(Reason.STALLED, "left the route corridor too often", view, events)
             self.route_replans += 1
-            self._go(Phase.ROUTE, view.t, events)
+            self._cue(Cue.OFF_ROUTE, view.t, events)
             return self._route(view, pose, events)
         if self._subgoal_reached(pose):
             self.subgoal += 1
@@ -540,7 +558,7 @@ class TransportMission:
         if self.stuck >= self.s.stuck_plans:  # the contacts cannot push as the route asks
             self.stuck = 0
             self._forget_plan()
-            self._start_rearrangement(view, pose, events)
+            self._start_rearrangement(view, pose, events, Cue.STUCK)
             return self._rearrange(view, pose, events)
         return self._plan_and_execute(view, pose, events)
 
@@ -564,7 +582,7 @@ class TransportMission:
 
     def _deliver(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         self.done_t = view.t
-        self._go(Phase.DONE, view.t, events)
+        self._cue(Cue.DELIVERED, view.t, events)
         events.append(("delivered", {"t": view.t, "pose": np.round(pose, 4).tolist()}))
         return self._done(view, pose, events)
 
