@@ -10,6 +10,7 @@ from controller.mission.basic import GotoMission, HoldMission
 from controller.mission.job import CaptureJob, MissionError
 from controller.mission.planners import Planners
 from controller.mission.tracking import RobotLimits
+from controller.mission.types import Phase
 
 
 def staging_targets(cfg: FleetConfig, margin: float = 0.6) -> np.ndarray:
@@ -41,11 +42,9 @@ def build_mission(
         raise MissionError(f"unknown mission {kind!r}; expected one of {MISSION_KINDS}")
     if kind == "hold":
         return HoldMission(len(cfg.robots))
-    if kind == "transport":
-        from controller.mission.transport import transport_from_start
-
+    if kind == "transport":  # the same job, entered at route (the object already held)
         gen = rng if rng is not None else np.random.default_rng(cfg.transport.seed)
-        return transport_from_start(cfg, gen, planners=planners)
+        return CaptureJob(cfg, gen, planners, entry=Phase.ROUTE)
     if kind == "stage":
         return GotoMission(staging_targets(cfg), RobotLimits.from_config(cfg.robots))
     gen = rng if rng is not None else np.random.default_rng(cfg.capture.seed)

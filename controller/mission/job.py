@@ -19,8 +19,10 @@ from scipy.optimize import linear_sum_assignment
 from controller import geometry
 from controller.config import FleetConfig
 from controller.mission.capture import CaptureMission, CaptureSettings
+from controller.mission.guard import SafetyStage
 from controller.mission.outage import OutageWatch
 from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spawn_rng
+from controller.mission.sequence import Cue, Failure, JobState, Measures, next_phase
 from controller.mission.transport import TransportMission, route_planner_for
 from controller.mission.types import FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.approach import envelope, interception_times
@@ -86,16 +88,25 @@ class CaptureJob:
         cfg: FleetConfig,
         rng: np.random.Generator | None = None,
         planners: Planners | None = None,
+        entry: Phase = Phase.PLAN,
     ) -> None:
-        """``planners``: the port slow plans are asked of, off the tick (None: at once)."""
+        """``planners``: the port slow plans are asked of, off the tick (None: at once).
+        ``entry``: ``plan`` (the whole job) or ``route`` (``--mission transport``: the object
+        already held by the robots touching it at the first estimates; no capture plan)."""
+        if entry not in (Phase.PLAN, Phase.ROUTE):
+            raise MissionError(f"a job is entered at plan or route, not {entry}")
         self.cfg = cfg
         self.planners = planners
         self.rng = rng if rng is not None else np.random.default_rng(cfg.capture.seed)
         self.n = len(cfg.robots)
-        try:
-            self.capture = plan_capture_set(cfg, self.rng)
-        except CapturePlanError as exc:
-            raise MissionError(str(exc)) from None
+        self.entry = entry
+        self.job = JobState(Phase.PLAN)  # until the capture (or the transport) starts
+        self.capture: CaptureSet | None = None
+        if entry == Phase.PLAN:
+            try:
+                self.capture = plan_capture_set(cfg, self.rng)
+            except CapturePlanError as exc:
+                raise MissionError(str(exc)) from None
         self._replan_job = PlanSlot(planners or InlinePlanners(), "capture")
         self._replan_why = ""  # what the pending capture re-plan is for: lost, pinned, start
         self.outage = OutageWatch(cfg.fleet.outage_grace)
@@ -180,6 +191,13 @@ class CaptureJob:
         robots = [view.ids[i] for i in new]
         return [("reassign", {"robots": robots, "t": view.t, "eta_s": [now, better]})]
 
+    @property
+    def phase(self) -> Phase:
+        """The job's phase: the stage in charge holds it (the sequence moves it)."""
+        if self.transport is not None:
+            return self.transport.phase
+        return self.inner.phase if self.inner is not None and not self.failed else self.job.phase
+
     def plan(self, view: FleetView) -> Intent:
         if self.failed:
             zero = np.zeros((self.n, 2))
@@ -221,16 +239,35 @@ class CaptureJob:
 
     def _start_transport(self) -> None:
         """The object is arrested: from the next tick on, carry it to its goal."""
+        self._carry(self.inner.guard, self.assignment, self.capture.points, self.capture.normals)
+
+    def _carry(self, guard, robots: np.ndarray, points: np.ndarray, normals: np.ndarray) -> None:
+        """The transport, from the contacts the ``robots`` hold (object frame)."""
         self.transport = TransportMission(
             self.cfg,
             self.rng,
-            self.inner.guard,
-            self.assignment,
-            self.capture.points,
-            self.capture.normals,
+            guard,
+            robots,
+            points,
+            normals,
             route_planner=self.route_planner,
             planners=self.planners,
         )
+
+    def _carry_from_contact(self, view: FleetView, reach: float = 0.03) -> Intent:
+        """Entered at ``route``: the robots whose discs are within ``reach`` m of the object's
+        surface hold their nearest boundary point; the others are free."""
+        pose = np.asarray(view.object_pose, float)
+        poly = geometry.ensure_ccw(self.cfg.object_polygon())
+        local = geometry.inverse_transform(view.poses[:, :2], pose)
+        d, closest = geometry.point_segment_distance(local, poly, np.roll(poly, -1, axis=0))
+        j = np.argmin(d, axis=1)
+        rows = np.arange(len(local))
+        radii = np.array([r.radius for r in self.cfg.robots])
+        held = np.flatnonzero(d[rows, j] - radii < reach)
+        normals = geometry.outward_normals(poly)[j]
+        self._carry(SafetyStage(self.cfg), held, closest[rows, j][held], normals[held])
+        return self.transport.plan(view)
 
     # --- robot loss and join ---------------------------------------------------------------
     def _gone(self, view: FleetView) -> np.ndarray:
@@ -262,6 +299,8 @@ class CaptureJob:
             self.first_t = view.t
         if view.object_pose is None:
             return still
+        if self.entry == Phase.ROUTE:  # every robot seen: who holds the object is measured
+            return self._carry_from_contact(view) if ready.all() else still
         if not ready.all():
             if view.t - self.first_t < self.cfg.fleet.start_wait:
                 return still
@@ -348,12 +387,11 @@ class CaptureJob:
         intent.events[:0] = events
         return intent
 
-    def _fail(self, view: FleetView, reason: str, detail: str, events: list) -> Intent:
+    def _fail(self, view: FleetView, reason: Reason, detail: str, events: list) -> Intent:
         """Fail safe: every robot stopped, the failure event with its detail."""
-        events = events + [
-            ("phase", {"phase": str(Phase.FAILED), "t": view.t}),
-            ("failure", {"reason": str(reason), "t": view.t, "detail": detail}),
-        ]
+        step = next_phase(JobState(self.phase), Measures(view.t, None, Failure(reason, detail)))
+        self.job = step.state
+        events = events + list(step.events)
         self.failed = True
         self.failure_reason = reason
         return Intent(
@@ -361,7 +399,9 @@ class CaptureJob:
         )
 
     def _start(self, view: FleetView, pinned: bool) -> Intent:
-        """Assign robots to the capture set and start the approach (the capture event first)."""
+        """Assign robots to the capture set and start the approach (the capture event first;
+        the approach announces itself at its first tick, as after every re-plan)."""
+        self.job = next_phase(self.job, Measures(view.t, Cue.READY)).state
         self.assignment = self._assign(view)
         self.assigned_t = view.t
         self.inner = self._mission(view)
@@ -487,6 +527,8 @@ class CaptureJob:
         return self.inner.safety(view, intent)
 
     def summary(self) -> dict[str, Any]:
+        if self.capture is None:  # entered at route
+            return {} if self.transport is None else self.transport.summary()
         out: dict[str, Any] = {
             "capture_points": len(self.capture.points),
             "capture_objective": self.capture.objective,

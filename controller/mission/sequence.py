@@ -122,7 +122,8 @@ class SequenceSettings:
 
 
 def next_phase(state: JobState, m: Measures, s: SequenceSettings | None = None) -> Step:
-    """The job's next state from one tick's report (pure)."""
+    """The job's next state from one tick's report (pure). ``s`` None: a capture alone."""
+    s = s if s is not None else SequenceSettings()
     if state.final:
         return Step(state)
     if m.failure is not None:
@@ -132,9 +133,9 @@ def next_phase(state: JobState, m: Measures, s: SequenceSettings | None = None) 
     if m.cue is None:
         return Step(state)
     nxt = TRANSITIONS.get((state.phase, m.cue))
-    if nxt is None or (m.cue == Cue.CARRY and s is not None and not s.carry):
+    if nxt is None or (m.cue == Cue.CARRY and not s.carry):
         return Step(state)
-    if m.cue == Cue.SETTLED and s is not None and s.carry:
+    if m.cue == Cue.SETTLED and s.carry:
         return Step(state)  # a job with a goal holds on until it carries the object
     return Step(replace(state, phase=nxt, since=m.t), (_phase_event(nxt, m.t),))
 

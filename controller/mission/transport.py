@@ -873,30 +873,6 @@ class TransportMission:
         }
 
 
-class _Ready:
-    """Waits for every robot's and the object's first estimates, then hands over."""
-
-    def __init__(self, cfg: FleetConfig, make) -> None:
-        self.cfg, self.make, self.n = cfg, make, len(cfg.robots)
-        self.inner: TransportMission | None = None
-
-    def plan(self, view: FleetView) -> Intent:
-        if self.inner is None:
-            ready = view.object_pose is not None and bool(np.all(view.present & ~view.stale))
-            if not ready:
-                return Intent(np.zeros((self.n, 2)), Phase.PLAN, stop=True)
-            self.inner = self.make(view)
-        return self.inner.plan(view)
-
-    def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
-        if self.inner is None:
-            return MissionOutput(np.zeros((self.n, 3)), intent.phase, list(intent.events))
-        return self.inner.safety(view, intent)
-
-    def summary(self) -> dict[str, Any]:
-        return {} if self.inner is None else self.inner.summary()
-
-
 def _plan_route(box: JobOwned, cfg: FleetConfig, pose: np.ndarray) -> Any:
     """Job ``route``: the route from ``pose`` (the planner, kept in ``box``, built first when
     there is none)."""
@@ -924,41 +900,3 @@ def route_planner_for(cfg: FleetConfig) -> Any:
     from controller.planning.route import RoutePlanner
 
     return RoutePlanner.from_config(cfg)
-
-
-def transport_from_start(
-    cfg: FleetConfig,
-    rng: np.random.Generator,
-    reach: float = 0.03,
-    planners: Planners | None = None,
-):
-    """``fleet run/daemon --mission transport``: carry an object the robots already hold. The
-    robots whose discs are within ``reach`` m of the object's surface at the first estimates
-    hold their nearest boundary point; the others are free."""
-
-    planner = route_planner_for(cfg)
-
-    def make(view: FleetView) -> TransportMission:
-        pose = np.asarray(view.object_pose, float)
-        poly = geometry.ensure_ccw(cfg.object_polygon())
-        local = geometry.inverse_transform(view.poses[:, :2], pose)
-        a, b = poly, np.roll(poly, -1, axis=0)
-        d, closest = geometry.point_segment_distance(local, a, b)
-        j = np.argmin(d, axis=1)
-        near = closest[np.arange(len(local)), j]
-        radii = np.array([r.radius for r in cfg.robots])
-        gap = d[np.arange(len(local)), j] - radii
-        held = np.flatnonzero(gap < reach)
-        normals = geometry.outward_normals(poly)[j]
-        return TransportMission(
-            cfg,
-            rng,
-            SafetyStage(cfg),
-            held,
-            near[held],
-            normals[held],
-            route_planner=planner,
-            planners=planners,
-        )
-
-    return _Ready(cfg, make)

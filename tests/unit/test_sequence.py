@@ -1,0 +1,144 @@
+"""The job's phase sequence (controller/mission/sequence.py): a table of (state, report) →
+step covering every way out of every phase, every failure reason, and what a report out of
+turn does; and the sequence is the only place the missions change a phase."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controller.mission import sequence as seq
+from controller.mission.factory import build_mission
+from controller.mission.job import CaptureJob
+from controller.mission.sequence import Cue, Failure, JobState, Measures, next_phase
+from controller.mission.types import FleetView, Phase, Reason
+from tests.support.config import make_config
+
+P = Phase
+# (phase, cue, the phase it leads to): the job's whole map, written out by hand
+TABLE = [
+    (P.PLAN, Cue.READY, P.APPROACH),
+    (P.APPROACH, Cue.ON_ENVELOPE, P.CLOSE_IN),
+    (P.CLOSE_IN, Cue.ALL_TOUCHING, P.HOLD),
+    (P.HOLD, Cue.CONTACT_LOST, P.CLOSE_IN),
+    (P.HOLD, Cue.ESCAPED, P.CLOSE_IN),
+    (P.HOLD, Cue.HELD, P.ARRESTED),
+    (P.ARRESTED, Cue.CONTACT_LOST, P.CLOSE_IN),
+    (P.ARRESTED, Cue.CARRY, P.ROUTE),
+    (P.ROUTE, Cue.CAN_PUSH, P.TRANSPORT),
+    (P.ROUTE, Cue.CANNOT_PUSH, P.REARRANGE),
+    (P.REARRANGE, Cue.ARRANGED, P.TRANSPORT),
+    (P.REARRANGE, Cue.RESET, P.REARRANGE),
+    (P.REARRANGE, Cue.DELIVERED, P.DONE),
+    (P.TRANSPORT, Cue.CAN_PUSH, P.TRANSPORT),
+    (P.TRANSPORT, Cue.CANNOT_PUSH, P.REARRANGE),
+    (P.TRANSPORT, Cue.STUCK, P.REARRANGE),
+    (P.TRANSPORT, Cue.OFF_ROUTE, P.ROUTE),
+    (P.TRANSPORT, Cue.DELIVERED, P.DONE),
+]
+CARRY = seq.SequenceSettings(carry=True)
+
+
+@pytest.mark.parametrize(("phase", "cue", "to"), TABLE, ids=[f"{a}-{c}" for a, c, _ in TABLE])
+def test_every_way_out_of_every_phase(phase, cue, to):
+    step = next_phase(JobState(phase, 1.0), Measures(7.5, cue), CARRY)
+    assert step.state.phase == to and step.state.since == 7.5
+    # every transition announces the phase it enters, a segment begun again included
+    assert step.events == (("phase", {"phase": str(to), "t": 7.5}),)
+
+
+def test_the_table_is_the_whole_map():
+    assert {(a, c): b for a, c, b in TABLE} | {(P.ARRESTED, Cue.SETTLED): P.DONE} == (
+        seq.TRANSITIONS
+    )
+
+
+def test_a_capture_alone_ends_settled_and_a_carrying_job_does_not():
+    alone = next_phase(JobState(P.ARRESTED), Measures(3.0, Cue.SETTLED))
+    assert alone.state.phase == P.DONE
+    assert next_phase(JobState(P.ARRESTED), Measures(3.0, Cue.SETTLED), CARRY).state.phase == (
+        P.ARRESTED
+    )
+    # a capture alone never carries
+    assert not next_phase(JobState(P.ARRESTED), Measures(3.0, Cue.CARRY)).fired
+
+
+@pytest.mark.parametrize("phase", sorted({a for a, _, _ in TABLE}))
+def test_a_report_out_of_turn_leaves_the_phase(phase):
+    for cue in Cue:
+        if (phase, cue) in seq.TRANSITIONS:
+            continue
+        step = next_phase(JobState(phase, 1.0), Measures(2.0, cue), CARRY)
+        assert step.state == JobState(phase, 1.0) and step.events == ()
+
+
+@pytest.mark.parametrize("reason", list(Reason))
+@pytest.mark.parametrize("phase", [p for p in Phase if p not in seq.FINAL])
+def test_every_failure_from_every_live_phase(phase, reason):
+    step = next_phase(
+        JobState(phase), Measures(4.0, Cue.DELIVERED, Failure(reason, "why")), CARRY
+    )  # a failure wins over a cue of the same tick
+    assert step.state.phase == P.FAILED and step.state.failure == Failure(reason, "why")
+    assert step.events == (
+        ("phase", {"phase": "failed", "t": 4.0}),
+        ("failure", {"reason": str(reason), "t": 4.0, "detail": "why"}),
+    )
+
+
+@pytest.mark.parametrize("phase", sorted(seq.FINAL))
+def test_done_and_failed_are_final(phase):
+    st = JobState(phase, 1.0)
+    for cue in Cue:
+        assert next_phase(st, Measures(2.0, cue), CARRY).state == st
+    assert next_phase(st, Measures(2.0, None, Failure(Reason.TIMEOUT, "x"))).state == st
+
+
+def test_only_the_sequence_changes_a_phase():
+    """No mission module assigns a phase (``x.phase = ...``, ``replace(..., phase=...)``):
+    they report cues and failures."""
+    root = Path(seq.__file__).parent
+    assign = re.compile(r"\.phase\s*=[^=]|\bphase\s*=\s*Phase\.|_go\(")
+    for f in root.glob("*.py"):
+        if f.name in ("sequence.py", "types.py", "basic.py"):  # (basic: goto and hold alone)
+            continue
+        hits = [ln for ln in f.read_text().splitlines() if assign.search(ln)]
+        assert hits == [], (f.name, hits)
+
+
+def _view(cfg, t: float, poses: np.ndarray, obj: np.ndarray) -> FleetView:
+    n = len(cfg.robots)
+    return FleetView(
+        t=t,
+        ids=tuple(r.id for r in cfg.robots),
+        poses=poses,
+        velocities=np.zeros((n, 3)),
+        stale=np.zeros(n, bool),
+        present=np.ones(n, bool),
+        object_pose=obj,
+        object_velocity=np.zeros(3),
+        object_prediction=obj,
+        estop=False,
+    )
+
+
+def test_the_transport_mission_is_the_same_job_entered_at_route():
+    cfg = make_config(transport=True)
+    job = build_mission(cfg, "transport")
+    assert isinstance(job, CaptureJob) and job.capture is None
+    n = len(cfg.robots)
+    far = np.column_stack([np.linspace(1.0, 2.0, n), np.full(n, 11.0), np.zeros(n)])
+    obj = np.asarray(cfg.object.start, float)
+    # the job waits in ``plan`` until it sees the object (nobody touches it here: no holders)
+    first = job.plan(_view(cfg, 0.0, far, None))
+    assert first.phase == P.PLAN and first.stop
+    intent = job.plan(_view(cfg, 0.05, far, obj))
+    # the carrying starts at route (the route computed at once here: nobody holds the object,
+    # so the same tick goes on to re-arrange)
+    phases = [e[1]["phase"] for e in intent.events if e[0] == "phase"]
+    assert job.transport is not None and phases == ["route", "rearrange"], intent.events
+    assert all(c is None for c in job.transport.contacts.values())
+    with pytest.raises(Exception, match="entered at plan or route"):
+        CaptureJob(cfg, np.random.default_rng(0), entry=P.HOLD)
