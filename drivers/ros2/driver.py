@@ -139,8 +139,19 @@ class Ros2Driver:
         self._arrived.set()
 
     def connect(self, timeout: float) -> None:
-        """The handshake: a fresh pose arrived and the robot subscribes to our commands."""
+        """The handshake: a fresh pose arrived and the robot subscribes to our commands. On
+        ConnectTimeout the link is released (the session too, when ours): the agent does not
+        close a driver that never connected."""
         self.open()
+        try:
+            self._handshake(timeout)
+        except ConnectTimeout:
+            self.close()
+            raise
+        self._connected = True
+        self._closed = False
+
+    def _handshake(self, timeout: float) -> None:
         deadline = self._mono() + max(0.0, timeout)
         while not self._take():
             left = deadline - self._mono()
@@ -161,8 +172,6 @@ class Ros2Driver:
                     f"(within {timeout:g} s): check cmd_topic and cmd_type"
                 )
             wait.wait(0.01)  # polling the match (a handshake with a deadline)
-        self._connected = True
-        self._closed = False
 
     def samples_seen(self) -> int:
         """Pose samples received so far, taken or still queued (a lockstep handshake)."""
