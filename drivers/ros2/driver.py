@@ -127,7 +127,13 @@ class Ros2Driver:
             return
         s = self.settings
         if self._session is None:
-            self._session = open_session(s.connect, mode=s.mode)
+            try:
+                self._session = open_session(s.connect, mode=s.mode)
+            except Exception as exc:  # zenoh.ZError: nothing listens at the endpoints yet
+                raise ConnectTimeout(
+                    f"robot {self.robot_id!r}: no zenoh router of its ROS graph at "
+                    f"{', '.join(s.connect)} ({exc})"
+                ) from exc
         name = s.node_name or f"fleet_driver_{self.robot_id.replace('-', '_')}"
         self._node = RmwNode(self._session, s.domain_id, s.namespace or "/", name)
         self._pub = self._node.publisher(s.cmd_fq(), self.cmd_type, express=True)
@@ -141,10 +147,19 @@ class Ros2Driver:
     def connect(self, timeout: float) -> None:
         """The handshake: a fresh pose arrived and the robot subscribes to our commands. On
         ConnectTimeout the link is released (the session too, when ours): the agent does not
-        close a driver that never connected."""
-        self.open()
+        close a driver that never connected. A router not up yet is retried until then."""
+        deadline = self._mono() + max(0.0, timeout)
+        retry = threading.Event()
+        while True:
+            try:
+                self.open()
+                break
+            except ConnectTimeout:
+                if self._mono() + 0.2 >= deadline:
+                    raise
+                retry.wait(0.2)  # the router's own start (rmw_zenohd, the stand-in)
         try:
-            self._handshake(timeout)
+            self._handshake(max(0.0, deadline - self._mono()))
         except ConnectTimeout:
             self.close()
             raise

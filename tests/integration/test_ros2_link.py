@@ -190,3 +190,15 @@ def test_a_pose_from_rosbags_with_covariance_gives_sigma(link):
     link.advance(0.1)  # the stand-in's own poses carry no covariance: the configured sigma
     (m,) = d.poll()
     assert (m.sigma_xy, m.sigma_theta) == (link.settings.sigma_xy, link.settings.sigma_theta)
+
+
+def test_no_router_at_the_endpoint_is_a_connect_timeout():
+    """Nothing listens at ``connect``: ConnectTimeout naming the endpoint (a DriverError the
+    agent reports, exit 1), not zenoh's own error; nothing left open."""
+    from drivers.base import ConnectTimeout
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    d = Ros2Driver("r1", CAPS, Ros2Settings(connect=(endpoint,)), stale_after=0.5)
+    with pytest.raises(ConnectTimeout, match=endpoint):
+        d.connect(timeout=0.5)
+    assert d._session is None
