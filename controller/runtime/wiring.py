@@ -157,9 +157,10 @@ def ros2_settings(r: RobotConfig) -> Any:
 
 
 def _ros2_dry_run(links: DryRunLinks, cfg: FleetConfig, r: RobotConfig) -> Any:
-    from drivers.base import DriverError
+    """Refused (bad input, exit 2): a ROS 2 robot is a vehicle of its own."""
+    from controller.config import InputError
 
-    raise DriverError(
+    raise InputError(
         f"robot {r.id!r}: a ros2 robot is a vehicle of its own, not a body of the dry run's "
         "world; run it with `fleet driver` against the robot (or the stand-in, "
         "tests/support/ros2_robot.py)"

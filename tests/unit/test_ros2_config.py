@@ -110,3 +110,13 @@ def test_a_ros2_table_on_a_sim_robot_is_refused(tmp_path):
     with pytest.raises(ConfigError) as err:
         load_config(write_toml(tmp_path / "fleet.toml", data))
     assert err.value.path == "robots[0].ros2" and 'driver = "ros2"' in str(err.value)
+
+
+@pytest.mark.e2e
+def test_a_dry_run_with_a_ros2_robot_is_refused_with_exit_2(tmp_path, capsys):
+    data = base_config_dict()
+    data["robots"][0].update(driver="ros2")
+    data["sim"] = {**data.get("sim", {}), "backend": "ideal"}
+    f = write_toml(tmp_path / "fleet.toml", data)
+    assert main(["run", "--config", str(f), "--out", str(tmp_path / "run.mcap")]) == 2
+    assert "a ros2 robot is a vehicle of its own" in capsys.readouterr().err
