@@ -120,3 +120,16 @@ def test_a_dry_run_with_a_ros2_robot_is_refused_with_exit_2(tmp_path, capsys):
     f = write_toml(tmp_path / "fleet.toml", data)
     assert main(["run", "--config", str(f), "--out", str(tmp_path / "run.mcap")]) == 2
     assert "a ros2 robot is a vehicle of its own" in capsys.readouterr().err
+
+
+def test_the_ros2_table_survives_the_logs_config_record(tmp_path):
+    """``fleet replay`` reloads the config from the log's metadata: the sub-table comes back."""
+    import json
+
+    from controller.config import parse_config
+    from controller.io.recorder import config_metadata
+
+    cfg = load_config(_config(tmp_path, {"namespace": "/tb1", "odom_to_world": [1, 2, 0.5]}))
+    again = parse_config(json.loads(config_metadata(cfg, "daemon")["config"]), "log")
+    assert again.robots[0].ros2 == cfg.robots[0].ros2
+    assert again.robots[0].ros2.odom_to_world == (1.0, 2.0, 0.5)
