@@ -257,6 +257,20 @@ def _validate_ros2(cfg: FleetConfig, i: int, src: str) -> None:
             )  # fmt: skip
 
 
+def _ros2_notes(cfg: FleetConfig, i: int) -> tuple[str, ...]:
+    """An odometry left at the world origin while the robot starts elsewhere: its odometry
+    starts at zero where it powers up, so its poses would land at the origin."""
+    r = cfg.robots[i]
+    s = r.ros2
+    if s.pose_type != "odometry" or any(s.odom_to_world) or not any(r.start[:2]):
+        return ()
+    return (
+        f"robots[{i}] ({r.id!r}, ros2): odom_to_world is [0, 0, 0] but start is "
+        f"{list(r.start)}: odometry starts at zero where the robot powers up; set "
+        "ros2.odom_to_world to its world pose then (usually its start)",
+    )
+
+
 # the built-in drivers (their classes: controller/runtime/wiring.py DRIVER_CLASSES)
 register_driver(DriverSpec("sim", world_body=True, acl=_sim_acl))
 register_driver(
@@ -278,5 +292,5 @@ register_driver(
         notes=_mavlink_notes,
     )
 )
-register_driver(DriverSpec("ros2", section=Ros2Section, validate=_validate_ros2))
+register_driver(DriverSpec("ros2", section=Ros2Section, validate=_validate_ros2, notes=_ros2_notes))
 DRIVERS = tuple(DRIVER_SPECS)

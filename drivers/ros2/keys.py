@@ -5,7 +5,10 @@ Implemented from ros2/rmw_zenoh 0.2.5 (jazzy branch, CHANGELOG of 2025-06-18; th
 format of 0.2.4, "Change serialization format in attachment_helpers.cpp" #605), read in
 ``rmw_zenoh_cpp/src/detail/``: ``liveliness_utils.cpp`` @3411fdec1 (keys and tokens),
 ``attachment_helpers.cpp`` @534747dca (attachment), ``rmw_publisher_data.cpp`` @3e19ec730
-(publish), ``type_support_common.hpp`` (the ``dds_`` type name) and ``docs/design.md``.
+(publish), ``type_support_common.hpp`` (the ``dds_`` type name) and ``docs/design.md``. (The
+fetched snapshot, bfc065f8 of 2024-10, is the zenoh 0.11 era: a key-value attachment with
+string numbers and tokens without node ids or type hashes; a Zenoh 1.x peer like ours cannot
+talk to that version at all.)
 
 - data key: ``<domain_id>/<topic without leading or trailing '/'>/<dds type>/<RIHS01 hash>``,
   e.g. ``0/robot1/cmd_vel/geometry_msgs::msg::dds_::Twist_/RIHS01_9c45…``;
