@@ -138,8 +138,8 @@ def test_the_ros2_table_survives_the_logs_config_record(tmp_path):
 def test_fleet_check_notes_an_odometry_left_at_the_origin(tmp_path, capsys):
     f = _config(tmp_path, {"namespace": "/tb1"})
     assert main(["check", "--config", str(f)]) == 0
-    assert "ros2.odom_to_world" in capsys.readouterr().err
+    assert "ros2.odom_to_world" in capsys.readouterr().out
     start = base_config_dict()["robots"][0]["start"]
     f = _config(tmp_path, {"namespace": "/tb1", "odom_to_world": start})
     assert main(["check", "--config", str(f)]) == 0
-    assert "odom_to_world" not in capsys.readouterr().err
+    assert "odom_to_world" not in capsys.readouterr().out
