@@ -10,6 +10,7 @@ from mcap_ros2.decoder import DecoderFactory
 from controller.config import parse_config
 from controller.io.bus import Bus
 from controller.io.recorder import McapRecorder, read_log
+from controller.replay.log import load_run, metrics_of
 from controller.runtime.recording import record_ros2
 from controller.runtime.wiring import ros2_settings
 from controller.wire import Twist2D
@@ -83,3 +84,7 @@ def test_ros2_topics_go_into_the_log_as_ros2_messages(tmp_path):
     raw = [x for x in read_log(out) if x.topic == "/tb1/odom"]
     last = rosbags_decode("nav_msgs/msg/Odometry", raw[-1].data)
     assert last.pose.pose.position.x == poses[-1].pose.pose.position.x
+
+    # fleet replay counts them apart from the Foxglove scene (--json "ros2")
+    figures = metrics_of(load_run(out))
+    assert figures["ros2"]["/tb1/odom"] == len(poses) and "/tb1/odom" not in figures["scene"]
