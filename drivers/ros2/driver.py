@@ -159,15 +159,14 @@ class Ros2Driver:
                     raise
                 retry.wait(0.2)  # the router's own start (rmw_zenohd, the stand-in)
         try:
-            self._handshake(max(0.0, deadline - self._mono()))
+            self._handshake(deadline, timeout)
         except ConnectTimeout:
             self.close()
             raise
         self._connected = True
         self._closed = False
 
-    def _handshake(self, timeout: float) -> None:
-        deadline = self._mono() + max(0.0, timeout)
+    def _handshake(self, deadline: float, timeout: float) -> None:
         while not self._take():
             left = deadline - self._mono()
             if left <= 0:
