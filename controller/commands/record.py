@@ -31,7 +31,7 @@ def run(args) -> int:
     from controller.config import load_config
     from controller.io.bus import Bus
     from controller.io.recorder import default_log_path
-    from controller.runtime.recording import open_recorder
+    from controller.runtime.recording import open_recorder, record_ros2
 
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name, "record")
@@ -44,6 +44,7 @@ def run(args) -> int:
     try:
         with Bus(cfg.zenoh, cfg.fleet.name, mode="peer", listen=[], connect=connect) as bus:
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
+            record_ros2(bus, cfg, recorder)  # ROS 2 robots' own topics too
             print(
                 f"fleet record: recording fleet {cfg.fleet.name!r} to {recorder.location}",
                 file=sys.stderr,

@@ -24,6 +24,7 @@ from controller.config.driver_sections import (
     MAVLINK_PROFILES,
     DriverSpec,
     MavlinkSection,
+    Ros2Section,
     driver_spec,
     register_driver,
 )
@@ -126,6 +127,7 @@ __all__ = [
     "MISSION_KINDS",
     "MOTION_KINDS",
     "MavlinkSection",
+    "Ros2Section",
     "MotionSection",
     "ObjectSection",
     "Obstacle",

@@ -7,6 +7,7 @@ there, its module in drivers/.
 
 from __future__ import annotations
 
+import re
 import typing
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -46,6 +47,36 @@ class MavlinkSection:
     # s: the vehicle's GCS failsafe timeout as set on it (ArduRover FS_TIMEOUT), for fleet check
     # to compare with heartbeat_hz (0: not given)
     fs_timeout: float = _rule(0.0, min=0, max=3600)
+
+
+ROS2_CMD_TYPES = ("twist", "twist_stamped")
+ROS2_POSE_TYPES = ("odometry", "pose_stamped")
+ROS2_ROUTER = "tcp/127.0.0.1:7447"  # rmw_zenohd's default endpoint on the robot's host
+
+
+@dataclass(frozen=True, kw_only=True)
+class Ros2Section:
+    """``[robots.ros2]``: a ROS 2 robot reached over zenoh with rmw_zenoh's conventions
+    (drivers/ros2/). Topics are ROS names, relative ones under ``namespace``."""
+
+    domain_id: int = _rule(0, min=0, max=232)  # ROS_DOMAIN_ID
+    namespace: str = _rule("")  # the robot's ROS namespace, e.g. "/tb4_1" ("": the root)
+    node_name: str = _rule("")  # our node's name on the robot's graph ("": fleet_driver_<id>)
+    cmd_topic: str = _rule("cmd_vel")
+    cmd_type: str = _rule("twist", choices=ROS2_CMD_TYPES)
+    cmd_frame_id: str = _rule("base_link")  # header.frame_id of a TwistStamped
+    pose_topic: str = _rule("odom")
+    pose_type: str = _rule("odometry", choices=ROS2_POSE_TYPES)
+    # the pose frame's (odom, REP 105, or a mocap map) pose in our world: x, y (m), yaw (rad)
+    odom_to_world: tuple[float, float, float] = _rule((0.0, 0.0, 0.0))
+    # a pose's time: its header stamp (clocks synchronised) or our clock when it arrives
+    time_source: str = _rule("header", choices=("header", "receipt"))
+    # m, rad: a pose's standard deviations when its message gives no covariance
+    sigma_xy: float = _rule(0.02, gt=0, max=10)
+    sigma_theta: float = _rule(0.02, gt=0, max=10)
+    # the zenoh router of the robot's ROS graph (rmw_zenohd) and how we join it
+    connect: tuple[str, ...] = _rule((ROS2_ROUTER,))
+    mode: str = _rule("client", choices=("client", "peer"))
 
 
 #: an ArduRover's FS_TIMEOUT must span this many of our heartbeat periods (one lost or late
@@ -170,6 +201,76 @@ def _mavlink_notes(cfg: FleetConfig, i: int) -> tuple[str, ...]:
     )
 
 
+_ROS_TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream)/\S+$")
+
+
+def _ros_name(value: str, absolute: bool) -> bool:
+    """A ROS name: ``/``-separated tokens (letters, digits, ``_``; no leading digit)."""
+    if absolute and value.startswith("/"):
+        value = value[1:]
+    return bool(value) and all(_ROS_TOKEN.match(p) for p in value.split("/"))
+
+
+def _ros2_topic(ns: str, topic: str) -> str:
+    if topic.startswith("/"):
+        return topic
+    return f"/{ns.strip('/')}/{topic}" if ns.strip("/") else f"/{topic}"
+
+
+def _validate_ros2(cfg: FleetConfig, i: int, src: str) -> None:
+    """ROS names that rmw_zenoh can key, router endpoints, and no two robots commanded on the
+    same topic of the same domain."""
+    r = cfg.robots[i]
+    s = r.ros2
+    path = f"robots[{i}].ros2"
+    if s.namespace not in ("", "/") and not (
+        s.namespace.startswith("/") and _ros_name(s.namespace, True)
+    ):
+        raise ConfigError(
+            src, f"{path}.namespace", f"expected an absolute ROS namespace (e.g. '/tb4_1'), got "
+            f"{s.namespace!r}",
+        )  # fmt: skip
+    if s.node_name and not _ROS_TOKEN.match(s.node_name):
+        raise ConfigError(src, f"{path}.node_name", f"not a ROS node name: {s.node_name!r}")
+    for key in ("cmd_topic", "pose_topic", "cmd_frame_id"):
+        value = getattr(s, key)
+        if not _ros_name(value, key != "cmd_frame_id"):
+            raise ConfigError(src, f"{path}.{key}", f"not a ROS name: {value!r}")
+    if not s.connect:
+        raise ConfigError(src, f"{path}.connect", "expected at least one zenoh endpoint")
+    for k, ep in enumerate(s.connect):
+        if not _ENDPOINT.match(ep):
+            raise ConfigError(
+                src, f"{path}.connect[{k}]", f"expected a zenoh endpoint like {ROS2_ROUTER!r}, "
+                f"got {ep!r}",
+            )  # fmt: skip
+    if _ros2_topic(s.namespace, s.cmd_topic) == _ros2_topic(s.namespace, s.pose_topic):
+        raise ConfigError(src, f"{path}.pose_topic", "the same topic as cmd_topic")
+    mine = (s.domain_id, _ros2_topic(s.namespace, s.cmd_topic))
+    for j, other in enumerate(cfg.robots[:i]):
+        o = other.ros2
+        if other.driver == "ros2" and (o.domain_id, _ros2_topic(o.namespace, o.cmd_topic)) == mine:
+            raise ConfigError(
+                src, f"{path}.cmd_topic", f"robots[{j}] is commanded on the same topic "
+                f"{mine[1]!r} of ROS domain {mine[0]}: give each robot its namespace",
+            )  # fmt: skip
+
+
+def _ros2_notes(cfg: FleetConfig, i: int) -> tuple[str, ...]:
+    """An odometry left at the world origin while the robot starts elsewhere: its odometry
+    starts at zero where it powers up, so its poses would land at the origin."""
+    r = cfg.robots[i]
+    s = r.ros2
+    if s.pose_type != "odometry" or any(s.odom_to_world) or not any(r.start[:2]):
+        return ()
+    return (
+        f"robots[{i}] ({r.id!r}, ros2): odom_to_world is [0, 0, 0] but start is "
+        f"{list(r.start)}: odometry starts at zero where the robot powers up; set "
+        "ros2.odom_to_world to its world pose then (usually its start)",
+    )
+
+
 # the built-in drivers (their classes: controller/runtime/wiring.py DRIVER_CLASSES)
 register_driver(DriverSpec("sim", world_body=True, acl=_sim_acl))
 register_driver(
@@ -191,4 +292,5 @@ register_driver(
         notes=_mavlink_notes,
     )
 )
+register_driver(DriverSpec("ros2", section=Ros2Section, validate=_validate_ros2, notes=_ros2_notes))
 DRIVERS = tuple(DRIVER_SPECS)

@@ -18,6 +18,7 @@ from controller.config.driver_sections import (
     DRIVERS,
     DriverSpec,
     MavlinkSection,
+    Ros2Section,
     _flat,
 )
 from controller.config.load import ConfigError, InputError, _rule
@@ -403,6 +404,7 @@ class RobotConfig:
     start: Pose = _rule()
     # per-driver sub-tables (DRIVER_SPECS): [robots.mavlink]; the flat keys merge into them
     mavlink: MavlinkSection = _rule(MavlinkSection())
+    ros2: Ros2Section = _rule(Ros2Section())
     # the robot agent's own zenoh identity (else the [zenoh] one): the lab ACL profile lets it
     # put only this robot's pose/event and receive only this robot's commands
     zenoh_user: str = _rule("")

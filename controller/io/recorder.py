@@ -6,6 +6,10 @@ its message type's JSON Schema from ``controller.wire``; log time = receive time
 the message's ``t``. Chunks are zstd-compressed and flushed at least every ``flush_interval`` s,
 so a recorder killed without warning leaves a file that still yields every message older than
 about one flush interval (``read_log`` reads such a file up to the cut).
+
+Native channels (:meth:`McapRecorder.native_channel`) keep other middlewares' messages as they
+are: a ROS 2 robot's topics go in with schema encoding ``ros2msg`` and message encoding ``cdr``
+under their ROS topic names, so ROS tools (ros2 bag, Foxglove, mcap-ros2-support) read them.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ log = logging.getLogger(__name__)
 
 PROFILE = "fleet"
 _META = object()  # queue tag of a metadata record
+_NATIVE = object()  # queue tag of a native (non-fleet) sample, e.g. a ROS 2 robot's CDR
 MAX_PAYLOAD_BYTES = 4 * 1024 * 1024  # a bigger sample is dropped unread (as the bus does)
 SIM_EPOCH = 946_684_800.0  # 2000-01-01T00:00:00Z: a dry run's t = 0 (log and publish times)
 CLOCK_SKEW = 60.0  # s: a stamp further than this from the run's clock is from another clock
@@ -110,6 +115,8 @@ class McapRecorder:
         self._meta: list[tuple[str, dict[str, str]]] = []
         self._bad_keys: set[str] = set()
         self._logged: dict[str, bool] = {}  # key: whether the registry logs it
+        # native channels: key -> (topic, schema name, schema encoding, schema, message encoding)
+        self._native: dict[str, tuple[str, str, str, bytes, str]] = {}
         self._segment_start: int | None = None
         self._open_segment()
         self._q: queue.Queue[tuple[Any, ...] | None] = queue.Queue()
@@ -117,6 +124,7 @@ class McapRecorder:
         self._last_log_ns = 0
         self.written = 0  # bus messages
         self.scene_written = 0
+        self.native_written = 0  # native channels' messages (ROS 2 robots)
         self.dropped = 0  # samples not written: bad payloads and anything else that failed
         self.bad_payloads = 0  # of those: payloads that do not decode as their key's type
         self._thread = threading.Thread(target=self._run, name="mcap-writer", daemon=True)
@@ -159,6 +167,25 @@ class McapRecorder:
             return  # the registry says so (status replies, liveliness)
         self._q.put((key, payload, recv_time))
 
+    def native_channel(
+        self,
+        key: str,
+        topic: str,
+        schema: str,
+        schema_text: str,
+        schema_encoding: str = "ros2msg",
+        message_encoding: str = "cdr",
+    ) -> None:
+        """Record the samples of ``key`` (fed to :meth:`on_native`) unchanged on ``topic``, e.g.
+        a ROS 2 robot's ``cmd_vel`` as ``geometry_msgs/msg/Twist`` in CDR."""
+        enc = schema_text.encode()
+        self._native[key] = (topic, schema, schema_encoding, enc, message_encoding)
+
+    def on_native(self, key: str, payload: bytes, recv_time: float) -> None:
+        """A sample of a native channel (any thread); other keys are ignored."""
+        if key in self._native:
+            self._q.put((_NATIVE, key, payload, recv_time))
+
     def record(self, key: str, msg: wire.Message, recv_time: float | None = None) -> None:
         """Record a message that did not come over the bus (e.g. the run summary)."""
         self.on_sample(key, wire.encode(msg), time.time() if recv_time is None else recv_time)
@@ -182,14 +209,41 @@ class McapRecorder:
         self._channels[key] = (ch, name, data)
         return self._channels[key]
 
-    def _schema_id(self, name: str, data: bytes) -> int:
+    def _schema_id(self, name: str, data: bytes, encoding: str = "jsonschema") -> int:
         if not name:
             return 0
-        sid = self._schemas.get(name)
+        tag = name if encoding == "jsonschema" else f"{encoding}:{name}"
+        sid = self._schemas.get(tag)
         if sid is None:
-            sid = self._writer.register_schema(name, "jsonschema", data)
-            self._schemas[name] = sid
+            sid = self._writer.register_schema(name, encoding, data)
+            self._schemas[tag] = sid
         return sid
+
+    def _native_channel(self, key: str) -> tuple[int, str, bytes]:
+        found = self._channels.get(key)
+        if found is None:
+            topic, name, schema_enc, data, msg_enc = self._native[key]
+            ch = self._writer.register_channel(
+                topic, msg_enc, self._schema_id(name, data, schema_enc)
+            )
+            found = self._channels[key] = (ch, name, data)
+        return found
+
+    def _write_native(self, key: str, payload: bytes, recv_time: float) -> None:
+        """A native sample as it came (not decoded: its own tools read it); stamped on
+        receipt (in a dry run: the run's latest sim time)."""
+        if len(payload) > MAX_PAYLOAD_BYTES:
+            self._bad(key, f"payload of {len(payload)} bytes > {MAX_PAYLOAD_BYTES}")
+            return
+        log_ns = self._times(recv_time if self.sim_epoch is None else self._sim_t, recv_time)[0]
+        for _ in range(2):
+            ch, _, _ = self._native_channel(key)
+            try:
+                self._add(ch, log_ns, log_ns, payload)
+                break
+            except _Rolled:
+                continue
+        self.native_written += 1
 
     def _times(self, t: Any, recv_time: float) -> tuple[int, int]:
         """(log, publish) times in ns of a message stamped ``t`` received at ``recv_time``."""
@@ -306,6 +360,12 @@ class McapRecorder:
         if item and item[0] is _META:
             self._meta.append((item[1], item[2]))
             self._writer.add_metadata(item[1], item[2])
+        elif item and item[0] is _NATIVE:
+            try:
+                self._write_native(*item[1:])
+            except Exception:  # noqa: BLE001 - never lose the thread
+                self.dropped += 1
+                log.exception("could not record a native sample on %s", item[1])
         elif item:
             try:
                 self._write(*item)

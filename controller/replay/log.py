@@ -59,6 +59,7 @@ class RunLog:
     robot_events: list[dict[str, Any]] = field(default_factory=list)
     estops: list[dict[str, Any]] = field(default_factory=list)
     scene: Counter = field(default_factory=Counter)  # Foxglove scene channels: messages
+    ros2: Counter = field(default_factory=Counter)  # ROS 2 robots' own topics (ros2msg/cdr)
     segments: list[dict[str, Any]] = field(default_factory=list)  # file, complete, messages, s
     time_base: str = "wall"  # "sim": log times are sim time on ``epoch_s`` (dry runs)
     epoch_s: float = 0.0
@@ -111,8 +112,8 @@ def _read_run(path: Path) -> RunLog:
 
 def _take(run: RunLog, rec: LogRecord) -> None:
     """One record of the log into the run."""
-    if rec.topic.startswith("/"):  # the Foxglove scene (never a bus key)
-        run.scene[rec.topic] += 1
+    if rec.topic.startswith("/"):  # the Foxglove scene or a ROS 2 topic (never a bus key)
+        (run.ros2 if "/msg/" in rec.schema else run.scene)[rec.topic] += 1
         return
     parsed = wire.parse_key(rec.topic, run.fleet)
     if run.fleet is None and parsed is not None:
@@ -231,6 +232,7 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         "duration_s": (max(all_t) - min(all_t)) if all_t else 0.0,
         "topics": {k: _topic_figures(run, k, n) for k, n in sorted(run.topics.items())},
         "scene": dict(sorted(run.scene.items())),
+        "ros2": dict(sorted(run.ros2.items())),
         "segments": run.segments,
         "recovered": _recovered(run.segments),
         "time_base": run.time_base,

@@ -41,7 +41,7 @@ from controller.runtime.estop import LatchFile, LatchKeeper
 from controller.runtime.hub import HUB_START, start_hub_process, stop_hub_process
 from controller.runtime.node import ControllerNode
 from controller.runtime.planner import PlannerWorker
-from controller.runtime.recording import open_recorder
+from controller.runtime.recording import open_recorder, record_ros2
 from controller.runtime.wiring import make_estimator
 
 log = logging.getLogger(__name__)
@@ -267,6 +267,7 @@ def run_daemon(
         with bus:
             claim.watch(bus)
             bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
+            record_ros2(bus, cfg, recorder)  # ROS 2 robots' own topics too
             rk = Ratekeeper(cfg.fleet.rate_hz)
             # the latch it left (without a hub it is the keeper; with one it learns from it too)
             file = LatchFile(cfg, "controller")

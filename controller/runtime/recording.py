@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import sys
 from pathlib import Path
+from typing import Any
 
 from controller.config import FleetConfig
 from controller.io.recorder import SIM_EPOCH, McapRecorder, config_metadata
@@ -52,3 +53,26 @@ def open_recorder(
     )
     rec.metadata("fleet.config", config_metadata(cfg, mode))
     return rec
+
+
+def record_ros2(bus: Any, cfg: FleetConfig, recorder: McapRecorder) -> list[str]:
+    """Record the config's ROS 2 robots' own topics too (their ``cmd_vel`` and pose source,
+    on rmw_zenoh's keys) as ROS 2 messages (``ros2msg``/``cdr``) under their ROS topic names.
+    They arrive when the bus reaches the robots' zenoh network (the same router, or the hub
+    connected to rmw_zenohd). Returns the keys subscribed."""
+    from controller.runtime.wiring import ros2_settings
+    from drivers.ros2.msgs import CMD_TYPES, POSE_TYPES, msg_definition
+
+    subscribed = []
+    for r in cfg.robots:
+        if r.driver != "ros2":
+            continue
+        s = ros2_settings(r)
+        for topic, type_name, key in (
+            (s.cmd_fq(), CMD_TYPES[s.cmd_type], s.cmd_key()),
+            (s.pose_fq(), POSE_TYPES[s.pose_type], s.pose_key()),
+        ):
+            recorder.native_channel(key, topic, type_name, msg_definition(type_name))
+            bus.subscribe_raw(key, recorder.on_native)
+            subscribed.append(key)
+    return subscribed

@@ -148,6 +148,37 @@ register_driver_class(
 register_driver_class(DriverClass("mavlink", _mavlink_dry_run, _mavlink_local, keepalive=True))
 
 
+def ros2_settings(r: RobotConfig) -> Any:
+    """A ROS 2 robot's ``[robots.ros2]`` table as the driver's settings."""
+    from drivers.ros2.driver import Ros2Settings
+
+    s = r.ros2
+    return Ros2Settings(**{f.name: getattr(s, f.name) for f in dataclasses.fields(s)})
+
+
+def _ros2_dry_run(links: DryRunLinks, cfg: FleetConfig, r: RobotConfig) -> Any:
+    """Refused (bad input, exit 2): a ROS 2 robot is a vehicle of its own."""
+    from controller.config import InputError
+
+    raise InputError(
+        f"robot {r.id!r}: a ros2 robot is a vehicle of its own, not a body of the dry run's "
+        "world; run it with `fleet driver` against the robot (or the stand-in, "
+        "tests/support/ros2_robot.py)"
+    )
+
+
+def _ros2_local(cfg: FleetConfig, r: RobotConfig, wall0: float, strict: bool):
+    from drivers.ros2.driver import Ros2Driver
+
+    driver = Ros2Driver(
+        r.id, capabilities_of(r), ros2_settings(r), stale_after=cfg.fleet.stale_after
+    )
+    return driver, None
+
+
+register_driver_class(DriverClass("ros2", _ros2_dry_run, _ros2_local))
+
+
 def make_sim_drivers(cfg: FleetConfig, hub: SimHub, connect_timeout: float = 5.0):
     """One connected driver per robot of a dry run, and the MAVLink vehicle emulators.
 

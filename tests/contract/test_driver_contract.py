@@ -1,13 +1,15 @@
 """One contract suite for every driver adapter (drivers.base.RobotDriver).
 
-Each adapter (the sim driver on both backends, MAVLink, and the remote sim driver of the shared
-``fleet world`` process) joins through a factory in ``ADAPTERS`` that returns a ``Rig``: a
-connected driver for an omni or a differential robot, an ``advance(seconds)`` that moves time
-on the robot's side, and a ``close``. Everything here is what the agent relies on.
+Each adapter (the sim driver on both backends, MAVLink, the remote sim driver of the shared
+``fleet world`` process, and ROS 2 over rmw_zenoh against the stand-in robot) joins through a
+factory in ``ADAPTERS`` that returns a ``Rig``: a connected driver for an omni or a differential
+robot, an ``advance(seconds)`` that moves time on the robot's side, and a ``close``. Everything
+here is what the agent relies on.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -136,11 +138,62 @@ def _mavlink_rig(kind: str) -> Rig:
     return Rig(drv, ls.advance, close, unreachable)
 
 
+def _ros2_rig(kind: str) -> Rig:
+    """A ROS 2 robot over rmw_zenoh's keys: the stand-in (rosbags CDR) listening on a loopback
+    port as the robot's zenoh peer, the driver joining it as a client. ``advance`` is a
+    lockstep: the stand-in takes every command sent, moves, publishes its odometry (odom frame,
+    placed in the world by ``odom_to_world``), and the driver holds the sample before it
+    returns (handshakes with deadlines, no sleeps)."""
+    from drivers.ros2.driver import Ros2Driver, Ros2Settings
+    from drivers.ros2.node import open_session
+    from tests.support.config import free_port
+    from tests.support.ros2_robot import StandInRobot
+    from tests.support.wait import wait_for
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    settings = Ros2Settings(
+        namespace="/tb1", odom_to_world=(1.0, 2.0, 0.5), connect=(endpoint,), mode="client"
+    )
+    robot_session = open_session(listen=[endpoint], mode="peer")
+    robot = StandInRobot(robot_session, settings, kind, start=(3.0, 4.0, 0.3))
+    caps = Capabilities(kind, kind == "omni", 0.5, 2.0, 0.15)
+    opened: list[Ros2Driver] = []
+
+    def driver(s: Ros2Settings) -> Ros2Driver:
+        d = Ros2Driver("r1", caps, s, stale_after=5.0, clock=lambda: robot.t)
+        opened.append(d)
+        return d
+
+    drv = driver(settings)
+    drv.open()
+    wait_for(robot.pub.matching, 10, "the driver's odometry subscription at the robot")
+    robot.publish()
+    drv.connect(timeout=5.0)
+
+    def advance(dt: float) -> None:
+        wait_for(lambda: robot.commands_seen() >= drv.sent, 5, "the commands at the robot")
+        robot.step(dt)
+        robot.publish()
+        wait_for(lambda: drv.samples_seen() >= robot.published, 5, "the odometry")
+
+    def close() -> None:
+        for d in opened:
+            d.close()
+        robot.close()
+        robot_session.close()
+
+    def unreachable() -> RobotDriver:
+        return driver(dataclasses.replace(settings, namespace="/nobody"))
+
+    return Rig(drv, advance, close, unreachable)
+
+
 ADAPTERS: dict[str, Callable[[str], Rig]] = {
     "ideal": lambda kind: _sim_rig("ideal", kind),
     "pybullet": lambda kind: _sim_rig("pybullet", kind),
     "mavlink": _mavlink_rig,
     "remote-ideal": lambda kind: _remote_rig("ideal", kind),
+    "ros2": _ros2_rig,
 }
 
 

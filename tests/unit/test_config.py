@@ -85,7 +85,7 @@ CASES = {
         {},
         lambda d: d["robots"][0].update(driver="ros"),
         "robots[0].driver",
-        "expected one of 'sim', 'mavlink', got 'ros'",
+        "expected one of 'sim', 'mavlink', 'ros2', got 'ros'",
     ),
     "subtable_and_flat_differ": (
         {},
@@ -275,7 +275,7 @@ def test_a_driver_class_needs_a_config_entry():
     from controller.runtime.wiring import DriverClass, register_driver_class
 
     with pytest.raises(ValueError, match="no config entry"):
-        register_driver_class(DriverClass("ros2", lambda *a: None, lambda *a: (None, None)))
+        register_driver_class(DriverClass("canbus", lambda *a: None, lambda *a: (None, None)))
 
 
 # --------------------------------------------------------------------------- transport strategies
