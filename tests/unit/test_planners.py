@@ -55,28 +55,28 @@ def test_the_same_plans_come_inline_and_deferred_only_later():
     a.plan(view(cfg, 0.0, poses, cfg.object.start))
     for k in range(4):
         b.plan(view(cfg, k * DT, poses, cfg.object.start))
-    assert np.array_equal(a.route.waypoints, b.route.waypoints)
+    assert np.array_equal(a.way.route.waypoints, b.way.route.waypoints)
 
 
 def test_the_last_plan_is_executed_while_the_next_one_is_computed():
     ticks = {"route": 0, "rearrange": 0, "transport": 6, "capture": 0}
     m, cfg, poses = transport(DeferredPlanners(ticks, DT), LIGHT)  # the holders can push it
     t = 0.0
-    while m.last_plan is None and t < 2.0:  # the segment's first plan: held meanwhile
+    while m.pusher.last_plan is None and t < 2.0:  # the segment's first plan: held meanwhile
         out = m.plan(view(cfg, t, poses, cfg.object.start))
-        if m.phase == Phase.TRANSPORT and m.last_plan is None:
+        if m.phase == Phase.TRANSPORT and m.pusher.last_plan is None:
             assert out.hold.all() and not np.any(out.velocities)
         t += DT
-    assert m.phase == Phase.TRANSPORT and m.last_plan is not None
-    first, plans = m.last_plan, m.plans
+    assert m.phase == Phase.TRANSPORT and m.pusher.last_plan is not None
+    first, plans = m.pusher.last_plan, m.pusher.plans
     waited = 0
     while True:  # the next plan is asked one interval on and comes 6 ticks after that
         out = m.plan(view(cfg, t, poses, cfg.object.start))
         t += DT
         waited += 1
-        if m.plans > plans:
+        if m.pusher.plans > plans:
             break
-        assert m.last_plan is first and np.any(out.velocities)  # the robots push meanwhile
+        assert m.pusher.last_plan is first and np.any(out.velocities)  # the robots push meanwhile
     # one plan per interval, as before; each one planned from a state 6 ticks old
     assert waited == round(first.interval / DT)
     age = dict(out.events)["transport"]["plan_age_s"]

@@ -139,6 +139,6 @@ def test_the_transport_mission_is_the_same_job_entered_at_route():
     # so the same tick goes on to re-arrange)
     phases = [e[1]["phase"] for e in intent.events if e[0] == "phase"]
     assert job.transport is not None and phases == ["route", "rearrange"], intent.events
-    assert all(c is None for c in job.transport.contacts.values())
+    assert all(c is None for c in job.transport.grip.contacts.values())
     with pytest.raises(Exception, match="entered at plan or route"):
         CaptureJob(cfg, np.random.default_rng(0), entry=P.HOLD)

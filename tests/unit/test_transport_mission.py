@@ -101,13 +101,13 @@ def test_progress_is_measured_along_the_route_not_as_the_crow_flies():
     sc = Scenario("detour", CRATE, (1.0, 2.2, 0.0), (4.0, 2.2, 0.0), obstacles=pillar)
     m, cfg, poses = mission(sc)
     m.plan(view(cfg, 0.0, poses, cfg.object.start))
-    wp = m.route.waypoints
-    m.route_j = 0
-    left = np.array([m._remaining(w, commit=True) for w in wp])
+    wp = m.way.route.waypoints
+    m.way.route_j = 0
+    left = np.array([m.way.remaining(w, commit=True) for w in wp])
     assert np.all(np.diff(left) <= 1e-9)  # every step along the route is progress
     # from the start, the whole route is left (give or take a corner cut inside the window),
     # never the straight line through the pillar (3 m)
-    assert left[-1] < 1e-6 and left[0] >= m.route.length_m - 0.05 > 3.5
+    assert left[-1] < 1e-6 and left[0] >= m.way.route.length_m - 0.05 > 3.5
 
 
 def _lp_ok(m, pts, nrm, twist, fmax):
@@ -161,22 +161,22 @@ def test_a_heavy_object_recruits_free_robots():
     m, cfg, _ = mission(sc)
     push = np.array([1.0, 0.0, 0.0])
     pts, nrm, value, n, basis = _arrangement(m, cfg, push)
-    held = sum(c is not None for c in m.contacts.values())
+    held = sum(c is not None for c in m.grip.contacts.values())
     assert n >= 4 and len(pts) >= 4 and n > 0
-    assert len(m.robots) == len(cfg.robots) > held  # the free ones take part
+    assert m.grip.n == len(cfg.robots) > held  # the free ones take part
     assert _lp_ok(m, pts, nrm, push * m.params.speed, 8.0)
 
 
 def test_a_lost_robot_leaves_the_job_and_is_told_nothing():
     m, cfg, poses = mission(OPEN)
     m.plan(view(cfg, 0.0, poses, cfg.object.start))
-    holder = next(i for i, c in m.contacts.items() if c is not None)
+    holder = next(i for i, c in m.grip.contacts.items() if c is not None)
     present = np.ones(len(cfg.robots), bool)
     present[holder] = False
     out = m.plan(view(cfg, 0.05, poses, cfg.object.start, present))
     lost = [d for k, d in out.events if k == "robot_lost"]
     assert [d["robot"] for d in lost] == [cfg.robots[holder].id]
-    assert m.contacts[holder] is None and holder not in m.moves
+    assert m.grip.contacts[holder] is None and holder not in m.grip.moves
     assert np.all(out.velocities[holder] == 0.0)
     out = m.plan(view(cfg, 0.1, poses, cfg.object.start, present))
     assert not [d for k, d in out.events if k == "robot_lost"]  # reported once
@@ -188,7 +188,7 @@ def test_a_stall_with_a_robot_lost_fails_with_robot_lost():
     present = np.ones(len(cfg.robots), bool)
     present[0] = False
     m.plan(view(cfg, 0.05, poses, cfg.object.start, present))
-    m.futile = m.s.max_rearrangements  # nothing more to try
+    m.rearranger.futile = m.s.max_rearrangements  # nothing more to try
     t, out = 0.05, None
     while t < 3 * m.s.stall_timeout and not (out is not None and out.failed):
         t += 0.5
@@ -203,8 +203,8 @@ def test_a_fleet_wide_silence_pauses_the_transport_and_loses_nobody():
     clock does not run; back, the transport goes on with the same contacts."""
     m, cfg, poses = mission(OPEN)
     m.plan(view(cfg, 0.0, poses, cfg.object.start))
-    contacts = {i: c for i, c in m.contacts.items()}
-    stall0 = m.progress_t
+    contacts = {i: c for i, c in m.grip.contacts.items()}
+    stall0 = m.way.progress_t
     nobody = np.zeros(len(cfg.robots), bool)
     t = 0.05
     seen = []
@@ -213,11 +213,11 @@ def test_a_fleet_wide_silence_pauses_the_transport_and_loses_nobody():
         seen += [k for k, _ in out.events]
         assert out.stop and not out.failed
         t += 0.05
-    assert seen == ["outage"] and not m.lost
-    assert m.progress_t - stall0 == pytest.approx(1.0, abs=0.06)  # paused, not stalled
+    assert seen == ["outage"] and not m.grip.lost
+    assert m.way.progress_t - stall0 == pytest.approx(1.0, abs=0.06)  # paused, not stalled
     out = m.plan(view(cfg, t, poses, cfg.object.start))
-    assert [k for k, _ in out.events][0] == "outage_end" and not m.lost
-    assert m.contacts == contacts
+    assert [k for k, _ in out.events][0] == "outage_end" and not m.grip.lost
+    assert m.grip.contacts == contacts
 
 
 def test_an_object_the_whole_fleet_cannot_push_fails_too_heavy_before_anyone_pushes():
@@ -238,4 +238,4 @@ def test_an_object_the_whole_fleet_cannot_push_fails_too_heavy_before_anyone_pus
         need = friction * mass * 9.81
         assert f"needs {need:.1f} N" in detail and "36.0 N in all" in detail
         assert (need <= 36.0) is fleet_ok
-        assert m.plans == 0 and m.relocations == 0  # nobody was asked to push or to move
+        assert m.pusher.plans == 0 and m.grip.relocations == 0  # nobody was asked to push or to move

@@ -1,0 +1,97 @@
+"""The transport's re-arrangement stage (pure): when the contacts held cannot push the object
+along its segment, a new set (Sharma's Eq. 5, ``controller.planning.arrangement``) is asked for
+off the tick; when it comes, the robots nearest to its contacts move there (:meth:`Grip.regrip`)
+and the event says who moves where."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from controller.config import FleetConfig
+from controller.mission.grip import Grip
+from controller.mission.planners import Planners, PlanSlot, spawn_rng
+from controller.mission.types import Event, FleetView
+from controller.planning.arrangement import Arrangement, plan_arrangement
+from controller.planning.transport_model import ObjectModel
+
+
+class Rearranger:
+    """Asks for new contact sets and hands them to the grip. ``count``: re-arrangements so
+    far; ``futile``: those since the object last made progress; ``since`` (s): when the last
+    one was asked for, or its set came (its timeout counts from there)."""
+
+    def __init__(
+        self,
+        cfg: FleetConfig,
+        model: ObjectModel,
+        speed: float,
+        strategy: str,
+        turn_margin: float,
+        planners: Planners,
+        rng: np.random.Generator,
+    ) -> None:
+        self.cfg, self.model, self.rng = cfg, model, rng
+        self.speed, self.strategy, self.turn_margin = speed, strategy, turn_margin
+        self._job = PlanSlot(planners, "rearrange")
+        self.count = 0
+        self.futile = 0
+        self.since = 0.0
+
+    @property
+    def pending(self) -> bool:
+        return self._job.pending
+
+    def ask(self, t: float, direction: np.ndarray, grip: Grip) -> None:
+        """Ask for new contacts for the unit twist ``direction`` (object frame); the robots
+        hold until they come."""
+        self.count += 1
+        self.futile += 1
+        self.since = t
+        grip.unplan()
+        active = grip.active()
+        weakest = min(self.cfg.robots[i].max_force for i in active)
+        self._job.request(
+            t,
+            plan_arrangement,
+            self.cfg,
+            self.model,
+            direction,
+            self.speed,
+            weakest,
+            len(active),
+            self.turn_margin,
+            spawn_rng(self.rng),
+            self.strategy,
+        )
+
+    def take(self, t: float) -> Any:
+        """The set asked for, once it has come (a ``PlanResult``), else None."""
+        return self._job.take(t)
+
+    def arrange(
+        self,
+        view: FleetView,
+        pose: np.ndarray,
+        new: Arrangement,
+        direction: np.ndarray,
+        grip: Grip,
+        events: list[Event],
+    ) -> None:
+        """The new contacts have come: the grip moves the nearest robots to them."""
+        self.since = view.t  # the timeout counts from the set's arrival
+        grip.regrip(view, pose, new.points, new.normals)
+        d = direction[:2]
+        data = {
+            "t": view.t,
+            "direction": np.round(d if np.any(d) else np.array([1.0, 0.0]), 4).tolist(),
+            "pushers": new.pushers,
+            "basis": new.basis,
+            "eq5_value": float(new.value),
+            "moving": [view.ids[i] for i in grip.moves],
+            "contacts": {
+                view.ids[i]: np.round(c.point, 4).tolist() for i, c in grip.targets.items()
+            },
+        }
+        events.append(("rearrange", data))
