@@ -44,10 +44,15 @@ import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.mission.capture_phase import (
+    CLOSED,
+    CaptureSettings,
+    CaptureState,
+    Measures,
+    advance,
+)
 from controller.mission.guard import SafetyStage
-from controller.mission.sequence import CAPTURING, Cue, Failure, JobState, next_phase
-from controller.mission.sequence import Measures as SeqMeasures
-from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
+from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase
 from controller.planning.approach import (
     STATION_GAP,
     PlannerParams,
@@ -61,56 +66,6 @@ from controller.planning.approach import (
 )
 
 STATION_SLACK = 0.02  # m beyond the safety filter's margin a station keeps from walls, obstacles
-CLOSED = (Phase.HOLD, Phase.ARRESTED, Phase.DONE)  # robots in contact, preloading
-
-
-@dataclass(frozen=True)
-class CaptureSettings:
-    """The capture mission's tuning constants, in one place (SI units).
-
-    From ``[approach]``: the tolerances, ``hold_s``, ``preload_depth``, the timeout and the
-    interception horizon. Internal: ``settle_s`` (s the arrested fleet keeps holding before a
-    capture-only mission is done); ``release_factor`` (a robot in hold whose gap exceeds this
-    many contact tolerances lost contact); ``creep_gap`` (m: closer than this estimated gap to
-    the surface a robot stops riding on the object's estimated motion and creeps in: the
-    estimate of an object being pushed is what the pushing moves); ``station_gap`` (m between a
-    contact target and the
-    surface while closing in); ``waypoint_reached`` (m at which a detour waypoint counts as
-    reached); ``detour_clearance`` (m beyond the robot radius when testing whether the straight
-    line to a station crosses an obstacle), ``detour_samples`` (points tested on it),
-    ``detour_spacing`` (m between a detour's waypoints); ``speed_margin`` (the share of its
-    top speed a robot plans an interception with).
-    """
-
-    contact_tolerance: float = 0.015
-    envelope_tolerance: float = 0.08
-    hold_s: float = 2.0
-    hold_tolerance: float = 0.03
-    preload_depth: float = 0.0
-    timeout: float = 180.0
-    intercept_horizon: float = 8.0
-    settle_s: float = 0.5
-    release_factor: float = 2.0
-    creep_gap: float = 0.03
-    station_gap: float = 0.0
-    waypoint_reached: float = 0.15
-    detour_clearance: float = 0.05
-    detour_samples: int = 50
-    detour_spacing: float = 0.6
-    speed_margin: float = 0.9
-
-    @classmethod
-    def from_config(cls, cfg: FleetConfig) -> CaptureSettings:
-        ap = cfg.approach
-        return cls(
-            contact_tolerance=ap.contact_tolerance,
-            envelope_tolerance=ap.envelope_tolerance,
-            hold_s=ap.hold_s,
-            hold_tolerance=ap.hold_tolerance,
-            preload_depth=ap.preload_depth,
-            timeout=ap.timeout,
-            intercept_horizon=ap.intercept_horizon,
-        )
 
 
 @dataclass(frozen=True)
@@ -123,148 +78,6 @@ class Goals:
     touch: np.ndarray  # disc centres touching the surface (closing in)
     preload: np.ndarray  # disc centres ``preload_depth`` inside it (hold)
     shortfall: np.ndarray  # (M,) m a station lies beyond where a wall lets a robot stand
-
-
-@dataclass(frozen=True)
-class Measures:
-    """What the phase logic reads each tick (estimates, SI units)."""
-
-    t: float
-    dist: np.ndarray  # (M,) each assigned robot to its current target
-    preload: np.ndarray  # (M, 2) preload targets at the object's current estimate
-    gap: np.ndarray  # (M,) each assigned robot's disc to the object's surface (< 0: overlap)
-    polygon: np.ndarray  # (V, 2) the object's estimated polygon, world frame
-    detouring: bool
-
-
-@dataclass(frozen=True)
-class CaptureState:
-    """The capture's phase and what it remembers (immutable; :func:`advance` returns a new one)."""
-
-    job: JobState = JobState(Phase.APPROACH)  # the phase, moved by sequence.next_phase only
-    t0: float | None = None
-    contact_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    hold_t0: float | None = None
-    hold_polygon: np.ndarray | None = None
-    cage: np.ndarray | None = None  # (M, 2) world contact targets frozen at contact (NaN: none)
-    hold_displacement: float = 0.0
-    arrest_t: float | None = None
-    arrival_spread: float | None = None
-    escapes: int = 0
-    releases: int = 0
-
-    @property
-    def phase(self) -> Phase:
-        return self.job.phase
-
-
-@dataclass(frozen=True)
-class Step:
-    """The phase logic's answer for one tick."""
-
-    state: CaptureState
-    events: list[Event]
-    arrest: bool = False
-    done: bool = False
-    failed: bool = False
-    reason: str = ""
-
-
-def advance(st: CaptureState, m: Measures, s: CaptureSettings) -> Step:
-    """The capture's measures, pure: what it saw (a cue for :func:`sequence.next_phase`, which
-    moves the phase), what it remembers, and its events."""
-    events: list[Event] = []
-    cue: Cue | None = None
-    if st.phase == Phase.APPROACH:
-        if np.all(m.dist < s.envelope_tolerance) and not m.detouring:
-            cue = Cue.ON_ENVELOPE
-    elif st.phase == Phase.CLOSE_IN:
-        touching = m.gap < s.contact_tolerance
-        contact_t = st.contact_t.copy()
-        contact_t[touching & np.isnan(contact_t)] = m.t
-        st = replace(st, contact_t=contact_t, cage=_recage(st.cage, touching, m.preload))
-        if np.all(touching):
-            st = replace(st, hold_t0=m.t, hold_polygon=m.polygon, hold_displacement=0.0)
-            cue = Cue.ALL_TOUCHING
-    elif st.phase in CLOSED:
-        st, cue = _hold(st, m, s, events)
-    failure = None
-    if st.phase in CAPTURING and m.t - st.t0 > s.timeout:
-        reason = Reason.ESCAPED if st.escapes else Reason.TIMEOUT
-        failure = Failure(reason, _timeout_detail(st, m, s))
-    step = next_phase(st.job, SeqMeasures(m.t, cue, failure))
-    if step.fired:
-        st = _entered(replace(st, job=step.state), m)
-    events += step.events
-    arrest = step.fired and st.phase == Phase.ARRESTED
-    if arrest:
-        events.append(_arrest_event(st, m))
-    failed = st.phase == Phase.FAILED
-    reason = step.state.failure.reason if failed and step.state.failure else ""
-    return Step(st, events, arrest, st.phase == Phase.DONE, failed, reason)
-
-
-def _entered(st: CaptureState, m: Measures) -> CaptureState:
-    """What the capture remembers of the phase it has just entered."""
-    if st.phase == Phase.ARRESTED:
-        spread = float(np.nanmax(st.contact_t) - np.nanmin(st.contact_t))
-        return replace(st, arrest_t=m.t, arrival_spread=spread)
-    return st
-
-
-def _arrest_event(st: CaptureState, m: Measures) -> Event:
-    data = {
-        "t": m.t,
-        "arrival_spread_s": st.arrival_spread,
-        "hold_s": m.t - st.hold_t0,
-        "hold_displacement_m": st.hold_displacement,
-        "gaps_m": m.gap.round(4).tolist(),
-    }
-    return ("arrest", data)
-
-
-def _recage(cage: np.ndarray | None, touching: np.ndarray, preload: np.ndarray) -> np.ndarray:
-    """A touching robot holds still where it touched; one the object has left closes in again."""
-    out = np.full_like(preload, np.nan) if cage is None else cage.copy()
-    new = touching & np.isnan(out[:, 0])
-    out[new] = preload[new]
-    out[~touching] = np.nan
-    return out
-
-
-def _hold(st: CaptureState, m: Measures, s: CaptureSettings, events) -> tuple:
-    """Hold, arrested, done: contact kept and the object still (``held`` after ``hold_s``,
-    ``settled`` ``settle_s`` after the arrest), or contact lost or the object escaped."""
-    moved = float(np.max(np.linalg.norm(m.polygon - st.hold_polygon, axis=1)))
-    touching = m.gap < s.contact_tolerance
-    st = replace(
-        st,
-        hold_displacement=max(st.hold_displacement, moved),
-        cage=_recage(st.cage, touching, m.preload),
-    )
-    if np.any(m.gap > s.release_factor * s.contact_tolerance):
-        events.append(("contact_lost", {"t": m.t, "gaps_m": m.gap.round(4).tolist()}))
-        return replace(st, releases=st.releases + 1, cage=None), Cue.CONTACT_LOST
-    if moved > s.hold_tolerance and st.phase == Phase.HOLD:
-        events.append(("escape", {"t": m.t, "displacement_m": moved}))
-        return replace(st, escapes=st.escapes + 1, cage=None), Cue.ESCAPED
-    if st.phase == Phase.HOLD and m.t - st.hold_t0 >= s.hold_s and np.all(touching):
-        return st, Cue.HELD
-    if st.phase == Phase.ARRESTED and m.t - st.arrest_t >= s.settle_s:
-        return st, Cue.SETTLED
-    return st, None
-
-
-def _timeout_detail(st: CaptureState, m: Measures, s: CaptureSettings) -> str:
-    if st.phase == Phase.APPROACH:
-        far = int(np.sum(m.dist >= s.envelope_tolerance))
-        return f"{far} robots still {np.max(m.dist):.2f} m from their stations after {s.timeout} s"
-    if st.phase == Phase.CLOSE_IN:
-        return (
-            f"{int(np.sum(m.gap >= s.contact_tolerance))} robots not in contact (gaps up to "
-            f"{np.max(m.gap):.3f} m); {st.escapes} escapes, {st.releases} contacts lost"
-        )
-    return f"hold never completed: {st.escapes} escapes, {st.releases} contacts lost"
 
 
 @dataclass

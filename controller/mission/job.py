@@ -18,7 +18,8 @@ from scipy.optimize import linear_sum_assignment
 
 from controller import geometry
 from controller.config import FleetConfig
-from controller.mission.capture import CaptureMission, CaptureSettings
+from controller.mission.capture import CaptureMission
+from controller.mission.capture_phase import CaptureSettings
 from controller.mission.guard import SafetyStage
 from controller.mission.outage import OutageWatch
 from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spawn_rng
