@@ -238,4 +238,4 @@ def test_an_object_the_whole_fleet_cannot_push_fails_too_heavy_before_anyone_pus
         need = friction * mass * 9.81
         assert f"needs {need:.1f} N" in detail and "36.0 N in all" in detail
         assert (need <= 36.0) is fleet_ok
-        assert m.pusher.plans == 0 and m.grip.relocations == 0  # nobody was asked to push or to move
+        assert m.pusher.plans == 0 and m.grip.relocations == 0  # nobody asked to push or to move
