@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
+import os
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -66,6 +67,18 @@ def _run_owned(fn: Callable[..., Any], args: tuple[Any, ...]) -> PlanResult:
             a = _OWNED[a.token]
         real.append(a)
     return run_job(fn, tuple(real))
+
+
+def _follow_parent(parent: int, period: float = 0.5) -> None:
+    """In the worker process: end it when the process that started it is gone (a daemon killed
+    with SIGKILL never shuts its pool down: its worker would live on, orphaned)."""
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(period)  # a poll of the parent's pid, not a wait for anything
+        os._exit(0)
+
+    threading.Thread(target=watch, name="follow-parent", daemon=True).start()
 
 
 def _warm() -> None:
@@ -129,7 +142,9 @@ class PlannerWorker:
         self._pool: Executor
         if process:
             ctx = multiprocessing.get_context("spawn")  # never fork a process with threads
-            self._pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
+            self._pool = ProcessPoolExecutor(
+                max_workers=1, mp_context=ctx, initializer=_follow_parent, initargs=(os.getpid(),)
+            )
             self._pool.submit(_warm)
         else:
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
