@@ -24,8 +24,10 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
+# the lockstep tiers (units, dry runs, replays) on both cores, then the real-time processes alone
 test: lint
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 -m "not serial"
+	$(BIN)/python -m pytest -q -m serial
 
 test-fast: lint
 	$(BIN)/python -m pytest -q -m "not e2e"

@@ -22,10 +22,17 @@ def port() -> int:
 # Their tests carry the ``e2e`` marker, so ``pytest -m "not e2e"`` is the fast tier (the unit
 # tests, under a minute); ``make test`` runs everything.
 E2E_FOLDERS = ("integration", "scenarios", "replay", "contract")
+# the folders whose tests time real processes against the wall clock (watchdogs, rates, e-stop
+# delays): ``serial``, run alone (``make test`` runs the rest on both cores first; the dry runs
+# are lockstep, their outcome does not depend on the machine's load)
+SERIAL_FOLDERS = ("integration", "contract")
 
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
         parts = item.path.parts
-        if "tests" in parts and parts[parts.index("tests") + 1] in E2E_FOLDERS:
+        folder = parts[parts.index("tests") + 1] if "tests" in parts else ""
+        if folder in E2E_FOLDERS:
             item.add_marker(pytest.mark.e2e)
+        if folder in SERIAL_FOLDERS:
+            item.add_marker(pytest.mark.serial)
