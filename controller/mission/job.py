@@ -1,11 +1,7 @@
-"""The whole job: the capture plan at construction, robot assignment once the first estimates
-are in, then the approach-and-arrest mission (pure, per tick).
-
-The plan is the GA's (Sharma Eq. 3, ``controller.planning.capture``), reinforced until the
-contacts can hold the object's push (``capture.hold_force``) with the robots' force limits
-(``controller.planning.capture_set``): form closure alone can need several times the push at a
-contact. Re-plans (robot loss, walls, a start without robots never seen) run off the tick.
-"""
+"""The whole job (pure, per tick): the capture plan (Sharma Eq. 3, reinforced to hold the
+object's push: ``controller.planning.capture_set``), the roster, the assignment, the approach
+and arrest, then the transport; re-plans (robot loss, walls, a start without robots never seen)
+run off the tick. Its stages: ``roster``, ``assign``, ``reach``, ``capture``, ``transport``."""
 
 from __future__ import annotations
 
@@ -14,19 +10,20 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.mission.assign import Reassigner, assign, interception_costs
 from controller.mission.capture import CaptureMission
 from controller.mission.capture_phase import CaptureSettings
 from controller.mission.guard import SafetyStage
 from controller.mission.outage import OutageWatch
 from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spawn_rng
+from controller.mission.reach import Reach
+from controller.mission.roster import Roster, parked
 from controller.mission.sequence import Cue, Failure, JobState, Measures, next_phase
 from controller.mission.transport import TransportMission, route_planner_for
 from controller.mission.types import FleetView, Intent, MissionOutput, Phase, Reason
-from controller.planning.approach import envelope, interception_times
 from controller.planning.capture_set import (  # noqa: F401 - re-exported: the job's planning
     TOKEN_LOAD,
     WALL_TOLERANCE,
@@ -43,25 +40,9 @@ class MissionError(RuntimeError):
     gives the planner's reason)."""
 
 
-REASSIGN_PERIOD = 2.0  # s between looks at a better assignment during the approach
-REASSIGN_GAIN = 0.25  # the share of the total interception time a new assignment must save
-REASSIGN_MIN_S = 5.0  # s of total interception time it must save at least
-REASSIGN_MIN_SPEED = 0.1  # m/s: slower objects keep their first assignment
-PIN_TICKS = 10  # ticks a capture point must stay blocked by a wall before the capture re-plans
-MAX_REPLANS = 8  # capture re-plans at walls before the set stands as it is
 PIN_RETRIES = 6  # re-plans that find no set before an object at rest is declared pinned
 PIN_STILL_SPEED = 0.03  # m/s: an object slower than this has come to rest against the wall
-STUCK_S = 8.0  # s a robot may come no closer to its station (object at rest) before its point
-STUCK_PROGRESS = 0.05  # m  ... is taken for out of reach and the capture re-planned without it
-STUCK_POCKET = 0.3  # m around a stuck point whose nodes are excluded with it
-STUCK_OBJECT_MOVE = 0.1  # m the object may move (estimate) and still count as at rest
-
-
-# s a robot's estimate may stay stale (no pose for fleet.stale_after) before the capture takes
-# the robot for lost (a robot whose liveliness token or link is gone is lost at once)
-LOST_STALE_S = 0.5
 WATCHED = (Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD)  # phases a lost robot re-plans
-PARK = 1.0e3  # m: a robot never seen is parked this far away in the views the capture reads
 
 
 class CaptureJob:
@@ -113,19 +94,12 @@ class CaptureJob:
         self.outage = OutageWatch(cfg.fleet.outage_grace)
         self.assignment: np.ndarray | None = None
         self.inner: Any = None
-        self.blocked_ticks = 0
-        self.replans = 0
-        self.reassignments = 0
+        self.roster = Roster(self.n)
+        self.reach = Reach(cfg)
+        self.reassigner = Reassigner()
         self.pin_fails = 0
-        self.unreachable: set[int] = set()  # candidate nodes robots could not get to
-        self.progress: tuple[np.ndarray, np.ndarray, np.ndarray, Any] | None = None
-        self.assigned_t = -math.inf
         self.failed = False
         self.failure_reason: str = Reason.PINNED
-        self.available = np.ones(self.n, bool)  # robots an assignment may use
-        self.lost: list[int] = []  # robots lost during the capture, in order
-        self.stale_since = np.full(self.n, np.nan)  # s: when each estimate turned stale
-        self.first_t: float | None = None  # s: the first estimates (robot or object)
         self.start_tried = -1  # robots a start without the missing ones was last planned for
         self.loss_replans = 0
         self.lost_t: float | None = None  # s: the last loss that re-planned
@@ -134,63 +108,6 @@ class CaptureJob:
         self.route_planner: Any = None
         if cfg.object.goal is not None:  # built before the loop: it takes a second
             self.route_planner = route_planner_for(cfg)
-
-    def _assign(self, view: FleetView) -> np.ndarray:
-        """Each capture point's robot (M,), among the available ones only."""
-        cols = np.flatnonzero(self.available)
-        rows, picked = linear_sum_assignment(self._costs(view)[:, cols])
-        out = np.empty(len(rows), dtype=int)
-        out[rows] = cols[picked]
-        return out
-
-    def _costs(self, view: FleetView) -> np.ndarray:
-        """(M, N) s for each robot to meet each capture point's station where the moving
-        object will be (interception at full speed, scaled by the detour around the object)."""
-        radius = self.cfg.max_robot_radius
-        margin = self.cfg.approach.envelope_margin
-        stations = geometry.transform(
-            self.capture.points + (radius + margin) * self.capture.normals, view.object_pose
-        )
-        ovel = np.zeros(3) if view.object_velocity is None else np.asarray(view.object_velocity)
-        rel = stations - np.asarray(view.object_pose)[:2]
-        vel = ovel[:2] + ovel[2] * np.stack([-rel[:, 1], rel[:, 0]], 1)
-        speed = np.array([r.max_speed for r in self.cfg.robots])
-        horizon = max(self.cfg.approach.intercept_horizon, 1.0) * 10.0
-        cost = interception_times(view.poses[:, :2], stations, vel, speed, horizon)
-        # a robot behind the object goes around it: scale by the detour around its envelope
-        hull = envelope(
-            geometry.transform(geometry.ensure_ccw(self.cfg.object_polygon()), view.object_pose),
-            radius,
-        )
-        around = geometry.distance_around_convex(stations, view.poses[:, :2], hull)
-        straight = np.linalg.norm(stations[:, None] - view.poses[None, :, :2], axis=-1)
-        return cost * around / np.maximum(straight, 1e-9)
-
-    def _reassign(self, view: FleetView) -> list:
-        """During the approach, every ``REASSIGN_PERIOD`` s: hand the capture points to other
-        robots when that meets the object sooner by ``REASSIGN_GAIN`` (the first assignment
-        is made before the object's velocity estimate has settled: a fast object runs away from
-        the robots that were nearest at first sight, toward others). Returns its events."""
-        if view.t - self.assigned_t < REASSIGN_PERIOD or self.inner.phase != Phase.APPROACH:
-            return []
-        ovel = view.object_velocity
-        if ovel is None or float(np.hypot(ovel[0], ovel[1])) < REASSIGN_MIN_SPEED:
-            return []  # a slow object: the first assignment stands (no thrashing)
-        self.assigned_t = view.t
-        cost = self._costs(view)
-        new = self._assign(view)
-        m = np.arange(len(new))
-        now, better = cost[m, self.assignment].sum(), cost[m, new].sum()
-        gain = now - better
-        if not (np.isfinite(better) and gain > REASSIGN_GAIN * now and gain > REASSIGN_MIN_S):
-            return []
-        t0 = self.inner.state.t0
-        self.assignment = new
-        self.inner = self._mission(view)
-        self.inner.state = dataclasses.replace(self.inner.state, t0=t0)  # the same timeout
-        self.reassignments += 1
-        robots = [view.ids[i] for i in new]
-        return [("reassign", {"robots": robots, "t": view.t, "eta_s": [now, better]})]
 
     @property
     def phase(self) -> Phase:
@@ -203,18 +120,18 @@ class CaptureJob:
         if self.failed:
             zero = np.zeros((self.n, 2))
             return Intent(zero, Phase.FAILED, stop=True, failed=True, reason=self.failure_reason)
-        view = self._parked(view)  # (a robot never seen: no estimate)
+        view = parked(view)  # (a robot never seen: no estimate)
         if self.transport is not None:
             return self.transport.plan(view)
-        gone = self._gone(view)
+        gone = self.roster.gone(view)
         if self.inner is None:
             return self._wait(view)
-        gone, pause, events = self.outage.filter(view.t, gone, self.available, view.ids)
+        gone, pause, events = self.outage.filter(view.t, gone, self.roster.available, view.ids)
         if pause:  # one fleet-wide silence: every robot still until it ends or its grace runs out
             return Intent(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
-        events += self._joins(view, gone)
+        events += self.roster.joins(view, gone)
         if self.inner.phase in WATCHED:
-            lost, replan = self._losses(view, gone)
+            lost, replan = self.roster.losses(view, gone, self.assignment, str(self.inner.phase))
             events += lost
             if replan:
                 self._ask_replan_lost(view)
@@ -223,11 +140,14 @@ class CaptureJob:
         events += self._reassign(view)
         intent = self.inner.plan(view)
         intent.events[:0] = events
-        if not self._replan_job.pending and self._blocked(view):
-            self.blocked_ticks = 0
+        reach = self.reach
+        if not self._replan_job.pending and reach.blocked(
+            view, self.inner.phase, self.capture, self.inner.last_distance, self.inner
+        ):
+            reach.blocked_ticks = 0
             pose = np.asarray(view.object_pose, float)
-            k = int(self.available.sum())
-            self._ask_replan("pinned", view, replan_pinned, pose, frozenset(self.unreachable), k)
+            k = int(self.roster.available.sum())
+            self._ask_replan("pinned", view, replan_pinned, pose, frozenset(reach.unreachable), k)
         if self._replan_job.pending:
             return self._await_pinned(view, intent)
         if intent.arrest:
@@ -270,45 +190,22 @@ class CaptureJob:
         self._carry(SafetyStage(self.cfg), held, closest[rows, j][held], normals[held])
         return self.transport.plan(view)
 
-    # --- robot loss and join ---------------------------------------------------------------
-    def _gone(self, view: FleetView) -> np.ndarray:
-        """(N,) robots gone this tick: liveliness or link lost, or stale for ``LOST_STALE_S``."""
-        stale = np.asarray(view.stale, bool)
-        self.stale_since[~stale] = np.nan
-        self.stale_since[stale & np.isnan(self.stale_since)] = view.t
-        held = stale & (view.t - np.nan_to_num(self.stale_since, nan=view.t) >= LOST_STALE_S)
-        return ~np.asarray(view.present, bool) | held
-
-    def _parked(self, view: FleetView) -> FleetView:
-        """The view with robots never seen (no estimate: NaN) parked far away, standing still:
-        the planners and the safety filter read every robot's pose."""
-        unknown = ~np.all(np.isfinite(view.poses), axis=1)
-        if not unknown.any():
-            return view
-        poses, vels = view.poses.copy(), view.velocities.copy()
-        k = np.flatnonzero(unknown)
-        poses[k] = np.stack([PARK + 10.0 * k, np.full(len(k), PARK), np.zeros(len(k))], 1)
-        vels[k] = 0.0
-        return dataclasses.replace(view, poses=poses, velocities=vels)
-
     def _wait(self, view: FleetView) -> Intent:
         """Phase ``plan``: start when the object and every robot are seen, or, ``start_wait``
         s after the first estimates, with the robots seen when they can close the object."""
         still = Intent(np.zeros((self.n, 2)), Phase.PLAN, stop=True)
-        ready = np.asarray(view.present & ~view.stale, bool)
-        if self.first_t is None and (view.object_pose is not None or ready.any()):
-            self.first_t = view.t
+        ready = self.roster.seen(view)
         if view.object_pose is None:
             return still
         if self.entry == Phase.ROUTE:  # every robot seen: who holds the object is measured
             return self._carry_from_contact(view) if ready.all() else still
         if not ready.all():
-            if view.t - self.first_t < self.cfg.fleet.start_wait:
+            if view.t - self.roster.first_t < self.cfg.fleet.start_wait:
                 return still
             k = int(ready.sum())
             if k < len(self.capture.points):
                 return self._start_with(view, ready, k, still)
-        self.available = ready
+        self.roster.available = ready
         return self._start(view, pinned=False)
 
     def _start_with(self, view: FleetView, ready: np.ndarray, k: int, still: Intent) -> Intent:
@@ -324,7 +221,7 @@ class CaptureJob:
         if got is None or not got.ok or got.value is None or self.start_tried != k:
             return still
         self.capture = got.value
-        self.available = ready
+        self.roster.available = ready
         return self._start(view, pinned=False)
 
     def _ask_replan(self, why: str, view: FleetView, fn, *args) -> None:
@@ -333,34 +230,15 @@ class CaptureJob:
         self._replan_why = why
         self._replan_job.request(view.t, fn, self.cfg, self.capture, *args)
 
-    def _joins(self, view: FleetView, gone: np.ndarray) -> list:
-        """Robots present with a fresh estimate again (or seen at last) are available again."""
-        back = ~self.available & ~gone & view.present & ~view.stale
-        self.available |= back
-        return [("robot_joined", {"t": view.t, "robot": view.ids[i]}) for i in np.flatnonzero(back)]
-
-    def _losses(self, view: FleetView, gone: np.ndarray) -> tuple[list, bool]:
-        """Robots lost this tick (events), and whether one of them held a capture point."""
-        new = np.flatnonzero(gone & self.available)
-        self.available[new] = False
-        self.lost += [int(i) for i in new]
-        assigned = {int(i) for i in self.assignment}
-        phase = str(self.inner.phase)
-        events = [
-            ("robot_lost", {"t": view.t, "robot": view.ids[i], "phase": phase, "assigned": a})
-            for i, a in ((int(i), int(i) in assigned) for i in new)
-        ]
-        return events, any(int(i) in assigned for i in new)
-
     def _ask_replan_lost(self, view: FleetView) -> None:
         """An assigned robot is lost: the capture re-planned for the robots left (off the
         tick; a pending re-plan is asked again with the robots left now)."""
-        keep = self.available[self.assignment]
-        k = int(self.available.sum())
+        keep = self.roster.available[self.assignment]
+        k = int(self.roster.available.sum())
         pose = np.asarray(view.object_pose, float)
         rng = spawn_rng(self.rng)
         self._ask_replan(
-            "lost", view, replan_for_robots, keep, k, rng, pose, frozenset(self.unreachable)
+            "lost", view, replan_for_robots, keep, k, rng, pose, frozenset(self.reach.unreachable)
         )
 
     def _await_lost(self, view: FleetView, events: list) -> Intent:
@@ -371,8 +249,8 @@ class CaptureJob:
             return Intent(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
         new = got.value if got.ok else None
         if new is None:
-            k = int(self.available.sum())
-            lost = ", ".join(view.ids[i] for i in self.lost)
+            k = int(self.roster.available.sum())
+            lost = ", ".join(view.ids[i] for i in self.roster.lost)
             detail = (
                 f"robots lost ({lost}): the {k} robots left cannot close the object "
                 f"(the capture needs {len(self.capture.points)})"
@@ -383,7 +261,7 @@ class CaptureJob:
         self.loss_replans += 1
         self.lost_t = view.t
         self.capture = new
-        self.blocked_ticks = 0
+        self.reach.blocked_ticks = 0
         intent = self._start(view, pinned=bool(new.walls))
         intent.events[:0] = events
         return intent
@@ -399,12 +277,28 @@ class CaptureJob:
             np.zeros((self.n, 2)), Phase.FAILED, events, stop=True, failed=True, reason=reason
         )
 
+    def _reassign(self, view: FleetView) -> list:
+        """A better assignment during the approach (``mission.assign``): a new approach, with
+        the same timeout."""
+        if self.inner.phase != Phase.APPROACH:
+            return []
+        new, events = self.reassigner.look(
+            self.cfg, self.capture, view, self.assignment, self.roster.available
+        )
+        if new is not None:
+            t0 = self.inner.state.t0
+            self.assignment = new
+            self.inner = self._mission(view)
+            self.inner.state = dataclasses.replace(self.inner.state, t0=t0)
+        return events
+
     def _start(self, view: FleetView, pinned: bool) -> Intent:
         """Assign robots to the capture set and start the approach (the capture event first;
         the approach announces itself at its first tick, as after every re-plan)."""
         self.job = next_phase(self.job, Measures(view.t, Cue.READY)).state
-        self.assignment = self._assign(view)
-        self.assigned_t = view.t
+        costs = interception_costs(self.cfg, self.capture, view)
+        self.assignment = assign(costs, self.roster.available)
+        self.reassigner.assigned(view.t)
         self.inner = self._mission(view)
         data = {
             "points": self.capture.points.round(4).tolist(),
@@ -417,7 +311,7 @@ class CaptureJob:
             "reinforced": self.capture.reinforced,
             "pinned": pinned,
             "wall_contacts": self.capture.walls,
-            "unavailable": [view.ids[i] for i in np.flatnonzero(~self.available)],
+            "unavailable": [view.ids[i] for i in np.flatnonzero(~self.roster.available)],
         }
         intent = self.inner.plan(view)
         intent.events.insert(0, ("capture", data))
@@ -435,56 +329,6 @@ class CaptureJob:
             self.rng,
             settings=settings,
         )
-
-    def _stuck(self, view: FleetView) -> bool:
-        """Whether, with the object at rest, some robot of the approach has come no closer to
-        its station by ``STUCK_PROGRESS`` m for ``STUCK_S`` s: its point is out of reach in a
-        way a disc test cannot see (a notch a wall closes, a gap too narrow to pass). The point
-        is then excluded and the capture re-planned."""
-        dist = getattr(self.inner, "last_distance", None)
-        if self.inner.phase != Phase.APPROACH or dist is None:
-            return False
-        xy = np.asarray(view.object_pose[:2], float)
-        fresh = self.progress is None or self.progress[3] is not self.inner  # a new approach
-        if fresh or np.linalg.norm(xy - self.progress[2]) > STUCK_OBJECT_MOVE:
-            # (re)start: a moving object is chased, not stuck on (its pose, not its noisy speed)
-            self.progress = (dist.copy(), np.full(len(dist), view.t), xy, self.inner)
-        best, since, _, _ = self.progress
-        better = dist < best - STUCK_PROGRESS
-        best[better], since[better] = dist[better], view.t
-        stuck = (view.t - since > STUCK_S) & (dist > self.cfg.approach.envelope_tolerance)
-        if not stuck.any():
-            return False
-        # the nodes around a stuck point are in the same pocket: exclude them together
-        cand = self.capture.candidates
-        for m in np.flatnonzero(stuck):
-            near = np.linalg.norm(cand - self.capture.points[m], axis=1) < STUCK_POCKET
-            self.unreachable |= {int(i) for i in np.flatnonzero(near)}
-        return True
-
-    def _blocked(self, view: FleetView) -> bool:
-        """Whether some capture point has been out of a robot's reach (a wall or an obstacle
-        where its disc must go) for ``PIN_TICKS`` ticks, before the fleet closes in, or a robot
-        is stuck on the way to it (``_stuck``)."""
-        if self.inner.phase not in (Phase.APPROACH, Phase.CLOSE_IN) or self.replans >= MAX_REPLANS:
-            return False
-        if self._stuck(view):
-            return True
-        r = self.cfg.max_robot_radius
-        centres = geometry.transform(
-            self.capture.points + (r + self.cfg.capture.clearance) * self.capture.normals,
-            view.object_pose,
-        )
-        bounds = self.cfg.bounds_array() if self.cfg.world.walls else None
-        hit = geometry.discs_touch_static(
-            centres,
-            r + self.cfg.approach.safety_margin,
-            self.cfg.obstacle_polygons(),
-            bounds,
-            slack=0.0,
-        )
-        self.blocked_ticks = self.blocked_ticks + 1 if hit.any() else 0
-        return self.blocked_ticks >= PIN_TICKS
 
     def _await_pinned(self, view: FleetView, intent: Intent) -> Intent:
         """The object is against a wall and its capture is being re-planned there (the wall a
@@ -509,12 +353,12 @@ class CaptureJob:
                 f"({x:.2f}, {y:.2f}, {math.degrees(th):.0f}°), at rest, {self.pin_fails} tries)"
             )
             return self._fail(view, Reason.PINNED, detail, [])
-        self.replans += 1
+        self.reach.replans += 1
         self.capture = new
         return self._start(view, pinned=True)
 
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
-        view = self._parked(view)
+        view = parked(view)
         if self.transport is not None:
             return self.transport.safety(view, intent)
         if self.inner is None or self.failed:
@@ -539,10 +383,10 @@ class CaptureJob:
             "assigned": None
             if self.assignment is None
             else [self.cfg.robots[i].id for i in self.assignment],
-            "reassignments": self.reassignments,
-            "wall_replans": self.replans,
-            "unreachable_nodes": len(self.unreachable),
-            "robots_lost": [self.cfg.robots[i].id for i in self.lost],
+            "reassignments": self.reassigner.count,
+            "wall_replans": self.reach.replans,
+            "unreachable_nodes": len(self.reach.unreachable),
+            "robots_lost": [self.cfg.robots[i].id for i in self.roster.lost],
             "outages": self.outage.outages,
             "loss_replans": self.loss_replans,
         }

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from controller.config import ConfigError
-from controller.mission.job import LOST_STALE_S, CaptureJob
+from controller.mission.job import CaptureJob
+from controller.mission.roster import LOST_STALE_S
 from controller.mission.types import FleetView, Phase, step
 from tests.support.config import base_config_dict, deep_update, make_config
 
@@ -107,7 +108,7 @@ def test_losing_a_spare_only_marks_it_unavailable():
     out = step(j, view(j, t, present=without(j.n, spare)))
     assert kinds(out) == ["robot_lost"]
     assert dict(out.events)["robot_lost"]["assigned"] is False
-    assert np.array_equal(j.assignment, before) and not j.available[spare]
+    assert np.array_equal(j.assignment, before) and not j.roster.available[spare]
     out = step(j, view(j, t + DT, present=without(j.n, spare)))
     assert "robot_lost" not in kinds(out)  # reported once
 
@@ -146,7 +147,7 @@ def test_a_robot_back_is_available_but_never_gets_its_old_point():
         intent = j.plan(view(j, t))
         assert first not in j.assignment and np.all(intent.velocities[first] == 0.0)
         j.safety(view(j, t), intent)
-    assert j.available[first]
+    assert j.roster.available[first]
     # another assigned robot is lost: the re-plan needs five robots and may pick it again
     second = int(j.assignment[0])
     t += DT
@@ -181,7 +182,7 @@ def test_start_wait_starts_without_a_robot_never_seen(hold_force):
     assert np.all(np.isfinite(out.commands)) and np.all(out.commands[missing] == 0.0)
     assert np.any(out.commands != 0.0)
     out = step(j, view(j, t + DT))  # seen at last: a spare
-    assert "robot_joined" in kinds(out) and j.available[missing]
+    assert "robot_joined" in kinds(out) and j.roster.available[missing]
     assert missing not in j.assignment
 
 

@@ -142,3 +142,10 @@ def test_the_transport_mission_is_the_same_job_entered_at_route():
     assert all(c is None for c in job.transport.grip.contacts.values())
     with pytest.raises(Exception, match="entered at plan or route"):
         CaptureJob(cfg, np.random.default_rng(0), entry=P.HOLD)
+
+
+def test_no_mission_module_over_400_lines():
+    """The mission layer stays in rooms a reader can hold: stages, not one class per phase."""
+    root = Path(seq.__file__).parent
+    sizes = {f.name: len(f.read_text().splitlines()) for f in root.glob("*.py")}
+    assert max(sizes.values()) <= 400, sizes

@@ -1,0 +1,75 @@
+"""Who takes part in the capture (pure): the one wait for the first estimates, robots gone
+(liveliness or link lost, or stale too long), lost and joining again, and robots never seen
+parked out of the way in the views the planners read."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from controller.mission.types import Event, FleetView
+
+# s a robot's estimate may stay stale (no pose for fleet.stale_after) before the capture takes
+# the robot for lost (a robot whose liveliness token or link is gone is lost at once)
+LOST_STALE_S = 0.5
+PARK = 1.0e3  # m: a robot never seen is parked this far away in the views the capture reads
+
+
+class Roster:
+    """``available`` (N,): robots an assignment may use; ``lost``: robots lost during the
+    capture, in order; ``first_t`` (s): the first estimates (a robot's or the object's)."""
+
+    def __init__(self, n: int) -> None:
+        self.available = np.ones(n, bool)
+        self.lost: list[int] = []
+        self.stale_since = np.full(n, np.nan)  # s: when each estimate turned stale
+        self.first_t: float | None = None
+
+    def seen(self, view: FleetView) -> np.ndarray:
+        """(N,) robots present with a fresh estimate (and the first estimates' time noted)."""
+        ready = np.asarray(view.present & ~view.stale, bool)
+        if self.first_t is None and (view.object_pose is not None or ready.any()):
+            self.first_t = view.t
+        return ready
+
+    def gone(self, view: FleetView) -> np.ndarray:
+        """(N,) robots gone this tick: liveliness or link lost, or stale for ``LOST_STALE_S``."""
+        stale = np.asarray(view.stale, bool)
+        self.stale_since[~stale] = np.nan
+        self.stale_since[stale & np.isnan(self.stale_since)] = view.t
+        held = stale & (view.t - np.nan_to_num(self.stale_since, nan=view.t) >= LOST_STALE_S)
+        return ~np.asarray(view.present, bool) | held
+
+    def joins(self, view: FleetView, gone: np.ndarray) -> list[Event]:
+        """Robots present with a fresh estimate again (or seen at last) are available again."""
+        back = ~self.available & ~gone & view.present & ~view.stale
+        self.available |= back
+        return [("robot_joined", {"t": view.t, "robot": view.ids[i]}) for i in np.flatnonzero(back)]
+
+    def losses(
+        self, view: FleetView, gone: np.ndarray, assignment: np.ndarray, phase: str
+    ) -> tuple[list[Event], bool]:
+        """Robots lost this tick (events), and whether one of them held a capture point."""
+        new = np.flatnonzero(gone & self.available)
+        self.available[new] = False
+        self.lost += [int(i) for i in new]
+        assigned = {int(i) for i in assignment}
+        events = [
+            ("robot_lost", {"t": view.t, "robot": view.ids[i], "phase": phase, "assigned": a})
+            for i, a in ((int(i), int(i) in assigned) for i in new)
+        ]
+        return events, any(int(i) in assigned for i in new)
+
+
+def parked(view: FleetView) -> FleetView:
+    """The view with robots never seen (no estimate: NaN) parked far away, standing still: the
+    planners and the safety filter read every robot's pose."""
+    unknown = ~np.all(np.isfinite(view.poses), axis=1)
+    if not unknown.any():
+        return view
+    poses, vels = view.poses.copy(), view.velocities.copy()
+    k = np.flatnonzero(unknown)
+    poses[k] = np.stack([PARK + 10.0 * k, np.full(len(k), PARK), np.zeros(len(k))], 1)
+    vels[k] = 0.0
+    return dataclasses.replace(view, poses=poses, velocities=vels)
