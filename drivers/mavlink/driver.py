@@ -118,9 +118,14 @@ class MavlinkDriver:
         idle: Callable[[float], None] | None = None,
         pool: LinkPool | None = None,
         strict: bool = False,
+        keepalive_thread: bool = False,
     ):
         """``strict``: refuse to connect when the vehicle's own setpoint timeout cannot be read or
-        is longer than ``max_vehicle_timeout`` (otherwise a warning)."""
+        is longer than ``max_vehicle_timeout`` (otherwise a warning). ``keepalive_thread`` (real
+        time only, e.g. ``fleet driver``): once connected, a thread of the driver services the
+        link every ``1 / SETPOINT_HZ`` s as well, so the heartbeat and setpoint keepalive go on
+        while the caller is busy elsewhere (an agent querying the e-stop latch for 2 s would
+        otherwise let a PX4 with ``COM_OF_LOSS_T`` = 1 s fall to HOLD right after connect)."""
         if cfg.profile not in ("ardurover", "px4"):
             raise DriverError(f"robot {cfg.id!r}: unknown MAVLink profile {cfg.profile!r}")
         if not cfg.url:
@@ -164,6 +169,9 @@ class MavlinkDriver:
         self._params: dict[str, float] = {}
         self.vehicle_timeout: float | None = None  # s, e.g. PX4 COM_OF_LOSS_T as read
         self.counters = {"setpoints": 0, "poses": 0, "unrouted": 0}
+        self._keepalive = keepalive_thread
+        self._ka_stop = threading.Event()
+        self._ka_thread: threading.Thread | None = None
 
     # ------------------------------------------------------------------ contract
 
@@ -196,6 +204,27 @@ class MavlinkDriver:
             raise
         self._connected = True
         log.info("%s: connected to system %d on %s", self.robot_id, self.system_id, self.cfg.url)
+        if self._keepalive and self._ka_thread is None:
+            self._ka_stop.clear()
+            self._ka_thread = threading.Thread(
+                target=self._keepalive_loop, name=f"mavlink-keepalive-{self.robot_id}", daemon=True
+            )
+            self._ka_thread.start()
+
+    def _keepalive_loop(self) -> None:
+        """Service the link (our heartbeat, the setpoint keepalive, the inbox) every
+        ``1 / SETPOINT_HZ`` s until close."""
+        while not self._ka_stop.wait(1.0 / SETPOINT_HZ):
+            if not self._lock.acquire(timeout=0.05):  # the caller is in a call: it services
+                continue
+            try:
+                link = self._link
+                if link is not None and self._connected:
+                    link.service(self.system_id)
+            except Exception:  # noqa: BLE001 - the keepalive must outlive a bad packet
+                log.exception("%s: keepalive failed", self.robot_id)
+            finally:
+                self._lock.release()
 
     @_locked
     def send(self, cmd: Twist2D) -> None:
@@ -265,6 +294,7 @@ class MavlinkDriver:
         """Zero the robot and release the link. Idempotent."""
         if self._closed:
             return
+        self._stop_keepalive()
         self.stop()
         if self.cfg.hold_on_close and self._link is not None and self._connected:
             try:
@@ -276,6 +306,12 @@ class MavlinkDriver:
         self._release()
 
     # ------------------------------------------------------------------ internals
+
+    def _stop_keepalive(self) -> None:
+        thread, self._ka_thread = self._ka_thread, None
+        if thread is not None:
+            self._ka_stop.set()  # it waits on our lock at most 0.05 s, then sees this
+            thread.join(timeout=2.0)
 
     def _release(self) -> None:
         link, self._link = self._link, None
