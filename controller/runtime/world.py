@@ -17,7 +17,9 @@ object, paced on the wall clock (real time). On the bus it plays what a lab's ha
   MAVLink to it with the real driver: the emulator takes SET_POSITION_TARGET_LOCAL_NED into the
   world body and reports LOCAL_POSITION_NED/ATTITUDE from the body's pose (NED), its failsafes
   (GUIDED target timeout, GCS failsafe, PX4 offboard loss) on the world's clock. It is pumped
-  after every physics step, as in the dry run. Nothing of it crosses the bus;
+  once per loop iteration at the wall clock's sim time: before the physics catches up (what
+  arrived meanwhile is stamped when it arrived, so a world held up by the machine does not trip
+  the vehicles' own timeouts) and after (telemetry). Nothing of it crosses the bus;
 - ground truth on ``sim/truth/**`` at ``fleet.rate_hz`` (scoring and logs only), for the
   MAVLink bodies too.
 
@@ -234,7 +236,7 @@ def run_world(
                 file=sys.stderr,
                 flush=True,
             )
-            stats = _serve(cfg, server, stop, duration, mono0)
+            stats = _serve(cfg, server, stop, duration, mono0, emulators)
     finally:
         for e in emulators:
             e.stop()
@@ -254,25 +256,30 @@ def run_world(
 
 
 def _start_vehicles(cfg: FleetConfig, hub: SimHub, vehicles: tuple[str, ...]) -> list:
-    """One emulated flight controller per id in ``vehicles``, on the world's (sim) clock, pumped
-    by the hub after every physics step (commands in, failsafes, telemetry out)."""
+    """One emulated flight controller per id in ``vehicles``, on the world's (sim) clock; the
+    caller pumps them (``pump_vehicles``)."""
     if not vehicles:
         return []
     from sim_backend.mavlink_vehicle import start_emulators
 
     robots = [r for r in cfg.robots if r.id in vehicles]
-    emulators = start_emulators(hub.world, robots, clock=lambda: hub.t)
+    return start_emulators(hub.world, robots, clock=lambda: hub.t)
 
-    def pump(t: float) -> None:
-        for e in emulators:
-            e.pump(t)
 
-    hub.step_hooks.append(pump)
-    return emulators
+def pump_vehicles(emulators, t: float) -> None:
+    """One round of every emulated vehicle at sim time ``t`` (s): MAVLink in, its failsafes and
+    command to the world, telemetry due out."""
+    for e in emulators:
+        e.pump(t)
 
 
 def _serve(
-    cfg: FleetConfig, server: WorldServer, stop: threading.Event, duration: float, mono0: float
+    cfg: FleetConfig,
+    server: WorldServer,
+    stop: threading.Event,
+    duration: float,
+    mono0: float,
+    emulators=(),
 ) -> tuple[float, float]:
     """The real-time loop. Returns (wall seconds served, seconds spent stepping physics)."""
     hub = server.hub
@@ -291,9 +298,12 @@ def _serve(
             )
         last = mono
         server.apply_commands(mono)
+        target = t_start + mono - mono0
+        pump_vehicles(emulators, target)  # MAVLink in, stamped at the wall clock's sim time
         b0 = time.perf_counter()
-        hub.advance_to(t_start + mono - mono0)
+        hub.advance_to(target)
         busy += time.perf_counter() - b0
+        pump_vehicles(emulators, hub.t)  # telemetry of the new state
         server.publish_samples()
         if mono - mono0 >= next_truth:
             server.publish_truth()

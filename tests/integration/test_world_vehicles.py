@@ -19,7 +19,12 @@ import pytest
 
 from controller.config import ConfigError
 from controller.runtime.wiring import make_hub
-from controller.runtime.world import _start_vehicles, emulated_vehicles, world_config
+from controller.runtime.world import (
+    _start_vehicles,
+    emulated_vehicles,
+    pump_vehicles,
+    world_config,
+)
 from controller.wire import Twist2D
 from drivers.mavlink.driver import MavlinkDriver
 from drivers.mavlink.link import LinkPool
@@ -72,8 +77,9 @@ def test_a_vehicle_url_off_loopback_is_refused_naming_the_key():
 
 
 def test_mavlink_bodies_move_in_the_shared_world_and_report_its_pose():
-    """The world's hub steps a PX4 and an ArduRover body next to a sim robot: the real driver's
-    setpoints move the bodies (NED setpoints, ENU world), its poses are the world's truth."""
+    """The world's loop steps a PX4 and an ArduRover body next to a sim robot: the real
+    driver's setpoints move the bodies (NED setpoints, ENU world), its poses are the world's
+    truth."""
     cfg = _mixed(free_udp_port(), free_udp_port())
     vehicles = emulated_vehicles(cfg, "all")
     hub = make_hub(world_config(cfg, vehicles))
@@ -81,8 +87,15 @@ def test_mavlink_bodies_move_in_the_shared_world_and_report_its_pose():
     emus = _start_vehicles(cfg, hub, vehicles)
     pool = LinkPool()
 
-    def idle(dt: float) -> None:
-        hub.advance_to(hub.t + max(dt, hub.dt))
+    connected: list[MavlinkDriver] = []
+
+    def idle(dt: float) -> None:  # one loop of the world; the connected drivers keep streaming
+        target = hub.t + max(dt, hub.dt)
+        pump_vehicles(emus, target)
+        hub.advance_to(target)
+        pump_vehicles(emus, hub.t)
+        for d in connected:
+            d.health()
 
     drivers = {
         r.id: MavlinkDriver(r, clock=lambda: hub.t, idle=idle, pool=pool)
@@ -92,14 +105,13 @@ def test_mavlink_bodies_move_in_the_shared_world_and_report_its_pose():
     try:
         for d in drivers.values():
             d.connect(timeout=3.0)
+            connected.append(d)
         start = {rid: hub.world.robot_pose(rid).copy() for rid in drivers}
         s0 = hub.world.robot_pose("s").copy()
         drivers["p"].send(Twist2D(t=hub.t, vx=0.0, vy=0.2, ttl=5.0))  # p: left = north
         drivers["a"].send(Twist2D(t=hub.t, vx=0.2, ttl=5.0))  # a faces north: forward
         for _ in range(100):  # 1 s
             idle(0.01)
-            for d in drivers.values():
-                d.health()
         moved = {rid: hub.world.robot_pose(rid) - start[rid] for rid in drivers}
         for rid in drivers:  # both went about 0.2 m north (+y), not east
             assert 0.12 < moved[rid][1] < 0.22 and abs(moved[rid][0]) < 0.02, (rid, moved)
@@ -177,3 +189,45 @@ def test_world_daemon_and_drivers_with_mavlink_vehicles_arrest_the_object(tmp_pa
     out = tail(world, 600)
     assert "2 MAVLink vehicles" in out and "real-time factor" in out, out
     print(f"\n{out}\nmixed rehearsal: {time.monotonic() - t0:.1f} s", file=sys.stderr)
+
+
+def test_a_world_held_up_by_the_machine_does_not_trip_the_vehicles_own_timeout():
+    """The world's loop held up 1.5 s (starved of CPU) while the PX4's driver kept streaming:
+    the setpoints that waited in the socket count from when they arrived, so the next loop's
+    physics catch-up does not read as 1.5 s without setpoints (COM_OF_LOSS_T 1 s: HOLD)."""
+    from drivers.mavlink import convert as mc
+
+    cfg = make_config([robot("p", "px4", free_udp_port(), 1), SIM])
+    vehicles = emulated_vehicles(cfg, "all")
+    hub = make_hub(world_config(cfg, vehicles))
+    emus = _start_vehicles(cfg, hub, vehicles)
+    wall = [hub.t]  # the driver's clock: the wall clock's sim time
+    served = [False]
+
+    def loop() -> None:  # one iteration of the world's loop at the wall clock's sim time
+        pump_vehicles(emus, wall[0])
+        hub.advance_to(wall[0])
+        pump_vehicles(emus, hub.t)
+
+    def idle(dt: float) -> None:
+        wall[0] += max(dt, hub.dt)
+        if served[0]:
+            drv.health()  # the driver streams on its own clock
+        loop()
+
+    drv = MavlinkDriver(cfg.robots[0], clock=lambda: wall[0], idle=idle, pool=LinkPool())
+    try:
+        drv.connect(timeout=3.0)
+        served[0] = True
+        assert emus[0].mode == mc.PX4_OFFBOARD
+        for _ in range(30):  # the world held up 1.5 s; the driver streams every 50 ms
+            wall[0] += 0.05
+            drv.health()
+        loop()
+        assert emus[0].mode == mc.PX4_OFFBOARD, "the world's stall tripped the vehicle"
+        assert hub.t == pytest.approx(wall[0], abs=hub.dt)
+    finally:
+        drv.close()
+        for e in emus:
+            e.stop()
+        hub.world.close()
