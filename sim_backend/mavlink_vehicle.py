@@ -9,13 +9,21 @@ run the whole MAVLink path in the dry run:
 - COMMAND_ACK for MAV_CMD_SET_MESSAGE_INTERVAL, MAV_CMD_DO_SET_MODE and
   MAV_CMD_COMPONENT_ARM_DISARM (UNSUPPORTED for anything else). ``heartbeat_rate_fixed``: a
   HEARTBEAT interval is refused (UNSUPPORTED) and heartbeats stay at 1 Hz, like many vehicles.
-- PARAM_REQUEST_READ by name: a PX4 answers ``COM_OF_LOSS_T`` (= ``offboard_loss_timeout``)
-  with PARAM_VALUE; unknown names get no answer (as PX4 does).
+- PARAM_REQUEST_READ by name, answered with PARAM_VALUE (``params()``); unknown names, and
+  those in ``unanswered`` (older firmware), get no answer (as PX4 and ArduPilot do). A PX4
+  answers ``COM_OF_LOSS_T`` (= ``offboard_loss_timeout``); an ArduRover ``FS_GCS_ENABLE``
+  (``fs_gcs_enable``), ``FS_TIMEOUT`` (= ``gcs_timeout``), ``FS_ACTION`` (``fs_action``) and
+  ``GUID_TIMEOUT`` (= ``target_timeout``), all as it behaves. (No ``FS_GCS_TIMEOUT``: the
+  emulated failsafe acts ``gcs_timeout`` s after the last GCS heartbeat, where a real rover waits
+  FS_GCS_TIMEOUT, or 2 s, then FS_TIMEOUT more: earlier, so a flapping failsafe shows here
+  first.)
 - ``ardurover``: GUIDED takes SET_POSITION_TARGET_LOCAL_NED with the velocity + yaw-rate mask as
   signed forward speed + turn rate (the lateral component is ignored), or velocity only as speed +
   heading; a mask with any velocity bit set ignores the velocity. A target older than
-  ``target_timeout`` (3 s) stops the rover. The GCS failsafe: once a HEARTBEAT from the GCS
-  system id has been seen, ``gcs_timeout`` s without one switches an armed rover to HOLD.
+  ``target_timeout`` (3 s) stops the rover. The GCS failsafe (``fs_gcs_enable``): once a
+  HEARTBEAT from the GCS system id has been seen, ``gcs_timeout`` s without one takes an armed
+  rover to its ``fs_action``: 2 HOLD (the default), 1/3 RTL, 4 SMART_RTL (reported in the
+  HEARTBEAT; the emulator does not drive them: any mode but GUIDED is a zero command), 0 none.
 - ``px4``: OFFBOARD takes body vx, vy and yaw rate (holonomic; the world drops vy for a diff
   robot). DO_SET_MODE OFFBOARD is refused unless setpoints have streamed above 2 Hz for at least
   1 s; in OFFBOARD, ``offboard_loss_timeout`` s without a setpoint switches to HOLD (AUTO.LOITER).
@@ -133,6 +141,9 @@ class VehicleEmulator:
         world_lock: threading.Lock | None = None,
         listener: Callable[[Any], None] | None = None,
         heartbeat_rate_fixed: bool = False,
+        fs_gcs_enable: bool = True,
+        fs_action: int = mc.ROVER_FS_ACTION_HOLD,
+        unanswered: Iterable[str] = (),
     ):
         """``bind``: a pymavlink url for the vehicle side, or ``HOST:PORT`` of the driver's
         listening port (-> ``udpout``); default derived from ``robot_cfg.url``."""
@@ -158,6 +169,9 @@ class VehicleEmulator:
         self.gcs_timeout = gcs_timeout
         self.target_timeout = target_timeout
         self.offboard_loss_timeout = offboard_loss_timeout
+        self.fs_gcs_enable = fs_gcs_enable
+        self.fs_action = fs_action
+        self.unanswered = frozenset(unanswered)
         self.heartbeat_rate_fixed = heartbeat_rate_fixed
         self.listener = listener
         self._world_lock = world_lock or threading.Lock()
@@ -375,10 +389,17 @@ class VehicleEmulator:
         return mc.RESULT_UNSUPPORTED
 
     def params(self) -> dict[str, float]:
-        """The vehicle parameters it answers by name."""
+        """The vehicle parameters it answers by name (its settings, as it behaves)."""
         if self.profile == "px4":
-            return {mc.PX4_OFFBOARD_LOSS_PARAM: float(self.offboard_loss_timeout)}
-        return {}
+            table = {mc.PX4_OFFBOARD_LOSS_PARAM: float(self.offboard_loss_timeout)}
+        else:
+            table = {
+                mc.ROVER_FS_GCS_ENABLE: 1.0 if self.fs_gcs_enable else 0.0,
+                mc.ROVER_FS_TIMEOUT: float(self.gcs_timeout),
+                mc.ROVER_FS_ACTION: float(self.fs_action),
+                mc.ROVER_GUID_TIMEOUT: float(self.target_timeout),
+            }
+        return {k: v for k, v in table.items() if k not in self.unanswered}
 
     def _on_param_read(self, m: Any) -> None:
         self.counters["param_reads"] += 1
@@ -447,13 +468,7 @@ class VehicleEmulator:
     def _update(self, now: float) -> None:
         vx = vy = wz = 0.0  # FLU
         if self.profile == "ardurover":
-            if self._gcs_last is not None and now - self._gcs_last > self.gcs_timeout:
-                if self.armed and self.mode != mc.ROVER_HOLD and not self.failsafe:
-                    log.warning("%s: GCS failsafe, HOLD", self.robot_id)
-                    self.mode = mc.ROVER_HOLD
-                    self.failsafe = "gcs"
-            elif self.failsafe == "gcs":
-                self.failsafe = ""
+            self._gcs_failsafe(now)
             tgt = self._target
             if self.armed and self.mode == mc.ROVER_GUIDED and tgt is not None:
                 if now - tgt[3] > self.target_timeout:
@@ -480,6 +495,24 @@ class VehicleEmulator:
         self.command = (vx, vy, wz)
         with self._world_lock:
             self.world.set_command(self.robot_id, vx, vy, wz)
+
+    def _gcs_failsafe(self, now: float) -> None:
+        """ArduRover's GCS failsafe: ``gcs_timeout`` s without a GCS heartbeat (once one was
+        seen) takes an armed rover, not in HOLD or RTL, to its ``fs_action``."""
+        if not self.fs_gcs_enable:
+            return
+        if self._gcs_last is not None and now - self._gcs_last > self.gcs_timeout:
+            quiet = (mc.ROVER_HOLD, mc.ROVER_RTL)
+            if self.armed and self.mode not in quiet and not self.failsafe:
+                mode = {mc.ROVER_FS_ACTION_HOLD: mc.ROVER_HOLD, 1: mc.ROVER_RTL, 3: mc.ROVER_RTL,
+                        4: mc.ROVER_SMART_RTL}.get(self.fs_action)  # fmt: skip
+                log.warning("%s: GCS failsafe, %s", self.robot_id, mc.mode_name("ardurover", mode)
+                            if mode is not None else "no action")  # fmt: skip
+                if mode is not None:
+                    self.mode = mode
+                self.failsafe = "gcs"
+        elif self.failsafe == "gcs":
+            self.failsafe = ""
 
     # ------------------------------------------------------------------ outbound
 

@@ -5,8 +5,9 @@ watchdog, e-stop. Runs on the robot's computer or beside the daemon, on the wall
 ``fleet.rate_hz`` (at least 20 Hz). A ``mavlink`` robot is the real vehicle at its url; a ``sim``
 robot runs alone in a real-time stand-in world of its own (bench-top bring-up without hardware).
 Exit 1 when the robot does not answer or its link is lost, 2 on bad config. ``--strict``: also
-refuse (exit 1) a MAVLink vehicle whose own setpoint timeout (PX4 ``COM_OF_LOSS_T``) is longer
-than the robot's ``max_vehicle_timeout`` or cannot be read (otherwise a warning).
+refuse (exit 1) a MAVLink vehicle whose own setpoint timeout (PX4 ``COM_OF_LOSS_T``; ArduRover
+its GUIDED timeout and GCS failsafe) is longer than the robot's ``max_vehicle_timeout``, cannot
+be read, or is unsafe (drivers/mavlink/failsafe.py; otherwise a warning).
 """
 
 from __future__ import annotations
@@ -26,8 +27,9 @@ def add_arguments(parser, word: str) -> None:
     parser.add_argument(
         "--strict",
         action="store_true",
-        help="refuse a MAVLink vehicle whose own setpoint timeout (PX4 COM_OF_LOSS_T) is longer "
-        "than the robot's max_vehicle_timeout or unreadable (default: warn)",
+        help="refuse a MAVLink vehicle whose own setpoint timeout (PX4 COM_OF_LOSS_T; ArduRover "
+        "GUID_TIMEOUT and GCS failsafe) is longer than the robot's max_vehicle_timeout, "
+        "unreadable or unsafe (default: warn)",
     )
 
 

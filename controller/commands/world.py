@@ -1,10 +1,15 @@
-"""``fleet world [--config F] [--duration S]``: the shared stand-in world as its own process.
+"""``fleet world [--config F] [--duration S] [--mavlink [IDS]]``: the shared stand-in world as
+its own process.
 
 One world (``sim.backend``) with every ``sim`` robot and the object, in real time, for a lab
 rehearsal on one machine (``controller.runtime.world``): it publishes ``object/pose`` the way a
 motion-capture system would and serves the ``sim`` agents of ``fleet driver`` (with
-``sim.world = "process"``). Stops on SIGINT/SIGTERM or after ``--duration`` seconds; exit 0, 2
-on bad config, 1 when its session cannot open.
+``sim.world = "process"``). ``--mavlink`` makes MAVLink robots bodies of the same world too,
+each behind an emulated flight controller answering its ``url`` on loopback (every MAVLink robot,
+or the ids given, comma-separated), so a mixed fleet rehearses together; their ``fleet driver``
+talks MAVLink to it. Stops on SIGINT/SIGTERM or after ``--duration`` seconds; exit 0, 2 on bad
+config (or a ``--mavlink`` id that is not a MAVLink robot with a loopback-answerable url), 1 when
+its session cannot open.
 """
 
 from __future__ import annotations
@@ -15,9 +20,21 @@ from controller.commands import add_config_argument, serve_until_signalled
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)
     parser.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
+    parser.add_argument(
+        "--mavlink",
+        nargs="?",
+        const="all",
+        default=None,
+        metavar="IDS",
+        help="emulate MAVLink robots as bodies of this world, answering their url on loopback "
+        "(all of them, or the ids given, comma-separated)",
+    )
 
 
 def run(args) -> int:
     from controller.runtime.world import run_world
 
-    return serve_until_signalled(args, run_world)
+    def serve(cfg, stop, duration):
+        return run_world(cfg, stop, duration, mavlink=args.mavlink)
+
+    return serve_until_signalled(args, serve)

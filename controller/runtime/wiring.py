@@ -133,7 +133,7 @@ def _mavlink_dry_run(links: DryRunLinks, cfg: FleetConfig, r: RobotConfig) -> An
 def _mavlink_local(cfg: FleetConfig, r: RobotConfig, wall0: float, strict: bool):
     from drivers.mavlink.driver import MavlinkDriver
 
-    return MavlinkDriver(r, clock=time.time, strict=strict), None
+    return MavlinkDriver(r, clock=time.time, strict=strict, keepalive_thread=True), None
 
 
 register_driver_class(

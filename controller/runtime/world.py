@@ -11,7 +11,17 @@ object, paced on the wall clock (real time). On the bus it plays what a lab's ha
   and command gate) and puts the robot's measured pose back on ``sim/world/<id>/pose``; a robot
   whose command stream is silent for the command's ``ttl`` is stopped (the vehicle's own
   setpoint timeout);
-- ground truth on ``sim/truth/**`` at ``fleet.rate_hz`` (scoring and logs only).
+- every MAVLink robot named in ``vehicles`` (``fleet world --mavlink``): a body of the same
+  world behind an emulated flight controller (``sim_backend.mavlink_vehicle``) that answers the
+  robot's ``url`` on loopback, as its vehicle would. The robot's agent (``fleet driver``) talks
+  MAVLink to it with the real driver: the emulator takes SET_POSITION_TARGET_LOCAL_NED into the
+  world body and reports LOCAL_POSITION_NED/ATTITUDE from the body's pose (NED), its failsafes
+  (GUIDED target timeout, GCS failsafe, PX4 offboard loss) on the world's clock. It is pumped
+  once per loop iteration at the wall clock's sim time: before the physics catches up (what
+  arrived meanwhile is stamped when it arrived, so a world held up by the machine does not trip
+  the vehicles' own timeouts) and after (telemetry). Nothing of it crosses the bus;
+- ground truth on ``sim/truth/**`` at ``fleet.rate_hz`` (scoring and logs only), for the
+  MAVLink bodies too.
 
 The world listens to nothing else: the object obeys its ``[object] motion`` and give-up rule
 and physics decides contacts, whatever the controller says. Its session joins a ``fleet hub``
@@ -27,9 +37,10 @@ import math
 import sys
 import threading
 import time
+from collections.abc import Iterable
 
 from controller import wire
-from controller.config import FleetConfig
+from controller.config import ConfigError, FleetConfig
 from controller.io.ratekeeper import Ratekeeper
 from controller.runtime.daemon import open_daemon_bus
 from controller.runtime.wiring import make_hub
@@ -47,7 +58,17 @@ class WorldServer:
     Time is passed in: ``time_offset`` (s) is added to sim time in every stamp (the wall-clock
     instant of sim time 0), ``mono`` (s, monotonic) times the vehicles' setpoint timeouts."""
 
-    def __init__(self, bus, hub: SimHub, time_offset: float, sigma_xy: float, sigma_theta: float):
+    def __init__(
+        self,
+        bus,
+        hub: SimHub,
+        time_offset: float,
+        sigma_xy: float,
+        sigma_theta: float,
+        vehicles: Iterable[str] = (),
+    ):
+        """``vehicles``: ids of the MAVLink bodies of the world (truth only: their poses and
+        commands go over MAVLink, not the bus)."""
         self.bus = bus
         self.hub = hub
         self.offset = time_offset
@@ -57,7 +78,10 @@ class WorldServer:
         self._cmds = bus.subscribe_topic("world_cmd")  # every robot's: the id is in the key
         self._poses = {rid: bus.publisher("world_pose", id=rid) for rid in ids}
         self._object = bus.publisher("object_pose")
-        self._truth_robot = {rid: bus.publisher("truth_robot", id=rid) for rid in ids}
+        self.vehicle_ids = tuple(vehicles)
+        self._truth_robot = {
+            rid: bus.publisher("truth_robot", id=rid) for rid in ids + self.vehicle_ids
+        }
         self._truth_object = bus.publisher("truth_object")
         self._expires: dict[str, float | None] = dict.fromkeys(ids)
         self._seq = dict.fromkeys(ids, 0)
@@ -145,45 +169,117 @@ class WorldServer:
         self._truth_object.put(truth(w.object_pose()))
 
 
-def world_config(cfg: FleetConfig) -> FleetConfig:
-    """The config of the shared world: its robots that are bodies of the world (``sim``; a
-    MAVLink robot is a real vehicle, not a body of the stand-in world)."""
-    return dataclasses.replace(cfg, robots=tuple(r for r in cfg.robots if r.spec.world_body))
+def world_config(cfg: FleetConfig, vehicles: Iterable[str] = ()) -> FleetConfig:
+    """The config of the shared world: its robots that are bodies of the world (``sim``), and
+    the MAVLink robots named in ``vehicles`` (emulated vehicles of this world; any other MAVLink
+    robot is a real vehicle, not a body of the stand-in world)."""
+    keep = set(vehicles)
+    return dataclasses.replace(
+        cfg, robots=tuple(r for r in cfg.robots if r.spec.world_body or r.id in keep)
+    )
 
 
-def run_world(cfg: FleetConfig, stop: threading.Event, duration: float = 0.0) -> int:
-    """Serve the world until ``stop`` (or ``duration`` s of wall time). Exit 0."""
-    hub = make_hub(world_config(cfg))
+def emulated_vehicles(cfg: FleetConfig, which: str | None) -> tuple[str, ...]:
+    """The MAVLink robots ``fleet world --mavlink [IDS]`` makes bodies of the world: none
+    (``which`` None), every one (``"all"``) or the comma-separated ids. ConfigError naming the
+    id when it is not a MAVLink robot of the config, or when its url cannot be answered on
+    loopback (``udpin`` on any host, ``udpout``/``tcp`` to 127.0.0.1)."""
+    from sim_backend.mavlink_vehicle import vehicle_url
+
+    if which is None:
+        return ()
+    mavlink = [r for r in cfg.robots if r.driver == "mavlink"]
+    if which.strip() == "all":
+        chosen = mavlink
+    else:
+        by_id = {r.id: r for r in mavlink}
+        chosen = []
+        for rid in (w.strip() for w in which.split(",") if w.strip()):
+            if rid not in by_id:
+                raise ConfigError(
+                    cfg.source,
+                    "robots",
+                    f"--mavlink {rid!r}: not a MAVLink robot; MAVLink robots: {sorted(by_id)}",
+                )
+            chosen.append(by_id[rid])
+    for r in chosen:
+        try:
+            vehicle_url(r.url)
+        except ValueError as exc:
+            i = cfg.robots.index(r)
+            raise ConfigError(cfg.source, f"robots[{i}].url", f"--mavlink: {exc}") from None
+    return tuple(r.id for r in chosen)
+
+
+def run_world(
+    cfg: FleetConfig, stop: threading.Event, duration: float = 0.0, mavlink: str | None = None
+) -> int:
+    """Serve the world until ``stop`` (or ``duration`` s of wall time). Exit 0.
+
+    ``mavlink``: which MAVLink robots are emulated vehicles of this world (``"all"`` or ids
+    separated by commas; None: none)."""
+    vehicles = emulated_vehicles(cfg, mavlink)
+    hub = make_hub(world_config(cfg, vehicles))
+    emulators = _start_vehicles(cfg, hub, vehicles)
     try:
         bus, how = open_daemon_bus(cfg)
         with bus:
             bus.declare_alive("world", "main")
             mono0, wall0 = time.monotonic(), time.time()
             noise = cfg.sim.pose_noise
-            server = WorldServer(bus, hub, wall0 - hub.t, noise.xy, noise.theta)
+            server = WorldServer(bus, hub, wall0 - hub.t, noise.xy, noise.theta, vehicles)
+            urls = {e.robot_id: e.url for e in emulators}
             print(
                 f"fleet world: fleet {cfg.fleet.name!r}, {cfg.sim.backend} backend, robots "
-                f"{list(server.robot_ids)}, on {list(cfg.zenoh.listen)} ({how})",
+                f"{list(server.robot_ids)}, MAVLink vehicles {urls}, on "
+                f"{list(cfg.zenoh.listen)} ({how})",
                 file=sys.stderr,
                 flush=True,
             )
-            stats = _serve(cfg, server, stop, duration, mono0)
+            stats = _serve(cfg, server, stop, duration, mono0, emulators)
     finally:
+        for e in emulators:
+            e.stop()
         hub.world.close()
     wall, busy = stats
     rtf, load = hub.t / max(wall, 1e-9), busy / max(wall, 1e-9)
+    setpoints = sum(e.counters["setpoints"] for e in emulators)
     print(
         f"fleet world: stopped at sim time {hub.t:.2f} s after {wall:.2f} s of wall time "
         f"(real-time factor {rtf:.3f}; stepping took {load:.1%} of the wall time); "
         f"{server.commands} commands, {server.samples} samples, "
-        f"{server.failsafe_stops} setpoint-timeout stops",
+        f"{server.failsafe_stops} setpoint-timeout stops; {len(emulators)} MAVLink vehicles, "
+        f"{setpoints} setpoints",
         file=sys.stderr,
     )
     return 0
 
 
+def _start_vehicles(cfg: FleetConfig, hub: SimHub, vehicles: tuple[str, ...]) -> list:
+    """One emulated flight controller per id in ``vehicles``, on the world's (sim) clock; the
+    caller pumps them (``pump_vehicles``)."""
+    if not vehicles:
+        return []
+    from sim_backend.mavlink_vehicle import start_emulators
+
+    robots = [r for r in cfg.robots if r.id in vehicles]
+    return start_emulators(hub.world, robots, clock=lambda: hub.t)
+
+
+def pump_vehicles(emulators, t: float) -> None:
+    """One round of every emulated vehicle at sim time ``t`` (s): MAVLink in, its failsafes and
+    command to the world, telemetry due out."""
+    for e in emulators:
+        e.pump(t)
+
+
 def _serve(
-    cfg: FleetConfig, server: WorldServer, stop: threading.Event, duration: float, mono0: float
+    cfg: FleetConfig,
+    server: WorldServer,
+    stop: threading.Event,
+    duration: float,
+    mono0: float,
+    emulators=(),
 ) -> tuple[float, float]:
     """The real-time loop. Returns (wall seconds served, seconds spent stepping physics)."""
     hub = server.hub
@@ -202,9 +298,12 @@ def _serve(
             )
         last = mono
         server.apply_commands(mono)
+        target = t_start + mono - mono0
+        pump_vehicles(emulators, target)  # MAVLink in, stamped at the wall clock's sim time
         b0 = time.perf_counter()
-        hub.advance_to(t_start + mono - mono0)
+        hub.advance_to(target)
         busy += time.perf_counter() - b0
+        pump_vehicles(emulators, hub.t)  # telemetry of the new state
         server.publish_samples()
         if mono - mono0 >= next_truth:
             server.publish_truth()

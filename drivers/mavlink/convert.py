@@ -155,3 +155,18 @@ MSG_LOCAL_POSITION_NED = 32
 # Parameters (PARAM_REQUEST_READ / PARAM_VALUE).
 PARAM_TYPE_REAL32 = 9  # MAV_PARAM_TYPE_REAL32
 PX4_OFFBOARD_LOSS_PARAM = "COM_OF_LOSS_T"  # s PX4 keeps the last setpoint without a stream
+
+# ArduRover failsafe parameters read on connect (Rover/Parameters.cpp, Rover/failsafe.cpp,
+# Rover/mode_guided.cpp of ArduPilot; see drivers/mavlink/failsafe.py).
+ROVER_FS_GCS_ENABLE = "FS_GCS_ENABLE"  # 0 disabled (default), 1 enabled, 2 continue a mission
+ROVER_FS_TIMEOUT = "FS_TIMEOUT"  # s a failsafe condition lasts before FS_ACTION (default 1.5)
+ROVER_FS_ACTION = "FS_ACTION"  # 0 nothing, 1 RTL, 2 Hold, 3 SmartRTL or RTL, 4 SmartRTL or Hold
+ROVER_FS_GCS_TIMEOUT = "FS_GCS_TIMEOUT"  # s without a GCS heartbeat: the condition (newer fw)
+ROVER_GUID_TIMEOUT = "GUID_TIMEOUT"  # s GUIDED keeps a speed/turn-rate target (newer fw)
+ROVER_FS_ACTIONS = {0: "nothing", 1: "RTL", 2: "Hold", 3: "SmartRTL or RTL",
+                    4: "SmartRTL or Hold"}  # fmt: skip
+ROVER_FS_ACTION_HOLD = 2
+ROVER_RTL = 11
+ROVER_SMART_RTL = 12
+ROVER_GCS_LOST_FIXED = 2.0  # s: firmware without FS_GCS_TIMEOUT starts the condition here
+ROVER_GUIDED_TIMEOUT_FIXED = 3.0  # s: firmware without GUID_TIMEOUT ("target not received")

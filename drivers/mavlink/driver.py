@@ -38,10 +38,13 @@ or not (a vehicle that went quiet may still hear us, and a caller idle for longe
 timeout must not leave the vehicle on its last setpoint); ``close()`` then switches the vehicle
 to HOLD when ``hold_on_close`` is set (fire and forget: close never waits).
 
-The vehicle's own timeout: on connect a PX4 is asked for ``COM_OF_LOSS_T`` (how long it keeps
-the last setpoint once our stream stops, i.e. how far a rover drives on after this process
-dies); above ``max_vehicle_timeout`` connect warns, or refuses with ``strict`` (``fleet driver
---strict``). ArduRover's GUIDED velocity timeout is a fixed 3 s (no parameter).
+The vehicle's own timeout: on connect the driver reads how long the vehicle keeps the last
+setpoint once our stream stops, i.e. how far a rover drives on after this process dies
+(``vehicle_timeout``): a PX4's ``COM_OF_LOSS_T``; an ArduRover's GUIDED target timeout
+(``GUID_TIMEOUT``, a fixed 3 s in firmware without it) and its GCS failsafe (``FS_GCS_ENABLE``,
+``FS_ACTION``, ``FS_TIMEOUT``, ``FS_GCS_TIMEOUT``), judged in drivers/mavlink/failsafe.py. When
+it is unknown, unsafe (no GCS failsafe, a failsafe that drives home) or above
+``max_vehicle_timeout``, connect warns, or refuses with ``strict`` (``fleet driver --strict``).
 """
 
 from __future__ import annotations
@@ -63,6 +66,7 @@ os.environ["MAVLINK20"] = "1"  # before pymavlink picks its dialect: MAVLink 2 m
 from controller.wire import PoseMeasurement, Twist2D  # noqa: E402
 from drivers.base import ConnectTimeout, DriverError, LinkHealth, LinkLost, capabilities_of  # noqa: E402
 from drivers.mavlink import convert as mc  # noqa: E402
+from drivers.mavlink import failsafe  # noqa: E402
 from drivers.mavlink.link import (  # noqa: E402
     AUTOPILOT_COMPONENT,
     LinkPool,
@@ -118,9 +122,14 @@ class MavlinkDriver:
         idle: Callable[[float], None] | None = None,
         pool: LinkPool | None = None,
         strict: bool = False,
+        keepalive_thread: bool = False,
     ):
         """``strict``: refuse to connect when the vehicle's own setpoint timeout cannot be read or
-        is longer than ``max_vehicle_timeout`` (otherwise a warning)."""
+        is longer than ``max_vehicle_timeout`` (otherwise a warning). ``keepalive_thread`` (real
+        time only, e.g. ``fleet driver``): once connected, a thread of the driver services the
+        link every ``1 / SETPOINT_HZ`` s as well, so the heartbeat and setpoint keepalive go on
+        while the caller is busy elsewhere (an agent querying the e-stop latch for 2 s would
+        otherwise let a PX4 with ``COM_OF_LOSS_T`` = 1 s fall to HOLD right after connect)."""
         if cfg.profile not in ("ardurover", "px4"):
             raise DriverError(f"robot {cfg.id!r}: unknown MAVLink profile {cfg.profile!r}")
         if not cfg.url:
@@ -162,8 +171,14 @@ class MavlinkDriver:
         self._hb_gaps: deque[float] = deque(maxlen=5)  # s between the last vehicle heartbeats
         self._widened_logged = False
         self._params: dict[str, float] = {}
-        self.vehicle_timeout: float | None = None  # s, e.g. PX4 COM_OF_LOSS_T as read
+        # s the vehicle keeps our last setpoint by itself (PX4 COM_OF_LOSS_T; ArduRover its
+        # GUIDED timeout or GCS failsafe), as read on connect; None: unknown
+        self.vehicle_timeout: float | None = None
+        self.vehicle_params: dict[str, float] = {}  # the ArduRover failsafe parameters read
         self.counters = {"setpoints": 0, "poses": 0, "unrouted": 0}
+        self._keepalive = keepalive_thread
+        self._ka_stop = threading.Event()
+        self._ka_thread: threading.Thread | None = None
 
     # ------------------------------------------------------------------ contract
 
@@ -196,6 +211,27 @@ class MavlinkDriver:
             raise
         self._connected = True
         log.info("%s: connected to system %d on %s", self.robot_id, self.system_id, self.cfg.url)
+        if self._keepalive and self._ka_thread is None:
+            self._ka_stop.clear()
+            self._ka_thread = threading.Thread(
+                target=self._keepalive_loop, name=f"mavlink-keepalive-{self.robot_id}", daemon=True
+            )
+            self._ka_thread.start()
+
+    def _keepalive_loop(self) -> None:
+        """Service the link (our heartbeat, the setpoint keepalive, the inbox) every
+        ``1 / SETPOINT_HZ`` s until close."""
+        while not self._ka_stop.wait(1.0 / SETPOINT_HZ):
+            if not self._lock.acquire(timeout=0.05):  # the caller is in a call: it services
+                continue
+            try:
+                link = self._link
+                if link is not None and self._connected:
+                    link.service(self.system_id)
+            except Exception:  # noqa: BLE001 - the keepalive must outlive a bad packet
+                log.exception("%s: keepalive failed", self.robot_id)
+            finally:
+                self._lock.release()
 
     @_locked
     def send(self, cmd: Twist2D) -> None:
@@ -265,6 +301,7 @@ class MavlinkDriver:
         """Zero the robot and release the link. Idempotent."""
         if self._closed:
             return
+        self._stop_keepalive()
         self.stop()
         if self.cfg.hold_on_close and self._link is not None and self._connected:
             try:
@@ -276,6 +313,12 @@ class MavlinkDriver:
         self._release()
 
     # ------------------------------------------------------------------ internals
+
+    def _stop_keepalive(self) -> None:
+        thread, self._ka_thread = self._ka_thread, None
+        if thread is not None:
+            self._ka_stop.set()  # it waits on our lock at most 0.05 s, then sees this
+            thread.join(timeout=2.0)
 
     def _release(self) -> None:
         link, self._link = self._link, None
@@ -483,44 +526,60 @@ class MavlinkDriver:
             )
         )
 
-    def _read_param(self, name: str, timeout: float) -> float | None:
-        """A vehicle parameter by name (PARAM_REQUEST_READ, re-asked every COMMAND_RETRY s), or
-        None when it does not answer within ``timeout``."""
-        self._params.pop(name, None)
+    def _read_params(
+        self, names: tuple[str, ...], timeout: float, optional: tuple[str, ...] = ()
+    ) -> dict[str, float]:
+        """Vehicle parameters by name (PARAM_REQUEST_READ for each not yet answered, re-asked
+        every COMMAND_RETRY s) until all of ``names`` answered or ``timeout`` s; the
+        ``optional`` ones (parameters older firmware lacks) get COMMAND_RETRY s more once
+        ``names`` are in. Returns those answered."""
+        wanted = names + optional
+        for name in wanted:
+            self._params.pop(name, None)
         deadline = self._clock() + timeout
-        pid = name.encode()
+        grace: float | None = None
         while True:
-            self._send(
-                lambda mav: mav.param_request_read_encode(
-                    self.system_id, AUTOPILOT_COMPONENT, pid, -1
-                )
-            )
+            for name in wanted:
+                if name not in self._params:
+                    pid = name.encode()
+                    self._send(
+                        lambda mav, pid=pid: mav.param_request_read_encode(
+                            self.system_id, AUTOPILOT_COMPONENT, pid, -1
+                        )
+                    )
             retry_at = self._clock() + COMMAND_RETRY
-            if self._wait_until(lambda: name in self._params, min(deadline, retry_at)):
-                return self._params[name]
-            if self._clock() >= deadline or time.monotonic() > self._wall_deadline:
-                return None
+            self._wait_until(
+                lambda: all(n in self._params for n in wanted), min(deadline, retry_at)
+            )
+            now = self._clock()
+            if all(n in self._params for n in names) and grace is None:
+                grace = now + COMMAND_RETRY
+            done = all(n in self._params for n in wanted) or (grace is not None and now >= grace)
+            if done or now >= deadline or time.monotonic() > self._wall_deadline:
+                return {n: self._params[n] for n in wanted if n in self._params}
 
     def _check_vehicle_timeout(self, timeout: float) -> None:
-        """Read the vehicle's own setpoint timeout where it is a parameter (PX4
-        ``COM_OF_LOSS_T``) and warn, or refuse when ``strict``, above ``max_vehicle_timeout``."""
-        if self.profile != "px4":
-            return
-        name = mc.PX4_OFFBOARD_LOSS_PARAM
+        """Read how long the vehicle keeps our last setpoint by itself (PX4 ``COM_OF_LOSS_T``;
+        ArduRover ``FS_GCS_ENABLE``, ``FS_TIMEOUT``, ``FS_ACTION``, and ``FS_GCS_TIMEOUT``,
+        ``GUID_TIMEOUT`` where the firmware has them: drivers/mavlink/failsafe.py) and warn, or
+        refuse when ``strict``, when that is unsafe or above ``max_vehicle_timeout``."""
         limit = self.cfg.max_vehicle_timeout
-        value = self._read_param(name, min(timeout, PARAM_READ_TIMEOUT))
-        self.vehicle_timeout = value
-        where = f"robot {self.robot_id!r}: system {self.system_id} on {self.cfg.url}"
-        if value is None:
-            problem = f"{where} did not answer a read of {name}: its offboard timeout is unknown"
-        elif value > limit + 1e-6:
-            problem = (
-                f"{where} has {name} = {value:g} s, longer than max_vehicle_timeout = {limit:g} s:"
-                f" if this process dies the rover drives on for {value:g} s; set {name} <= "
-                f"{limit:g} on the vehicle"
-            )
+        wait = min(timeout, PARAM_READ_TIMEOUT)
+        if self.profile == "px4":
+            name = mc.PX4_OFFBOARD_LOSS_PARAM
+            verdict = failsafe.assess_px4(self._read_params((name,), wait).get(name), limit)
         else:
+            self.vehicle_params = self._read_params(
+                failsafe.ROVER_REQUIRED, wait, failsafe.ROVER_OPTIONAL
+            )
+            verdict = failsafe.assess_ardurover(self.vehicle_params, limit, self.heartbeat_period)
+        self.vehicle_timeout = verdict.stop_after
+        where = f"robot {self.robot_id!r}: system {self.system_id} on {self.cfg.url}"
+        for note in verdict.notes:
+            log.warning("%s %s", where, note)
+        if not verdict.problems:
             return
+        problem = f"{where} " + "; ".join(verdict.problems)
         if self.strict:
             raise DriverError(problem + " (refused: --strict)")
         log.warning("%s", problem)
