@@ -291,3 +291,5 @@ def test_a_stalled_world_is_one_outage_not_six_losses_and_the_job_goes_on(tmp_pa
     assert len(set(outages[0]["data"]["robots"]) & set(ROBOTS)) >= 2, outages
     assert all(e["data"]["lost"] == [] and e["data"]["duration_s"] < 3.0 for e in ends), ends
     assert events_of(run, "robot_lost") == [], events_of(run, "robot_lost")
+    lasted = [e["data"]["duration_s"] for e in ends]
+    print(f"\noutages {lasted} s; arrest {t_arrest - ends[0]['t']:.1f} s after", file=sys.stderr)
