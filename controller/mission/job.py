@@ -23,7 +23,14 @@ from controller.mission.reach import Reach
 from controller.mission.roster import Roster, parked
 from controller.mission.sequence import Cue, Failure, JobState, Measures, next_phase
 from controller.mission.transport import TransportMission, route_planner_for
-from controller.mission.types import FleetView, Intent, MissionOutput, Phase, Reason
+from controller.mission.types import (
+    FleetView,
+    Intent,
+    MissionError,
+    MissionOutput,
+    Phase,
+    Reason,
+)
 from controller.planning.capture_set import (  # noqa: F401 - re-exported: the job's planning
     TOKEN_LOAD,
     WALL_TOLERANCE,
@@ -33,12 +40,6 @@ from controller.planning.capture_set import (  # noqa: F401 - re-exported: the j
     replan_for_robots,
     replan_pinned,
 )
-
-
-class MissionError(RuntimeError):
-    """The mission cannot be built for this fleet (e.g. no feasible capture plan: the message
-    gives the planner's reason)."""
-
 
 PIN_RETRIES = 6  # re-plans that find no set before an object at rest is declared pinned
 PIN_STILL_SPEED = 0.03  # m/s: an object slower than this has come to rest against the wall

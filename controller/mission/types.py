@@ -52,6 +52,11 @@ class Reason(StrEnum):
 Event = tuple[str, dict[str, Any]]
 
 
+class MissionError(RuntimeError):
+    """The mission cannot be built for this fleet (e.g. no feasible capture plan: the message
+    gives the planner's reason). Beside ``Phase`` and ``Reason``: what a mission can answer."""
+
+
 @dataclass(frozen=True)
 class FleetView:
     """What the mission sees each tick: estimates as N×k arrays in config robot order (SI units)."""
