@@ -73,6 +73,7 @@ def run_one(sc: ArrestScenario, out_dir: Path) -> dict:
         ),
         "failure": res.get("failure"),
         "min_clearance_m": res.get("min_clearance_m"),
+        "object_min_clearance_m": res.get("object_min_clearance_m"),
         "phases": [p["phase"] for p in res.get("phases", [])],
         "wall_s": round(time.perf_counter() - t0, 2),
     }
@@ -82,6 +83,7 @@ def run_one(sc: ArrestScenario, out_dir: Path) -> dict:
 
 EDGE_SPEEDS = "0.25,0.30,0.35,0.40,0.45,0.50"
 EDGE_SEEDS = 10
+WALL_CLEAR_M = 0.05  # m: an arrest counts only if the object never came this near a wall
 HOLD_MARGIN_S = 12.0  # s of sim time after the object would reach a wall: hold, arrest, settle
 
 
@@ -158,8 +160,9 @@ def rules(variant: str):
 def speed_edge(speeds: list[float], seeds: int, variants: list[str], out_dir: Path) -> dict:
     """Arrest rate per object speed in open space (6 omni robots at 0.5 m/s), ``seeds`` runs
     per speed, each variant on the same seeds: an arrest counts only if it came before the
-    object reached a wall (no wall re-plan, and within the time it takes the object to get
-    there plus the hold)."""
+    object reached a wall (no wall re-plan, the object never within ``WALL_CLEAR_M`` of a wall
+    by ground truth, and the run stops at the time the object would take to get there plus
+    the hold)."""
     out: dict = {"seeds": seeds, "variants": {}}
     for variant in variants:
         rows, per_seed = [], {}
@@ -169,12 +172,21 @@ def speed_edge(speeds: list[float], seeds: int, variants: list[str], out_dir: Pa
                 sc, t_wall = edge_case(v, k)
                 with rules(variant):
                     row = run_one(sc, out_dir)
-                hit = row["outcome"] == "arrest" and row["wall_replans"] == 0
+                clear = row["object_min_clearance_m"]
+                hit = (
+                    row["outcome"] == "arrest"
+                    and row["wall_replans"] == 0
+                    and clear is not None
+                    and clear > WALL_CLEAR_M
+                )
                 ok += hit
                 per_seed[f"{v:.2f}/{k}"] = {
                     "arrest": bool(hit),
+                    "outcome": row["outcome"],
+                    "wall_replans": row["wall_replans"],
                     "t_s": row["arrest_time_s"],
                     "t_wall_s": round(t_wall, 1),
+                    "object_min_clearance_m": None if clear is None else round(clear, 3),
                 }
             lo, hi = wilson(ok, seeds)
             rows.append(
