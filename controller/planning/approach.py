@@ -145,6 +145,11 @@ class PlannerParams:
     alpha_growth: float
     alpha_max: float  # rad
     gain: float = 1.5  # 1/s, proportional on the distance to the goal
+    # m over which the goal's own velocity (feed-forward) fades in as the robot nears it; None:
+    # always all of it (the rule before, a baseline for bench/arrest.py). A far goal is a
+    # meeting point already predicted (interception): riding on the target's velocity on the
+    # way there slows a robot that comes at an object head-on to the difference of the speeds
+    ride_reach: float | None = 1.0
 
 
 def plan_velocities(
@@ -219,12 +224,20 @@ def plan_velocities(
         sp = max_speed[i] if full else speed_fb[i]
         v = sp * dvec
         if case == NO_HIT:
-            v = v + goal_velocity[i]
+            v = v + _ride_share(dist[i], params.ride_reach) * goal_velocity[i]
         s = np.linalg.norm(v)
         if s > max_speed[i]:
             v *= max_speed[i] / s
         vel[i] = v
     return vel, new_head, cases
+
+
+def _ride_share(dist: float, reach: float | None) -> float:
+    """The share of the goal's velocity a robot ``dist`` m from it rides on: all of it at the
+    goal, none from ``reach`` m on (None: all of it everywhere)."""
+    if reach is None:
+        return 1.0
+    return float(np.clip(1.0 - dist / max(reach, 1e-9), 0.0, 1.0))
 
 
 def limit_accel(v_new: np.ndarray, v_old: np.ndarray, max_accel: np.ndarray, dt: float):
@@ -317,11 +330,18 @@ def interception_times(
     target_velocity: np.ndarray,
     speed: np.ndarray,
     horizon: float,
+    oncoming: bool = True,
 ) -> np.ndarray:
     """Earliest times (s) at which robots (N, 2) at ``speed`` (N,) m/s can meet targets (M, 2)
-    moving at constant ``target_velocity`` (M, 2): the positive root of
-    ``|d + v T| = s T`` with ``d`` the target's offset; ``horizon`` where a target outruns the
-    robot (or is further than that). Returns (M, N)."""
+    moving at constant ``target_velocity`` (M, 2): the least positive root of
+    ``|d + v T| = s T`` with ``d`` the target's offset; ``horizon`` where there is none (a
+    target that runs away at least as fast as the robot) or it lies further than that.
+    Returns (M, N).
+
+    A target as fast as the robot, or faster, is still met when it comes toward the robot
+    (``d·v < 0``): the robot waits on its path (the earlier root of the two; for equal speeds
+    the one root ``-c/b``). ``oncoming=False`` is the rule before: only a target slower than
+    the robot is met (a baseline for ``bench/arrest.py``)."""
     d = targets[:, None, :] - robots[None, :, :]  # (M, N, 2)
     v = np.broadcast_to(target_velocity[:, None, :], d.shape)
     s2 = np.asarray(speed, float)[None, :] ** 2
@@ -330,6 +350,15 @@ def interception_times(
     c = np.sum(d * d, axis=-1)
     disc = b * b - 4.0 * a * c
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a)
-    ok = (a < -1e-12) & (disc >= 0) & np.isfinite(t) & (t >= 0)
+        # the earlier root: for a < 0 the one positive root, for a > 0 (b < 0) the first
+        # meeting of the two; -c/b when the speeds are equal
+        quad = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a)
+        lin = -c / b
+    equal = np.abs(a) <= 1e-9 * np.maximum(s2, 1e-12)
+    t = np.where(equal, lin, quad)
+    ok = (a < -1e-12) & ~equal
+    if oncoming:
+        ok |= (b < 0) & (equal | (disc >= 0))
+    ok &= (disc >= 0) | equal
+    ok &= np.isfinite(t) & (t >= 0)
     return np.where(ok, np.minimum(t, horizon), horizon)

@@ -24,8 +24,8 @@ class Arrangement:
     """Contact points and outward normals (K, 2), object frame; ``value``: Eq. 5's value, or
     the capacity of an LP set (≥ 1: it can move the object as asked); ``pushers``: K;
     ``basis``: ``eq5`` or ``lp_capacity``; ``feasible``: the set can move the object at all
-    (False: the whole fleet, every robot at its limit, cannot overcome the floor friction:
-    ``detail`` says the force needed against the force available)."""
+    (False: no set of contacts found, every robot at its limit, overcomes the floor friction
+    along the segment: ``detail`` says the force needed against the force available)."""
 
     points: np.ndarray
     normals: np.ndarray
@@ -73,36 +73,47 @@ def plan_arrangement(
     """The contact set for a segment whose unit twist is ``twist`` (object frame), pushed at
     ``speed`` m/s by ``robots`` robots whose weakest pushes ``weakest`` N: Sharma's Eq. 5 along
     the travel direction with the fewest pushers that overcome the floor friction (plus one for
-    the torque), then one more, each confirmed by the contact-force LP at the weakest robot's
-    limit; a segment that mostly turns the object, or one no Eq. 5 set can push, gets the
-    least-force set of the LP over all candidate nodes (:func:`wrench_set`). ``strategy``
-    ``serpentine`` (Sharma §4.1 as published): Eq. 5 for every robot, nothing else."""
+    the torque), then one more at a time up to every robot, each confirmed by the
+    contact-force LP at the weakest robot's limit; a segment that mostly turns the object, or
+    one no Eq. 5 set can push, gets the least-force set of the LP over all candidate nodes
+    (:func:`wrench_set`). When that set cannot produce the wrench either, the arrangement is
+    not ``feasible`` (the transport fails ``too_heavy`` before anyone pushes), with a
+    ``detail`` naming the force needed, the share the best set reaches and the fleet's summed
+    force; a turning segment is given the benefit of the doubt while the fleet's summed force
+    covers the need. ``strategy`` ``serpentine`` (Sharma §4.1 as published): Eq. 5 for every
+    robot, nothing else."""
     d = twist[:2] if np.any(twist[:2]) else np.array([1.0, 0.0])
     if strategy == "serpentine":  # Sharma §4.1: Eq. 5 for every robot, alone
         pts, nrm, value = pushing_set(cfg, d, robots, rng)
         return Arrangement(pts, nrm, value, robots, "eq5")
     lp = ContactForceLP(max(robots, 1), friction=model.contact_friction > 0)
     twist_v = twist * speed
-    if abs(twist[2]) * model.mean_radius <= TURN_SHARE:
+    turning = abs(twist[2]) * model.mean_radius > TURN_SHARE
+    if not turning:
         friction = model.floor_friction * model.mass * 9.81
         first = int(min(robots, math.ceil(friction / weakest) + 1))
-        for n in range(first, min(first + 1, robots) + 1):
+        # more pushers while the LP says the set cannot push, up to every robot
+        for n in range(first, robots + 1):
             pts, nrm, value = pushing_set(cfg, d, n, rng)
             if can_push(lp, model, twist_v, pts, -nrm, np.full(len(pts), weakest)):
                 return Arrangement(pts, nrm, value, n, "eq5")
     pts, nrm, value, n = wrench_set(cfg, model, twist_v, weakest, robots, turn_margin)
     need = float(np.hypot(*required_wrench(twist_v, model.mass, model.floor_friction, 1.0)[:2]))
-    if value * turn_margin >= 1.0 - 1e-9 or need <= robots * weakest:
-        # it holds, or the fleet's summed force would do (a turn's set short of its margin, a
-        # local optimum of the set): pushed as before
+    fleet = robots * weakest
+    if value * turn_margin >= 1.0 - 1e-9 or (turning and need <= fleet):
+        # it pushes (the LP: the set produces the wrench needed, every contact within the
+        # weakest robot's force), or a turn short of it with the fleet's summed force to spare
+        # (the LP's turning load is a rough model: turn-180-pybullet turns with such a set)
         return Arrangement(pts, nrm, value, n, "lp_capacity")
-    # the best set cannot move it and every robot at its limit would not overcome the floor
-    # friction: the LP says so before anyone pushes
+    # no set found can push the object along this segment: the LP knows it before anyone
+    # pushes (before, a push set short of the floor friction stalled after nine re-arrangements)
     detail = (
         f"too heavy to push: the floor friction needs {need:.1f} N; the best set of contacts "
         f"({n} robots where they fit, {weakest:g} N each) reaches {100 * value * turn_margin:.0f}"
-        f" % of it; the {robots} robots have {robots * weakest:.1f} N in all"
+        f" % of it; the {robots} robots have {fleet:.1f} N in all"
     )
+    if need <= fleet:
+        detail += " but cannot all push on the faces that move it this way"
     return Arrangement(pts, nrm, value, n, "lp_capacity", feasible=False, detail=detail)
 
 

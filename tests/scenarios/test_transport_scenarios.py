@@ -82,6 +82,15 @@ SCENARIOS = [
         kinds="dddddd",
     ),  # fmt: skip
 ]
+TOO_HEAVY = Scenario(  # floor friction 14.4 N, 40 % of the six robots' 36 N; pushed along x on
+    "too-heavy-pybullet",  # its 0.5 m face, where two robots of 6 N fit
+    CRATE,
+    (1.5, 2.5, 0.0),
+    (4.5, 2.5, 0.0),
+    backend="pybullet",
+    mass=4.89,
+    floor_friction=0.3,
+)
 UNREACHABLE = Scenario(
     "unreachable-goal", CRATE, (1.5, 2.0, 0.0), (6.1, 4.2, 0.0), obstacles=ENCLOSURE
 )
@@ -124,6 +133,20 @@ def test_an_unreachable_goal_fails_cleanly_with_no_route(tmp_path):
     assert judge(res) == []
     moved = (res["final_object_pose"][0] - 1.5) ** 2 + (res["final_object_pose"][1] - 2.0) ** 2
     assert moved**0.5 < 0.02  # the object was not pushed
+
+
+def test_a_crate_the_robots_that_fit_cannot_push_fails_too_heavy_at_once(tmp_path):
+    """The whole fleet's force would do (36 N for 14.4 N) but only two robots fit on the face
+    that pushes it along the route: the LP refuses the push before anyone pushes, and the run
+    fails ``too_heavy`` at once, the crate unmoved (before: nine re-arrangements, then
+    ``stalled``)."""
+    res = run(TOO_HEAVY, tmp_path)
+    assert res["status"] == "failed" and res["reason"] == "too_heavy", res["failure"]
+    assert "needs 14.4 N" in res["failure"]["detail"]
+    assert res["failure"]["t"] < 5.0 and res["rearrangements"] == 1
+    assert judge(res) == []
+    moved = (res["final_object_pose"][0] - 1.5) ** 2 + (res["final_object_pose"][1] - 2.5) ** 2
+    assert moved**0.5 < 0.02  # nobody pushed it
 
 
 def test_replay_reports_the_transport_as_the_run_did(runs, capsys):

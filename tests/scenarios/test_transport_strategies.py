@@ -15,9 +15,31 @@ import math
 
 import pytest
 
+from controller.config import TRANSPORT_STRATEGIES
 from controller.mission.factory import build_mission
 from controller.runtime.dry_run import DryRun, judge
+from tests.support.config import base_config_dict
 from tests.support.transport_scenarios import CRATE, Scenario, scenario_config
+
+# each local planner's closed-loop test: sa is the shipped default, so every transport scenario
+# (tests/scenarios/test_transport_scenarios.py) runs it; the other two run here
+CLOSED_LOOP = {
+    "sa": "tests/scenarios/test_transport_scenarios.py::test_the_object_is_delivered",
+    "downhill": "test_downhill_delivers_the_object",
+    "serpentine": "test_serpentine_pushes_the_object_most_of_the_way_cleanly",
+}
+
+
+def test_every_strategy_runs_in_a_closed_loop_test():
+    """A strategy added to the registry without a closed-loop test fails here; so does a new
+    default that would leave ``sa`` out of the transport suite (its scenarios patch no
+    strategy)."""
+    assert set(CLOSED_LOOP) == set(TRANSPORT_STRATEGIES)
+    assert base_config_dict(transport=True)["transport"]["strategy"] == "sa"
+    from tests.scenarios import test_transport_scenarios as suite
+
+    assert all("strategy" not in sc.patch.get("transport", {}) for sc in suite.SCENARIOS)
+    assert all(name in globals() for name in list(CLOSED_LOOP.values())[1:])
 
 
 def run(strategy: str, tmp_path) -> tuple[dict, object]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from controller import geometry
 from controller.planning import approach
@@ -135,3 +136,48 @@ def test_build_mission_with_a_capture_set():
     assert isinstance(build_mission(cfg), CaptureJob)  # the GA plan, assigned on first sight
     s = m.summary()
     assert s["phase"] == "approach" and s["arrival_spread_s"] is None
+
+
+def test_interception_meets_an_oncoming_target_as_fast_as_the_robot_or_faster():
+    """Analytic oracles: a target coming head-on at the robot's speed is met halfway (5 s for
+    10 m at 1 m/s each); one twice as fast after 10/3 s; one passing 5 m off the robot's line
+    at 2 m/s where |(10 - 2T, 5)| = T, T = 5 s. A target running away as fast is never met
+    (the horizon); a slower one is caught (20 s at 1 m/s against 0.5 m/s from 10 m). Before,
+    only a target slower than the robot was met: the oncoming ones got the horizon."""
+    robot = np.array([[0.0, 0.0]])
+    speed = np.array([1.0])
+
+    def meet(target, velocity, **kw):
+        t = approach.interception_times(robot, np.array([target]), np.array([velocity]), speed,
+                                        100.0, **kw)  # fmt: skip
+        return float(t[0, 0])
+
+    assert meet([10.0, 0.0], [-1.0, 0.0]) == pytest.approx(5.0)
+    assert meet([10.0, 0.0], [-2.0, 0.0]) == pytest.approx(10.0 / 3.0)
+    assert meet([10.0, 5.0], [-2.0, 0.0]) == pytest.approx(5.0)
+    assert meet([10.0, 0.0], [1.0, 0.0]) == 100.0
+    assert meet([10.0, 0.0], [0.5, 0.0]) == pytest.approx(20.0)
+    assert meet([10.0, 20.0], [-2.0, 0.0]) == 100.0  # passes too far off to be reached
+    assert meet([10.0, 0.0], [-1.0, 0.0], oncoming=False) == 100.0  # the rule before
+
+
+def test_a_robot_heading_for_a_far_meeting_point_goes_at_full_speed():
+    """A robot 5 m from its meeting point with an object that comes at it at 0.45 m/s (the goal
+    moves toward the robot): the meeting point is already predicted, so it goes there at full
+    speed; riding on the goal's velocity (the rule before, ``ride_reach=None``) left it
+    0.05 m/s. At the goal it rides on all of it."""
+    base = dict(max_turn=np.pi, projection=2.5, alpha=np.deg2rad(15), alpha_growth=1.25,
+                alpha_max=np.pi)  # fmt: skip
+
+    def step(centre, ride_reach):
+        params = approach.PlannerParams(**base, ride_reach=ride_reach)
+        vel, _, _ = approach.plan_velocities(
+            np.array([centre]), np.array([[-1.0, 0.0]]), np.array([0.1]), np.array([0.5]),
+            np.array([[5.0, 0.0]]), np.array([[0.45, 0.0]]), [], np.zeros((1, 0), bool),
+            np.ones(1, bool), params, np.random.default_rng(0),
+        )  # fmt: skip
+        return vel[0]
+
+    assert step([10.0, 0.0], 1.0) == pytest.approx([-0.5, 0.0])
+    assert step([10.0, 0.0], None) == pytest.approx([-0.05, 0.0])
+    assert step([5.0, 0.0], 1.0) == pytest.approx([0.45, 0.0])
