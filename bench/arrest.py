@@ -15,8 +15,7 @@ variant arrested. ``--quick`` is a profile (2 seeds at 0.40 and 0.45 m/s).
 from __future__ import annotations
 
 import argparse
-import contextlib
-import functools
+import dataclasses
 import json
 import logging
 import math
@@ -31,10 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import controller.mission.capture as cm  # noqa: E402
-import controller.mission.job as job  # noqa: E402
 from controller.mission.factory import build_mission  # noqa: E402
-from controller.planning import approach  # noqa: E402
 from controller.runtime.dry_run import DryRun  # noqa: E402
 from tests.support.arrest_scenarios import (  # noqa: E402
     OPEN,
@@ -138,23 +134,13 @@ def edge_case(v: float, k: int) -> tuple[ArrestScenario, float]:
     return sc, t_wall
 
 
-@contextlib.contextmanager
-def rules(variant: str):
-    """The approach's rules for a run: ``new`` (the planning layer as it is) or ``baseline``
-    (the rules before: an interception only of targets slower than the robot, the goal's
-    velocity ridden on at any distance), switched in this process by rebinding the names the
-    capture mission imported (the planning functions keep both rules behind a parameter)."""
-    if variant == "new":
-        yield
-        return
-    saved = (cm.PlannerParams, cm.interception_times, job.interception_times)
-    cm.PlannerParams = functools.partial(approach.PlannerParams, ride_reach=None)
-    old = functools.partial(approach.interception_times, oncoming=False)
-    cm.interception_times = job.interception_times = old
-    try:
-        yield
-    finally:
-        cm.PlannerParams, cm.interception_times, job.interception_times = saved
+def rules(sc: ArrestScenario, variant: str) -> ArrestScenario:
+    """The scenario with the approach's rules of a variant: ``new`` (``approach.intercept =
+    "oncoming"``) or ``baseline`` (``"classic"``, the default: an interception only of targets
+    slower than the robot, the goal's velocity ridden on at any distance)."""
+    rule = "oncoming" if variant == "new" else "classic"
+    patch = {**sc.patch, "approach": {**sc.patch.get("approach", {}), "intercept": rule}}
+    return dataclasses.replace(sc, patch=patch)
 
 
 def speed_edge(speeds: list[float], seeds: int, variants: list[str], out_dir: Path) -> dict:
@@ -170,8 +156,7 @@ def speed_edge(speeds: list[float], seeds: int, variants: list[str], out_dir: Pa
             ok = 0
             for k in range(seeds):
                 sc, t_wall = edge_case(v, k)
-                with rules(variant):
-                    row = run_one(sc, out_dir)
+                row = run_one(rules(sc, variant), out_dir)
                 clear = row["object_min_clearance_m"]
                 hit = (
                     row["outcome"] == "arrest"

@@ -35,7 +35,8 @@ def interception_costs(cfg: FleetConfig, capture: CaptureSet, view: FleetView) -
     vel = ovel[:2] + ovel[2] * np.stack([-rel[:, 1], rel[:, 0]], 1)
     speed = np.array([r.max_speed for r in cfg.robots])
     horizon = max(cfg.approach.intercept_horizon, 1.0) * 10.0
-    cost = interception_times(view.poses[:, :2], stations, vel, speed, horizon)
+    oncoming = cfg.approach.intercept == "oncoming"
+    cost = interception_times(view.poses[:, :2], stations, vel, speed, horizon, oncoming)
     # a robot behind the object goes around it: scale by the detour around its envelope
     hull = envelope(
         geometry.transform(geometry.ensure_ccw(cfg.object_polygon()), view.object_pose), radius

@@ -116,6 +116,7 @@ class CaptureMission:
             alpha=np.deg2rad(ap.alpha_deg),
             alpha_growth=ap.alpha_growth,
             alpha_max=np.deg2rad(ap.alpha_max_deg),
+            ride_reach=1.0 if ap.intercept == "oncoming" else None,
         )
         self.assigned = np.zeros(self.n, bool)
         self.assigned[self.assignment] = True
@@ -222,7 +223,8 @@ class CaptureMission:
         goal[a], gvel[a] = tgt, vel
         if phase == Phase.APPROACH:
             speed = self.s.speed_margin * self.max_speed[a]
-            t = interception_times(centers[a], tgt, vel, speed, self.s.intercept_horizon)
+            oncoming = self.cfg.approach.intercept == "oncoming"
+            t = interception_times(centers[a], tgt, vel, speed, self.s.intercept_horizon, oncoming)
             goal[a] = tgt + vel * np.diag(t)[:, None]
         for i, wps in list(self.waypoints.items()):
             while wps and np.linalg.norm(centers[i] - wps[0]) < self.s.waypoint_reached:

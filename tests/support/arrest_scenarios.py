@@ -100,7 +100,7 @@ def arrest_config(sc: ArrestScenario, port: int | None = None) -> FleetConfig:
 SCENARIOS = [
     # walls: the object drives into a wall before the robots reach it and keeps pushing on it
     ArrestScenario("wall-west", RECT, (1.2, 3.5, 0.0), {"kind": "line", "speed": 0.15,
-                   "heading": 3.14159}, expect=PINNED),  # at rest on the wall, turned 19°
+                   "heading": 3.14159}, expect=ARREST),  # pinned with approach.intercept oncoming
     ArrestScenario("wall-north", L_SHAPE, (4.0, 5.3, 0.0), {"kind": "line", "speed": 0.12,
                    "heading": 1.5708}, expect=ARREST),
     ArrestScenario("wall-east-slide", T_SHAPE, (6.2, 2.5, 0.0), {"kind": "line", "speed": 0.15,

@@ -80,4 +80,4 @@ def test_a_crate_too_heavy_for_the_robots_that_fit_fails_too_heavy_before_anyone
     assert out.failed and out.reason == "too_heavy" and np.all(out.velocities == 0.0)
     detail = dict(out.events)["failure"]["detail"]
     assert "needs 14.4 N" in detail and "36.0 N in all" in detail
-    assert m.plans == 0 and m.relocations == 0 and m.rearrangements == 1
+    assert m.pusher.plans == 0 and m.grip.relocations == 0 and m.rearranger.count == 1
