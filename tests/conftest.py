@@ -26,6 +26,7 @@ E2E_FOLDERS = ("integration", "scenarios", "replay", "contract")
 # delays): ``serial``, run alone (``make test`` runs the rest on both cores first; the dry runs
 # are lockstep, their outcome does not depend on the machine's load)
 SERIAL_FOLDERS = ("integration", "contract")
+LOCKSTEP_FILES = ("test_dry_run.py", "test_run_cli.py")  # dry runs in those folders: not serial
 
 
 def pytest_collection_modifyitems(config, items):
@@ -34,5 +35,5 @@ def pytest_collection_modifyitems(config, items):
         folder = parts[parts.index("tests") + 1] if "tests" in parts else ""
         if folder in E2E_FOLDERS:
             item.add_marker(pytest.mark.e2e)
-        if folder in SERIAL_FOLDERS:
+        if folder in SERIAL_FOLDERS and item.path.name not in LOCKSTEP_FILES:
             item.add_marker(pytest.mark.serial)
