@@ -296,10 +296,41 @@ def table(out: dict) -> str:
     return "\n".join([head, "|---|---|---|---|---|---|---|", *lines])
 
 
+def merge(paths: list[str], strategies, rng: np.random.Generator) -> dict:
+    """The runs of several outputs pooled (a run repeated in two files counts once) and
+    aggregated again: the statistics of chunked runs are those of one run over all their seeds."""
+    outs = [json.loads(Path(p).read_text()) for p in paths]
+    merged: dict = {"bench": "transport_compare", "merged_from": paths}
+    for sec in ("closed_loop", "robustness"):
+        runs: dict = {}
+        for o in outs:
+            for r in o.get(f"{sec}_runs", []):
+                runs[(r["scenario"], r["seed"], r["strategy"])] = r
+        if runs:
+            rows = list(runs.values())
+            merged[sec] = aggregate(rows, strategies, rng)
+            merged[f"{sec}_runs"] = rows
+    for o in outs:
+        if "planner" in o:
+            merged["planner"] = o["planner"]
+    merged["wall_s"] = round(sum(o.get("wall_s", 0.0) for o in outs), 1)
+    merged["load_average"] = [o.get("load_average") for o in outs]
+    return merged
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--table", nargs="+", metavar="JSON", help="print the README table")
     ap.add_argument("--seeds", type=int, default=5, help="closed-loop seeds per scenario")
+    ap.add_argument(
+        "--seed-from", type=int, default=0, help="first seed index (to run the seeds in chunks)"
+    )
+    ap.add_argument(
+        "--merge",
+        nargs="+",
+        metavar="JSON",
+        help="pool the runs of several outputs (chunks of seeds) and aggregate them again",
+    )
     ap.add_argument("--scenarios", type=int, default=2)
     ap.add_argument("--strategies", default=",".join(STRATEGIES))
     ap.add_argument("--backend", default="pybullet", choices=("pybullet", "ideal"))
@@ -316,12 +347,16 @@ def main() -> None:
         return
     strategies = tuple(args.strategies.split(","))
     rng = np.random.default_rng(2024)
+    if args.merge:
+        print(json.dumps(merge(args.merge, strategies, rng), indent=1))
+        return
     t0 = time.perf_counter()
     out: dict = {
         "bench": "transport_compare",
         "load_average": [round(x, 2) for x in os.getloadavg()],
         "size": {
             "seeds": args.seeds,
+            "seed_from": args.seed_from,
             "scenarios": args.scenarios,
             "strategies": list(strategies),
             "backend": args.backend,
@@ -336,7 +371,7 @@ def main() -> None:
     jobs = [
         (sc, strat, 100 + 17 * k + seed, "suite")
         for k, sc in enumerate(suite)
-        for seed in range(args.seeds)
+        for seed in range(args.seed_from, args.seed_from + args.seeds)
         for strat in strategies
     ]
     if jobs:
