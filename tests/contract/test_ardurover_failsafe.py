@@ -9,7 +9,6 @@ Lockstep on a fake clock (tests/support/mavlink_rig.py), except the real-time ke
 from __future__ import annotations
 
 import logging
-import signal
 import threading
 
 import pytest
@@ -18,7 +17,14 @@ from drivers.base import DriverError
 from drivers.mavlink import convert as mc
 from drivers.mavlink.driver import MavlinkDriver
 from drivers.mavlink.link import LinkPool
-from tests.support.mavlink_rig import Lockstep, free_udp_port, make_config, robot
+from tests.support.mavlink_rig import (
+    Lockstep,
+    emulated_vehicle_config,
+    free_udp_port,
+    make_config,
+    robot,
+    strict_driver_exit,
+)
 
 pytestmark = pytest.mark.e2e
 
@@ -122,40 +128,15 @@ def test_the_emulated_gcs_failsafe_follows_its_parameters(pool, kw, mode):
         ls.close()
 
 
-def _emulated_vehicle_config(tmp_path, profile: str):
-    from tests.support.config import write_toml
-
-    data = {
-        "fleet": {"name": "t"},
-        "zenoh": {"listen": [f"tcp/127.0.0.1:{free_udp_port()}"]},
-        "object": {
-            "polygon": [[0, 0], [0.5, 0], [0.5, 0.5], [0, 0.5]],
-            "start": [8.0, 8.0, 0.0],
-            "motion": {"kind": "static"},
-        },
-        "sim": {"backend": "ideal", "timestep": 0.01},
-        "robots": [robot("r", profile, free_udp_port(), 1)],
-    }
-    return write_toml(tmp_path / f"{profile}.toml", data), make_config(data["robots"])
-
-
 def test_fleet_driver_strict_refuses_an_ardurover_without_gcs_failsafe(tmp_path, capsys):
     """`fleet driver R --strict` against an ArduRover with FS_GCS_ENABLE = 0: exit 1 naming the
     parameter, the rover never put in GUIDED."""
-    from controller.cli import main
     from sim_backend.ideal import IdealWorld
     from sim_backend.mavlink_vehicle import VehicleEmulator
 
-    path, cfg = _emulated_vehicle_config(tmp_path, "ardurover")
+    path, cfg = emulated_vehicle_config(tmp_path, "ardurover")
     emu = VehicleEmulator(IdealWorld(cfg), cfg.robots[0], fs_gcs_enable=False, target_timeout=0.5)
-    emu.start()
-    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        code = main(["driver", "r", "--config", str(path), "--strict", "--connect-timeout", "3"])
-    finally:
-        emu.stop()
-        for s, h in handlers.items():  # `fleet driver` installs its own
-            signal.signal(s, h)
+    code = strict_driver_exit(path, emu.start())
     err = capsys.readouterr().err
     assert code == 1
     assert "FS_GCS_ENABLE = 0" in err and "--strict" in err
@@ -170,7 +151,7 @@ def test_keepalive_thread_holds_offboard_while_the_caller_is_busy(tmp_path, thre
     from sim_backend.ideal import IdealWorld
     from sim_backend.mavlink_vehicle import VehicleEmulator
 
-    _, cfg = _emulated_vehicle_config(tmp_path, "px4")
+    _, cfg = emulated_vehicle_config(tmp_path, "px4")
     emu = VehicleEmulator(IdealWorld(cfg), cfg.robots[0], offboard_loss_timeout=1.0).start()
     drv = MavlinkDriver(cfg.robots[0], pool=LinkPool(), keepalive_thread=thread)
     try:

@@ -9,7 +9,6 @@ vehicle advancing while nobody calls the driver.
 from __future__ import annotations
 
 import logging
-import signal
 
 import pytest
 
@@ -18,7 +17,14 @@ from drivers.base import DriverError
 from drivers.mavlink import convert as mc
 from drivers.mavlink.driver import MavlinkDriver
 from drivers.mavlink.link import LinkPool
-from tests.support.mavlink_rig import Lockstep, free_udp_port, make_config, robot
+from tests.support.mavlink_rig import (
+    Lockstep,
+    emulated_vehicle_config,
+    free_udp_port,
+    make_config,
+    robot,
+    strict_driver_exit,
+)
 
 
 @pytest.fixture
@@ -167,33 +173,12 @@ def test_px4_offboard_loss_timeout_too_long_refused_when_strict(pool):
 def test_fleet_driver_strict_refuses_a_long_offboard_timeout(tmp_path, capsys):
     """`fleet driver R --strict` against a PX4 whose COM_OF_LOSS_T is 5 s: exit 1 naming the
     parameter; without --strict the same check is a warning (tested above)."""
-    from controller.cli import main
     from sim_backend.ideal import IdealWorld
     from sim_backend.mavlink_vehicle import VehicleEmulator
-    from tests.support.config import write_toml
 
-    port = free_udp_port()
-    data = {
-        "fleet": {"name": "t"},
-        "zenoh": {"listen": [f"tcp/127.0.0.1:{free_udp_port()}"]},
-        "object": {
-            "polygon": [[0, 0], [0.5, 0], [0.5, 0.5], [0, 0.5]],
-            "start": [8.0, 8.0, 0.0],
-            "motion": {"kind": "static"},
-        },
-        "sim": {"backend": "ideal", "timestep": 0.01},
-        "robots": [robot("r", "px4", port, 1)],
-    }
-    path = write_toml(tmp_path / "px4.toml", data)
-    cfg = make_config(data["robots"])
-    emu = VehicleEmulator(IdealWorld(cfg), cfg.robots[0], offboard_loss_timeout=5.0).start()
-    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        code = main(["driver", "r", "--config", str(path), "--strict", "--connect-timeout", "3"])
-    finally:
-        emu.stop()
-        for s, h in handlers.items():  # `fleet driver` installs its own
-            signal.signal(s, h)
+    path, cfg = emulated_vehicle_config(tmp_path, "px4")
+    emu = VehicleEmulator(IdealWorld(cfg), cfg.robots[0], offboard_loss_timeout=5.0)
+    code = strict_driver_exit(path, emu.start())
     err = capsys.readouterr().err
     assert code == 1
     assert "COM_OF_LOSS_T = 5 s" in err and "--strict" in err

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import signal
 import socket
+from pathlib import Path
 from typing import Any
 
 from controller.config import FleetConfig, parse_config
@@ -74,3 +76,36 @@ class Lockstep:
     def close(self) -> None:
         for e in self.emulators:
             e.stop()
+
+
+def emulated_vehicle_config(folder: Path, profile: str) -> tuple[Path, FleetConfig]:
+    """A config file of one MAVLink robot ``r`` of ``profile`` on a free loopback port (for a
+    real-time emulator and `fleet driver`), and the parsed config the emulator is built from."""
+    from tests.support.config import write_toml
+
+    data = {
+        "fleet": {"name": "t"},
+        "zenoh": {"listen": [f"tcp/127.0.0.1:{free_udp_port()}"]},
+        "object": {
+            "polygon": [[0, 0], [0.5, 0], [0.5, 0.5], [0, 0.5]],
+            "start": [8.0, 8.0, 0.0],
+            "motion": {"kind": "static"},
+        },
+        "sim": {"backend": "ideal", "timestep": 0.01},
+        "robots": [robot("r", profile, free_udp_port(), 1)],
+    }
+    return write_toml(folder / f"{profile}.toml", data), make_config(data["robots"])
+
+
+def strict_driver_exit(path: Path, emu: VehicleEmulator) -> int:
+    """`fleet driver r --strict` against the started emulator ``emu``: its exit code (the
+    emulator stopped and the signal handlers `fleet driver` installs restored afterwards)."""
+    from controller.cli import main
+
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return main(["driver", "r", "--config", str(path), "--strict", "--connect-timeout", "3"])
+    finally:
+        emu.stop()
+        for s, h in handlers.items():
+            signal.signal(s, h)
