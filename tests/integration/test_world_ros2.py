@@ -24,6 +24,7 @@ from controller.runtime.world import (
 from controller.wire import Twist2D
 from drivers.base import capabilities_of
 from drivers.ros2.driver import Ros2Driver
+from drivers.ros2.node import open_session
 from tests.integration.test_world_lab import rehearsal_config
 from tests.support.config import free_port
 from tests.support.lab import fleet
@@ -80,8 +81,11 @@ class WorldRig:
     driver's clock is the world's (sim time + OFFSET, as ``fleet world`` stamps), every
     exchange waited for by handshake (samples seen), never by sleeping."""
 
-    def __init__(self) -> None:
+    def __init__(self, router: bool = False) -> None:
+        """``router``: something already listens at the robots' endpoint (rmw_zenohd's place,
+        a peer session here): the world joins it instead of listening there."""
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
+        self.router = open_session(listen=[self.endpoint], mode="peer") if router else None
         self.cfg = _fleet(self.endpoint)
         ids = ros2_bodies(self.cfg, "all")
         self.hub = make_hub(world_config(self.cfg, ids))
@@ -122,6 +126,8 @@ class WorldRig:
             d.close()
         self.bodies.close()
         self.hub.world.close()
+        if self.router is not None:
+            self.router.close()
 
 
 @pytest.fixture
@@ -159,6 +165,22 @@ def test_ros2_bodies_move_in_the_shared_world_and_report_its_pose(rig):
         assert last.t == pytest.approx(rig.hub.t + OFFSET, abs=1e-6)  # the world's time
         assert d.stale == 0 and d.bad == 0
     assert rig.bodies.timeout_stops == 0
+
+
+def test_the_world_joins_the_router_already_at_the_robots_endpoint():
+    """rmw_zenohd (here a listening peer) already holds the endpoint: the world's ROS 2 side
+    joins it as a client, and the driver reaches the bodies through it."""
+    rig = WorldRig(router=True)
+    try:
+        assert rig.bodies.how == {rig.endpoint: "joined"}
+        before = rig.hub.world.robot_pose("o").copy()
+        for _ in range(10):
+            rig.drivers["o"].send(Twist2D(t=0.0, vx=0.2, ttl=5.0))
+            rig.loop()
+        assert rig.hub.world.robot_pose("o")[0] - before[0] == pytest.approx(0.04, abs=0.005)
+        assert len(rig.drivers["o"].poll()) >= 5
+    finally:
+        rig.close()
 
 
 def test_a_silent_cmd_vel_stops_the_body_but_a_held_up_world_does_not(rig):
