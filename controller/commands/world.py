@@ -1,5 +1,5 @@
-"""``fleet world [--config F] [--duration S] [--mavlink [IDS]]``: the shared stand-in world as
-its own process.
+"""``fleet world [--config F] [--duration S] [--mavlink [IDS]] [--ros2 [IDS]]``: the shared
+stand-in world as its own process.
 
 One world (``sim.backend``) with every ``sim`` robot and the object, in real time, for a lab
 rehearsal on one machine (``controller.runtime.world``): it publishes ``object/pose`` the way a
@@ -7,9 +7,12 @@ motion-capture system would and serves the ``sim`` agents of ``fleet driver`` (w
 ``sim.world = "process"``). ``--mavlink`` makes MAVLink robots bodies of the same world too,
 each behind an emulated flight controller answering its ``url`` on loopback (every MAVLink robot,
 or the ids given, comma-separated), so a mixed fleet rehearses together; their ``fleet driver``
-talks MAVLink to it. Stops on SIGINT/SIGTERM or after ``--duration`` seconds; exit 0, 2 on bad
-config (or a ``--mavlink`` id that is not a MAVLink robot with a loopback-answerable url), 1 when
-its session cannot open.
+talks MAVLink to it. ``--ros2`` does the same for ROS 2 robots: each a body of the world behind
+its ROS graph (rmw_zenoh's keys, tokens and attachments) on a session answering its
+``ros2.connect`` endpoints on loopback, so their ``fleet driver`` drives them as real robots.
+Stops on SIGINT/SIGTERM or after ``--duration`` seconds; exit 0, 2 on bad config (or a
+``--mavlink`` id that is not a MAVLink robot with a loopback-answerable url, a ``--ros2`` id
+that is not a ROS 2 robot with loopback endpoints), 1 when its session cannot open.
 """
 
 from __future__ import annotations
@@ -29,12 +32,21 @@ def add_arguments(parser, word: str) -> None:
         help="emulate MAVLink robots as bodies of this world, answering their url on loopback "
         "(all of them, or the ids given, comma-separated)",
     )
+    parser.add_argument(
+        "--ros2",
+        nargs="?",
+        const="all",
+        default=None,
+        metavar="IDS",
+        help="make ROS 2 robots bodies of this world, on their rmw_zenoh keys at their "
+        "ros2.connect endpoints on loopback (all of them, or the ids given, comma-separated)",
+    )
 
 
 def run(args) -> int:
     from controller.runtime.world import run_world
 
     def serve(cfg, stop, duration):
-        return run_world(cfg, stop, duration, mavlink=args.mavlink)
+        return run_world(cfg, stop, duration, mavlink=args.mavlink, ros2=args.ros2)
 
     return serve_until_signalled(args, serve)

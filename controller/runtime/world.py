@@ -20,8 +20,20 @@ object, paced on the wall clock (real time). On the bus it plays what a lab's ha
   once per loop iteration at the wall clock's sim time: before the physics catches up (what
   arrived meanwhile is stamped when it arrived, so a world held up by the machine does not trip
   the vehicles' own timeouts) and after (telemetry). Nothing of it crosses the bus;
+- every ROS 2 robot named in ``ros2`` (``fleet world --ros2``): a body of the same world behind
+  the robot side of its ROS graph (``drivers.ros2.standin.RobotBase``: rmw_zenoh's keys,
+  attachments and liveliness tokens, rosbags' CDR), on a zenoh session that answers the
+  robot's ``ros2.connect`` endpoints on loopback as its router (rmw_zenohd) would: it listens
+  there, or joins the router already there. The robot's agent (``fleet driver``) drives it with
+  the real ROS 2 driver: the ``cmd_vel`` Twist/TwistStamped it takes is the body's command
+  (dated when the loop takes it, at the wall clock's sim time, like the MAVLink setpoints; a
+  ``cmd_vel`` silent for :data:`ROS2_CMD_TIMEOUT` stops the body, as a base's controller does),
+  and it publishes the body's true pose at ``sim.pose_rate_hz`` (Odometry or PoseStamped, per
+  ``ros2.pose_type``) in the robot's odom frame (``ros2.odom_to_world``), stamped with the
+  world's sim time in the lab's clock domain (wall time, as the agents' ``time_source =
+  "header"`` expects; the rmw attachment carries the same source time);
 - ground truth on ``sim/truth/**`` at ``fleet.rate_hz`` (scoring and logs only), for the
-  MAVLink bodies too.
+  MAVLink and ROS 2 bodies too.
 
 The world listens to nothing else: the object obeys its ``[object] motion`` and give-up rule
 and physics decides contacts, whatever the controller says. Its session joins a ``fleet hub``
@@ -43,11 +55,14 @@ from controller import wire
 from controller.config import ConfigError, FleetConfig
 from controller.io.ratekeeper import Ratekeeper
 from controller.runtime.daemon import open_daemon_bus
-from controller.runtime.wiring import make_hub
+from controller.runtime.wiring import make_hub, ros2_settings
 from sim_backend.hub import SimHub
 
 log = logging.getLogger(__name__)
 
+ROS2_CMD_TIMEOUT = 0.5  # s: a ROS 2 body stops when cmd_vel is silent this long (a base's own
+# timeout: ros2_control's diff_drive_controller cmd_vel_timeout defaults to 0.5 s)
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost")
 MIN_LOOP_HZ = 50.0  # the world's I/O loop: commands in, samples out, at least this often
 HELD_UP = 0.25  # s: a loop iteration later than this is reported (samples went out late)
 
@@ -67,8 +82,8 @@ class WorldServer:
         sigma_theta: float,
         vehicles: Iterable[str] = (),
     ):
-        """``vehicles``: ids of the MAVLink bodies of the world (truth only: their poses and
-        commands go over MAVLink, not the bus)."""
+        """``vehicles``: ids of the MAVLink and ROS 2 bodies of the world (truth only: their
+        poses and commands go over MAVLink or the robot's ROS graph, not the fleet's keys)."""
         self.bus = bus
         self.hub = hub
         self.offset = time_offset
@@ -171,8 +186,8 @@ class WorldServer:
 
 def world_config(cfg: FleetConfig, vehicles: Iterable[str] = ()) -> FleetConfig:
     """The config of the shared world: its robots that are bodies of the world (``sim``), and
-    the MAVLink robots named in ``vehicles`` (emulated vehicles of this world; any other MAVLink
-    robot is a real vehicle, not a body of the stand-in world)."""
+    the MAVLink and ROS 2 robots named in ``vehicles`` (emulated robots of this world; any other
+    is a real robot, not a body of the stand-in world)."""
     keep = set(vehicles)
     return dataclasses.replace(
         cfg, robots=tuple(r for r in cfg.robots if r.spec.world_body or r.id in keep)
@@ -211,36 +226,179 @@ def emulated_vehicles(cfg: FleetConfig, which: str | None) -> tuple[str, ...]:
     return tuple(r.id for r in chosen)
 
 
+def ros2_bodies(cfg: FleetConfig, which: str | None) -> tuple[str, ...]:
+    """The ROS 2 robots ``fleet world --ros2 [IDS]`` makes bodies of the world: none (``which``
+    None), every one (``"all"``) or the comma-separated ids. ConfigError naming the id when it
+    is not a ROS 2 robot of the config, or naming ``robots[i].ros2.connect`` when an endpoint
+    of its router is not on loopback (the world answers it there)."""
+    if which is None:
+        return ()
+    ros2 = [r for r in cfg.robots if r.driver == "ros2"]
+    if which.strip() == "all":
+        chosen = ros2
+    else:
+        by_id = {r.id: r for r in ros2}
+        chosen = []
+        for rid in (w.strip() for w in which.split(",") if w.strip()):
+            if rid not in by_id:
+                raise ConfigError(
+                    cfg.source,
+                    "robots",
+                    f"--ros2 {rid!r}: not a ROS 2 robot; ROS 2 robots: {sorted(by_id)}",
+                )
+            chosen.append(by_id[rid])
+    for r in chosen:
+        for endpoint in r.ros2.connect:
+            host = endpoint.partition("/")[2].rpartition(":")[0]
+            if host not in LOOPBACK_HOSTS:
+                i = cfg.robots.index(r)
+                raise ConfigError(
+                    cfg.source,
+                    f"robots[{i}].ros2.connect",
+                    f"--ros2: the world answers a robot's router only on loopback, not "
+                    f"{endpoint!r}",
+                )
+    return tuple(r.id for r in chosen)
+
+
+class Ros2Bodies:
+    """ROS 2 robots as bodies of the world: the robot side of each one's ROS graph
+    (``drivers.ros2.standin.RobotBase``, rosbags' CDR) on one zenoh session per distinct set
+    of ``ros2.connect`` endpoints, which listens there as the robot's router would (or, when
+    something already listens there, e.g. rmw_zenohd or the fleet's own endpoint, joins it as
+    a client). Driven by the world's loop: :meth:`apply` before the physics, :meth:`publish`
+    after."""
+
+    def __init__(self, cfg: FleetConfig, hub: SimHub, ids: Iterable[str], time_offset: float):
+        from drivers.ros2.node import open_session
+        from drivers.ros2.standin import RobotBase
+
+        self.hub = hub
+        self.offset = time_offset
+        self.period = 1.0 / cfg.sim.pose_rate_hz
+        self.sessions: dict[tuple[str, ...], object] = {}
+        self.how: dict[str, str] = {}  # robot id -> "listens on ..." / "joined ..."
+        self.robots: dict[str, RobotBase] = {}
+        self._last_cmd: dict[str, float | None] = {}
+        self._next_pose = hub.t
+        self.timeout_stops = 0
+        try:
+            for rid in ids:
+                r = cfg.robot(rid)
+                s = ros2_settings(r)
+                ends = tuple(s.connect)
+                if ends not in self.sessions:
+                    self.sessions[ends], how = _ros2_session(open_session, ends)
+                    self.how.update({e: how for e in ends})
+                self.robots[rid] = RobotBase(self.sessions[ends], s, r.kind == "omni")
+                self._last_cmd[rid] = None
+        except BaseException:
+            self.close()
+            raise
+
+    def commands(self) -> int:
+        """``cmd_vel`` samples taken so far."""
+        return sum(b.received for b in self.robots.values())
+
+    def apply(self, t: float) -> None:
+        """Each body's latest ``cmd_vel`` to the world, dated ``t`` (s, sim time: the wall
+        clock's, so a world held up by the machine does not time out what kept arriving); a
+        body whose ``cmd_vel`` is silent past :data:`ROS2_CMD_TIMEOUT` is stopped."""
+        w = self.hub.world
+        for rid, base in self.robots.items():
+            cmd = base.take_command()
+            if cmd is not None:
+                w.set_command(rid, *cmd)
+                moving = any(v != 0.0 for v in cmd)
+                self._last_cmd[rid] = t if moving else None  # a stopped body has no timeout
+                continue
+            last = self._last_cmd[rid]
+            if last is not None and t - last > ROS2_CMD_TIMEOUT:
+                w.set_command(rid, 0.0, 0.0, 0.0)
+                self._last_cmd[rid] = None
+                self.timeout_stops += 1
+                log.warning("ROS 2 robot %s: cmd_vel silent %.2f s: stopped", rid, t - last)
+
+    def publish(self) -> None:
+        """Every body's true pose (odom frame) when one is due at the world's time, stamped
+        with it in the lab's clock domain; the Odometry's twist is the body's (body frame)."""
+        t = self.hub.t
+        if not self.robots or t + 1e-9 < self._next_pose:
+            return
+        self._next_pose = max(self._next_pose + self.period, t)
+        w = self.hub.world
+        for rid, base in self.robots.items():
+            x, y, th = (float(v) for v in w.robot_pose(rid))
+            vx, vy, wz = (float(v) for v in w.robot_velocity(rid))
+            c, s = math.cos(th), math.sin(th)
+            base.publish_pose(t + self.offset, x, y, th, (c * vx + s * vy, -s * vx + c * vy, wz))
+
+    def close(self) -> None:
+        """Undeclare every robot's node and close the sessions (the counters stay)."""
+        for base in self.robots.values():
+            base.close()
+        for session in self.sessions.values():
+            session.close()
+        self.sessions = {}
+
+
+def _ros2_session(open_session, endpoints: tuple[str, ...]):
+    """A session answering ``endpoints`` as the robots' router: listening there (peer), or,
+    when something already listens, joined to it (client). Returns (session, how)."""
+    try:
+        return open_session(listen=list(endpoints), mode="peer"), "listening"
+    except Exception:  # noqa: BLE001 - zenoh.ZError: the address is taken (a router is there)
+        return open_session(connect=list(endpoints), mode="client"), "joined"
+
+
 def run_world(
-    cfg: FleetConfig, stop: threading.Event, duration: float = 0.0, mavlink: str | None = None
+    cfg: FleetConfig,
+    stop: threading.Event,
+    duration: float = 0.0,
+    mavlink: str | None = None,
+    ros2: str | None = None,
 ) -> int:
     """Serve the world until ``stop`` (or ``duration`` s of wall time). Exit 0.
 
-    ``mavlink``: which MAVLink robots are emulated vehicles of this world (``"all"`` or ids
-    separated by commas; None: none)."""
+    ``mavlink``: which MAVLink robots are emulated vehicles of this world, ``ros2``: which ROS
+    2 robots are bodies of it (``"all"`` or ids separated by commas; None: none)."""
     vehicles = emulated_vehicles(cfg, mavlink)
-    hub = make_hub(world_config(cfg, vehicles))
+    ros2_ids = ros2_bodies(cfg, ros2)
+    hub = make_hub(world_config(cfg, vehicles + ros2_ids))
     emulators = _start_vehicles(cfg, hub, vehicles)
+    bodies = None
     try:
         bus, how = open_daemon_bus(cfg)
         with bus:
             bus.declare_alive("world", "main")
             mono0, wall0 = time.monotonic(), time.time()
             noise = cfg.sim.pose_noise
-            server = WorldServer(bus, hub, wall0 - hub.t, noise.xy, noise.theta, vehicles)
+            server = WorldServer(
+                bus, hub, wall0 - hub.t, noise.xy, noise.theta, vehicles + ros2_ids
+            )
+            bodies = Ros2Bodies(cfg, hub, ros2_ids, wall0 - hub.t)
             urls = {e.robot_id: e.url for e in emulators}
+            ros = {rid: list(b.settings.connect) for rid, b in bodies.robots.items()}
             print(
                 f"fleet world: fleet {cfg.fleet.name!r}, {cfg.sim.backend} backend, robots "
-                f"{list(server.robot_ids)}, MAVLink vehicles {urls}, on "
-                f"{list(cfg.zenoh.listen)} ({how})",
+                f"{list(server.robot_ids)}, MAVLink vehicles {urls}, ROS 2 robots {ros} "
+                f"({bodies.how}), on {list(cfg.zenoh.listen)} ({how})",
                 file=sys.stderr,
                 flush=True,
             )
-            stats = _serve(cfg, server, stop, duration, mono0, emulators)
+            stats = _serve(cfg, server, stop, duration, mono0, emulators, bodies)
     finally:
         for e in emulators:
             e.stop()
+        if bodies is not None:
+            bodies.close()
         hub.world.close()
+    _report(hub, server, stats, emulators, bodies)
+    return 0
+
+
+def _report(hub: SimHub, server: WorldServer, stats, emulators, bodies: Ros2Bodies) -> None:
+    """The world's last line on stderr: time served, load, what went through it."""
     wall, busy = stats
     rtf, load = hub.t / max(wall, 1e-9), busy / max(wall, 1e-9)
     setpoints = sum(e.counters["setpoints"] for e in emulators)
@@ -249,10 +407,10 @@ def run_world(
         f"(real-time factor {rtf:.3f}; stepping took {load:.1%} of the wall time); "
         f"{server.commands} commands, {server.samples} samples, "
         f"{server.failsafe_stops} setpoint-timeout stops; {len(emulators)} MAVLink vehicles, "
-        f"{setpoints} setpoints",
+        f"{setpoints} setpoints; {len(bodies.robots)} ROS 2 robots, "
+        f"{bodies.commands()} cmd_vel, {bodies.timeout_stops} cmd_vel-timeout stops",
         file=sys.stderr,
     )
-    return 0
 
 
 def _start_vehicles(cfg: FleetConfig, hub: SimHub, vehicles: tuple[str, ...]) -> list:
@@ -280,6 +438,7 @@ def _serve(
     duration: float,
     mono0: float,
     emulators=(),
+    bodies: Ros2Bodies | None = None,
 ) -> tuple[float, float]:
     """The real-time loop. Returns (wall seconds served, seconds spent stepping physics)."""
     hub = server.hub
@@ -300,10 +459,14 @@ def _serve(
         server.apply_commands(mono)
         target = t_start + mono - mono0
         pump_vehicles(emulators, target)  # MAVLink in, stamped at the wall clock's sim time
+        if bodies is not None:
+            bodies.apply(target)  # cmd_vel in, likewise
         b0 = time.perf_counter()
         hub.advance_to(target)
         busy += time.perf_counter() - b0
         pump_vehicles(emulators, hub.t)  # telemetry of the new state
+        if bodies is not None:
+            bodies.publish()  # odometry of the new state
         server.publish_samples()
         if mono - mono0 >= next_truth:
             server.publish_truth()
