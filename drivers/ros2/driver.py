@@ -11,9 +11,10 @@ Our side is a ROS 2 node (``node_name`` in the robot's ``namespace`` on ``domain
   odom frame (REP 105) to our world by ``odom_to_world``; each is stamped with its header
   stamp (``time_source = "header"``: the robot's clock, synchronised with ours) or with our
   clock on receipt (``"receipt"``); sigma from the covariance when the message has one;
-- the link is lost when no fresh pose came for ``stale_after`` seconds (``fleet.stale_after``);
-  a pose whose stamp is older than that on our clock is stale: counted and dropped, it does
-  not keep the link alive;
+- a pose whose stamp is older than ``stale_after`` (``fleet.stale_after``) on our clock is
+  stale: counted and dropped, it does not keep the link alive; the link is lost when no fresh
+  pose came for ``link_timeout`` seconds (``[robots.ros2] link_timeout``; until then the robot
+  is only stale for the controller, which stops commanding it);
 - ``connect`` waits for the first fresh pose and for the robot's ``cmd_vel`` subscription to
   match our publisher (``ConnectTimeout`` naming the key).
 
@@ -60,6 +61,7 @@ class Ros2Settings:
     sigma_theta: float = 0.02
     connect: tuple[str, ...] = (ROUTER,)
     mode: str = "client"
+    link_timeout: float = 2.5  # s without a fresh pose: the link is lost
 
     def cmd_key(self) -> str:
         ros_type = msgs.CMD_TYPES[self.cmd_type]
@@ -241,7 +243,7 @@ class Ros2Driver:
             return LinkHealth(False, "not connected")
         self._take()
         silent = self._silence()
-        if silent > self.stale_after:
+        if silent > self.settings.link_timeout:
             return LinkHealth(
                 False, f"no fresh {self.pose_type} on {self.pose_key} for {silent:.2f} s"
             )
@@ -259,7 +261,7 @@ class Ros2Driver:
         if not self._connected:
             raise LinkLost(f"robot {self.robot_id}: not connected")
         self._take()
-        if self._silence() > self.stale_after:
+        if self._silence() > self.settings.link_timeout:
             raise LinkLost(f"robot {self.robot_id}: no fresh pose on {self.pose_key}")
         self._put(cmd.vx, cmd.vy, cmd.wz)
 

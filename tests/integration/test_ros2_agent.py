@@ -55,7 +55,7 @@ def test_fleet_driver_serves_a_ros2_robot_and_reports_its_silence():
             assert (m.x, m.y, m.theta) == pytest.approx(tuple(r.start), abs=1e-6)
             # the agent commands the robot (its watchdog's zero, the e-stop's hold) on cmd_vel
             wait_for(lambda: robot.commands_seen() > 0, 10, "a command from the agent")
-            robot_stop.set()  # the robot goes silent: a lost link after fleet.stale_after
+            robot_stop.set()  # the robot goes silent: a lost link after ros2.link_timeout
             robot_thread.join(5)
 
             def lost() -> bool:

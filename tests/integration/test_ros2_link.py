@@ -131,10 +131,16 @@ def test_odom_poses_are_placed_in_the_world(link):
     assert m.theta == pytest.approx(0.3)
 
 
-def test_silence_longer_than_stale_after_is_a_lost_link(link):
+def test_silence_beyond_link_timeout_is_a_lost_link_and_shorter_is_not(link):
+    """A pose stream silent longer than stale_after (0.5 s) leaves the link up (the controller
+    sees the robot stale and stops commanding it); silent longer than link_timeout (2.5 s),
+    the link is lost."""
     d = link.driver
+    assert d.health().ok and link.settings.link_timeout == 2.5
+    link.mono[0] += 0.6  # longer than stale_after, a Wi-Fi hiccup
     assert d.health().ok
-    link.mono[0] += 0.6  # no pose for longer than stale_after = 0.5 s
+    d.send(Twist2D(t=0.0, vx=0.0))
+    link.mono[0] += 2.0  # 2.6 s of silence in all
     h = d.health()
     assert not h.ok and "no fresh nav_msgs/msg/Odometry" in h.detail
     with pytest.raises(LinkLost):
@@ -150,7 +156,7 @@ def test_a_pose_older_than_stale_after_is_dropped_and_keeps_no_link(link):
     link.mono[0] += 0.3
     link.advance(0.1)
     assert d.poll() == [] and d.stale == 1
-    link.mono[0] += 0.3
+    link.mono[0] += 2.2  # link_timeout (2.5 s) since the last fresh pose: stale ones count not
     assert not d.health().ok
 
 

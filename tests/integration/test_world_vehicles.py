@@ -169,12 +169,6 @@ def mixed_fleet(tmp_path, port: int):
     data["robots"] = robots
     data["object"]["goal"] = GOAL
     data["transport"]["start_after"] = 5.0
-    # The ROS 2 driver's link is lost after fleet.stale_after without a fresh pose (its agent
-    # exits, as a MAVLink agent does after mavlink.link_timeout, 2.5 s): with nine processes
-    # on 2 shared cores, 0.3 s silences happen (measured: r4 lost after 0.34 s at a load of
-    # 9.5, the world's loop on time), so this rehearsal gives poses a second, as a lab whose
-    # ROS 2 robots publish odometry over Wi-Fi would.
-    data["fleet"]["stale_after"] = 1.0
     return write_toml(tmp_path / "mixed.toml", data), [r["id"] for r in robots]
 
 

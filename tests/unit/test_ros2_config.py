@@ -57,6 +57,7 @@ def test_defaults_are_a_turtlebot_on_the_local_router(tmp_path):
         "cmd_vel", "twist", "odom", "odometry",
     )  # fmt: skip
     assert s.connect == ("tcp/127.0.0.1:7447",) and s.domain_id == 0
+    assert s.link_timeout == 2.5  # the MAVLink link's: a silence of stale_after is no loss
 
 
 BAD = {
@@ -78,6 +79,7 @@ BAD = {
     "same_topic": ({"pose_topic": "cmd_vel"}, "robots[0].ros2.pose_topic", "same topic"),
     "unknown_key": ({"cmd_topik": "x"}, "robots[0].ros2.cmd_topik", "did you mean 'cmd_topic'"),
     "time_source": ({"time_source": "gps"}, "robots[0].ros2.time_source", "'receipt'"),
+    "link_timeout": ({"link_timeout": 0}, "robots[0].ros2.link_timeout", "> 0"),
 }
 
 
