@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from controller.config import FleetConfig
+from controller.events import ArrestEvent, ContactLostEvent, EscapeEvent
 from controller.mission.sequence import CAPTURING, Cue, Failure, JobState, next_phase
 from controller.mission.sequence import Measures as SeqMeasures
 from controller.mission.types import Event, Phase, Reason
@@ -153,14 +154,13 @@ def _entered(st: CaptureState, m: Measures) -> CaptureState:
 
 
 def _arrest_event(st: CaptureState, m: Measures) -> Event:
-    data = {
-        "t": m.t,
-        "arrival_spread_s": st.arrival_spread,
-        "hold_s": m.t - st.hold_t0,
-        "hold_displacement_m": st.hold_displacement,
-        "gaps_m": m.gap.round(4).tolist(),
-    }
-    return ("arrest", data)
+    return ArrestEvent(
+        t=m.t,
+        arrival_spread_s=st.arrival_spread,
+        hold_s=m.t - st.hold_t0,
+        hold_displacement_m=st.hold_displacement,
+        gaps_m=m.gap.round(4).tolist(),
+    )
 
 
 def _recage(cage: np.ndarray | None, touching: np.ndarray, preload: np.ndarray) -> np.ndarray:
@@ -183,10 +183,10 @@ def _hold(st: CaptureState, m: Measures, s: CaptureSettings, events) -> tuple:
         cage=_recage(st.cage, touching, m.preload),
     )
     if np.any(m.gap > s.release_factor * s.contact_tolerance):
-        events.append(("contact_lost", {"t": m.t, "gaps_m": m.gap.round(4).tolist()}))
+        events.append(ContactLostEvent(t=m.t, gaps_m=m.gap.round(4).tolist()))
         return replace(st, releases=st.releases + 1, cage=None), Cue.CONTACT_LOST
     if moved > s.hold_tolerance and st.phase == Phase.HOLD:
-        events.append(("escape", {"t": m.t, "displacement_m": moved}))
+        events.append(EscapeEvent(t=m.t, displacement_m=moved))
         return replace(st, escapes=st.escapes + 1, cage=None), Cue.ESCAPED
     if st.phase == Phase.HOLD and m.t - st.hold_t0 >= s.hold_s and np.all(touching):
         return st, Cue.HELD

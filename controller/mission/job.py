@@ -13,6 +13,7 @@ import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.events import CaptureEvent
 from controller.mission.assign import Reassigner, assign, interception_costs
 from controller.mission.capture import CaptureMission
 from controller.mission.capture_phase import CaptureSettings
@@ -301,21 +302,21 @@ class CaptureJob:
         self.assignment = assign(costs, self.roster.available)
         self.reassigner.assigned(view.t)
         self.inner = self._mission(view)
-        data = {
-            "points": self.capture.points.round(4).tolist(),
-            "normals": self.capture.normals.round(4).tolist(),
-            "robots": [view.ids[i] for i in self.assignment],
-            "objective": self.capture.objective,
-            "form_closure": self.capture.form_closure,
-            "robots_needed": len(self.capture.points),
-            "hold_capacity": self.capture.hold_capacity,
-            "reinforced": self.capture.reinforced,
-            "pinned": pinned,
-            "wall_contacts": self.capture.walls,
-            "unavailable": [view.ids[i] for i in np.flatnonzero(~self.roster.available)],
-        }
+        event = CaptureEvent(
+            points=self.capture.points.round(4).tolist(),
+            normals=self.capture.normals.round(4).tolist(),
+            robots=[view.ids[i] for i in self.assignment],
+            objective=self.capture.objective,
+            form_closure=self.capture.form_closure,
+            robots_needed=len(self.capture.points),
+            hold_capacity=self.capture.hold_capacity,
+            reinforced=self.capture.reinforced,
+            pinned=pinned,
+            wall_contacts=self.capture.walls,
+            unavailable=[view.ids[i] for i in np.flatnonzero(~self.roster.available)],
+        )
         intent = self.inner.plan(view)
-        intent.events.insert(0, ("capture", data))
+        intent.events.insert(0, event)
         return intent
 
     def _mission(self, view: FleetView):

@@ -22,6 +22,7 @@ import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.events import DeliveredEvent, RobotLostEvent, RouteEvent
 from controller.mission.grip import Contact, Grip
 from controller.mission.guard import SafetyStage
 from controller.mission.outage import OutageWatch
@@ -146,8 +147,7 @@ class TransportMission:
         for i in range(self.n):
             if gone[i] and i not in lost:
                 self.grip.drop(i)
-                data = {"t": view.t, "robot": view.ids[i], "phase": self.phase}
-                events.append(("robot_lost", data))
+                events.append(RobotLostEvent(t=view.t, robot=view.ids[i], phase=self.phase))
         return False
 
     def _cue(self, cue: Cue | None, t: float, events: list[Event], failure: Failure | None = None):
@@ -200,15 +200,15 @@ class TransportMission:
         if not res.ok:
             return self._fail(Reason.NO_ROUTE, res.reason, view, events)
         self.way.begin(res, view.t)
-        data = {
-            "t": view.t,
-            "waypoints": np.round(res.waypoints, 4).tolist(),
-            "subgoals": np.round(res.subgoals, 4).tolist(),
-            "length_m": res.length_m,
-            "cost_s": res.cost,
-            "replans": self.route_replans,
-        }
-        events.append(("route", data))
+        event = RouteEvent(
+            t=view.t,
+            waypoints=np.round(res.waypoints, 4).tolist(),
+            subgoals=np.round(res.subgoals, 4).tolist(),
+            length_m=res.length_m,
+            cost_s=res.cost,
+            replans=self.route_replans,
+        )
+        events.append(event)
         return self._begin_segment(view, pose, events)
 
     def _begin_segment(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
@@ -342,7 +342,7 @@ class TransportMission:
     def _deliver(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         self.done_t = view.t
         self._cue(Cue.DELIVERED, view.t, events)
-        events.append(("delivered", {"t": view.t, "pose": np.round(pose, 4).tolist()}))
+        events.append(DeliveredEvent(t=view.t, pose=np.round(pose, 4).tolist()))
         return self._done(view, pose, events)
 
     # --- done ---------------------------------------------------------------------------------

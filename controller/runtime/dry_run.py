@@ -18,6 +18,7 @@ import numpy as np
 
 from controller import geometry, wire
 from controller.config import FleetConfig
+from controller.events import ArrestEvent, DeliveredEvent, FailureEvent, RouteEvent
 from controller.io.bus import Bus
 from controller.latch import released_at_start
 from controller.mission.types import Mission, Reason
@@ -143,10 +144,10 @@ class ArrestScore:
         if self.hold_start is not None and not self.carried:
             moved = float(np.max(np.linalg.norm(poly - self.hold_start, axis=1)))
             self.displacement = max(self.displacement or 0.0, moved)
-        for kind, data in out.events:
-            if kind == "arrest" and self.arrest_t is None:
+        for ev in out.events:
+            if isinstance(ev, ArrestEvent) and self.arrest_t is None:
                 self.arrest_t = t
-                robots = [c["robot"] for c in data.get("contacts", [])]
+                robots = ev.contact_robots
                 self.gaps = {
                     rid: float(
                         geometry.polygon_signed_distance(world.robot_pose(rid)[None, :2], poly)[0]
@@ -181,11 +182,11 @@ class TransportScore:
     def tick(self, t: float, dt: float, out, world) -> None:
         if out is None:
             return
-        for kind, data in out.events:
-            if kind == "route" and self.route is None:
-                self.route = np.asarray(data["waypoints"], float)[:, :2]
-                self.route_length = float(data.get("length_m", 0.0))
-            if kind == "delivered":
+        for ev in out.events:
+            if isinstance(ev, RouteEvent) and self.route is None:
+                self.route = np.asarray(ev.waypoints, float)[:, :2]
+                self.route_length = float(ev.length_m)
+            if isinstance(ev, DeliveredEvent):
                 self.delivered = True
         active = out.phase in self.PHASES
         if active and self.start_t is None:
@@ -507,5 +508,5 @@ class DryRun:
 
 def _mission_failure(out, t: float) -> dict[str, Any]:
     """The mission's own failure (its reason, and the detail of its ``failure`` event)."""
-    detail = next((d.get("detail", "") for k, d in out.events if k == "failure"), "")
+    detail = next((e.detail for e in out.events if isinstance(e, FailureEvent)), "")
     return {"reason": out.reason or "failed", "t": t, "detail": detail}

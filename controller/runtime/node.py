@@ -381,12 +381,13 @@ class ControllerNode:
             self._cmd_pub[rid].put(wire.Twist2D(t=now, seq=self._seq, vx=vx, vy=vy, wz=wz, ttl=ttl))
             self.est.command(rid, now, vx, vy, wz)
             self.counters.commands += 1
-        for kind, data in out.events:
+        for ev in out.events:
             self._seq += 1
+            data = ev.to_dict()
             self.bus.put(
                 "plan",
-                wire.PlanEvent(t=now, seq=self._seq, kind=kind, phase=out.phase, data=data),
-                what=kind,
+                wire.PlanEvent(t=now, seq=self._seq, kind=ev.kind, phase=out.phase, data=data),
+                what=ev.kind,
             )
         self._publish_states(now, view)
         self.last_output = out  # before TickDone: the sim reads it once the tick is answered

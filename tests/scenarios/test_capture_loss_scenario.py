@@ -36,7 +36,7 @@ class CutLink:
                 self.drivers[i].fail_link("test: link cut mid-approach")
                 self.cut = (view.ids[i], view.t)
         if self.cut is not None and self.replanned_t is None:
-            if any(k == "robot_lost" for k, _ in intent.events):
+            if any(e.kind == "robot_lost" for e in intent.events):
                 self.replanned_t = view.t
         return intent
 
