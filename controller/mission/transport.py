@@ -89,8 +89,8 @@ class TransportMission:
         # every robot of the fleet takes part: those holding the object keep their contacts,
         # the others are free (re-arrangement recruits them when the holders cannot push)
         self.lp = ContactForceLP(max(self.n, 1), friction=o.contact_friction > 0)
-        self.grip = Grip(cfg, self.model, self.s.grip(), robots, points, normals)
-        self.way = RouteProgress(self.model, np.asarray(o.goal, float), self.s.progress())
+        self.grip = Grip(cfg, self.model, self.s.grip, robots, points, normals)
+        self.way = RouteProgress(self.model, np.asarray(o.goal, float), self.s.progress)
         self.rearranger = Rearranger(
             cfg, self.model, self.params.speed, self.params.strategy, self.s.turn_margin,
             self.planners, rng,
