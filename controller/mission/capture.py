@@ -38,7 +38,6 @@ the stand-in world never stops the object because the controller declared anythi
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 import numpy as np
 
@@ -53,6 +52,7 @@ from controller.mission.capture_phase import (
     advance,
 )
 from controller.mission.guard import SafetyStage
+from controller.mission.summary import CaptureSummary
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase
 from controller.planning.approach import (
     STATION_GAP,
@@ -343,15 +343,15 @@ class CaptureMission:
         assert self.guard is not None
         return self.guard.apply(view, intent)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> CaptureSummary:
         assert self.guard is not None
         st = self.state
-        return {
-            "phase": str(st.phase),
-            "arrival_spread_s": st.arrival_spread,
-            "arrest_time_s": st.arrest_t,
-            "hold_displacement_estimated_m": st.hold_displacement if st.hold_t0 else None,
-            "escapes": st.escapes,
-            "contacts_lost": st.releases,
-            "infeasible_filter_calls": self.guard.counters.infeasible,
-        }
+        return CaptureSummary(
+            phase=str(st.phase),
+            arrival_spread_s=st.arrival_spread,
+            arrest_time_s=st.arrest_t,
+            hold_displacement_estimated_m=st.hold_displacement if st.hold_t0 else None,
+            escapes=st.escapes,
+            contacts_lost=st.releases,
+            infeasible_filter_calls=self.guard.counters.infeasible,
+        )

@@ -23,6 +23,7 @@ from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spaw
 from controller.mission.reach import Reach
 from controller.mission.roster import Roster, parked
 from controller.mission.sequence import Cue, Failure, JobState, Measures, next_phase
+from controller.mission.summary import CapturePlanSummary, JobSummary
 from controller.mission.transport import TransportMission, route_planner_for
 from controller.mission.types import (
     FleetView,
@@ -373,27 +374,24 @@ class CaptureJob:
             )
         return self.inner.safety(view, intent)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JobSummary:
+        carry = None if self.transport is None else self.transport.summary()
         if self.capture is None:  # entered at route
-            return {} if self.transport is None else self.transport.summary()
-        out: dict[str, Any] = {
-            "capture_points": len(self.capture.points),
-            "capture_objective": self.capture.objective,
-            "form_closure": self.capture.form_closure,
-            "hold_capacity": self.capture.hold_capacity,
-            "reinforced_points": self.capture.reinforced,
-            "assigned": None
-            if self.assignment is None
-            else [self.cfg.robots[i].id for i in self.assignment],
-            "reassignments": self.reassigner.count,
-            "wall_replans": self.reach.replans,
-            "unreachable_nodes": len(self.reach.unreachable),
-            "robots_lost": [self.cfg.robots[i].id for i in self.roster.lost],
-            "outages": self.outage.outages,
-            "loss_replans": self.loss_replans,
-        }
-        if self.inner is not None and hasattr(self.inner, "summary"):
-            out.update(self.inner.summary())
-        if self.transport is not None:
-            out.update(self.transport.summary())
-        return out
+            return JobSummary(transport=carry)
+        ids = [r.id for r in self.cfg.robots]
+        plan = CapturePlanSummary(
+            capture_points=len(self.capture.points),
+            capture_objective=self.capture.objective,
+            form_closure=self.capture.form_closure,
+            hold_capacity=self.capture.hold_capacity,
+            reinforced_points=self.capture.reinforced,
+            assigned=None if self.assignment is None else [ids[i] for i in self.assignment],
+            reassignments=self.reassigner.count,
+            wall_replans=self.reach.replans,
+            unreachable_nodes=len(self.reach.unreachable),
+            robots_lost=[ids[i] for i in self.roster.lost],
+            outages=self.outage.outages,
+            loss_replans=self.loss_replans,
+        )
+        inner = None if self.inner is None else self.inner.summary()
+        return JobSummary(plan, inner, carry)

@@ -37,6 +37,7 @@ from controller.mission.sequence import (
     Measures,
     next_phase,
 )
+from controller.mission.summary import TransportSummary
 from controller.mission.transport_settings import SEQUENCE, TransportSettings
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.arrangement import can_push
@@ -383,16 +384,16 @@ class TransportMission:
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
         return self.guard.apply(view, intent)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> TransportSummary:
         f = np.asarray(self.pusher.forces) if self.pusher.forces else np.zeros(0)
         route = self.way.route
-        return {
-            "transport_phase": str(self.phase),
-            "route_length_m": None if route is None else route.length_m,
-            "route_replans": self.route_replans,
-            "rearrangements": self.rearranger.count,
-            "relocations": self.grip.relocations,
-            "local_plans": self.pusher.plans,
-            "planned_force_mean_n": float(f.mean()) if len(f) else None,
-            "transport_failure": self.failure,
-        }
+        return TransportSummary(
+            transport_phase=str(self.phase),
+            route_length_m=None if route is None else route.length_m,
+            route_replans=self.route_replans,
+            rearrangements=self.rearranger.count,
+            relocations=self.grip.relocations,
+            local_plans=self.pusher.plans,
+            planned_force_mean_n=float(f.mean()) if len(f) else None,
+            transport_failure=self.failure,
+        )

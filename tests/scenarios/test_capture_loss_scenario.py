@@ -6,9 +6,8 @@ arrest the object, in the ``ideal`` world over zenoh."""
 
 from __future__ import annotations
 
-from typing import Any
-
 from controller.mission.factory import build_mission
+from controller.mission.summary import JobSummary
 from controller.runtime import dry_run
 from controller.runtime.dry_run import DryRun, judge
 from tests.support.capture_scenarios import SCENARIOS, scenario
@@ -43,7 +42,7 @@ class CutLink:
     def safety(self, view, intent):
         return self.job.safety(view, intent)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JobSummary:
         return self.job.summary()
 
 

@@ -82,8 +82,8 @@ def test_losing_an_assigned_robot_mid_approach_replans_over_the_robots_left():
     assert len(j.capture.points) <= j.n - 1
     assert out.phase == Phase.APPROACH and not out.failed
     assert np.all(out.commands[lost] == 0.0)  # a lost robot is told nothing
-    summary = j.summary()
-    assert summary["loss_replans"] == 1 and summary["robots_lost"] == [j.cfg.robots[lost].id]
+    summary = j.summary().plan
+    assert summary.loss_replans == 1 and summary.robots_lost == [j.cfg.robots[lost].id]
 
 
 def test_a_stale_robot_is_lost_only_after_the_grace():
@@ -225,7 +225,7 @@ def test_a_fleet_wide_silence_is_one_outage_that_the_job_rides_out():
     assert kinds(out)[0] == "outage_end" and by_kind(out.events)["outage_end"].lost == []
     assert out.phase == Phase.APPROACH and np.any(out.commands != 0.0)
     assert np.array_equal(j.capture.points, points) and np.array_equal(j.assignment, assignment)
-    assert j.summary()["robots_lost"] == [] and j.summary()["outages"] == 1
+    assert j.summary().plan.robots_lost == [] and j.summary().plan.outages == 1
 
 
 def test_an_outage_loses_only_the_robots_still_missing_after_its_grace():
@@ -242,4 +242,4 @@ def test_an_outage_loses_only_the_robots_still_missing_after_its_grace():
     out = step(j, view(j, t, present=without(j.n, first)))
     assert kinds(out)[:3] == ["outage_end", "robot_lost", "capture"]
     assert by_kind(out.events)["robot_lost"].robot == j.cfg.robots[first].id
-    assert first not in j.assignment and j.summary()["loss_replans"] == 1
+    assert first not in j.assignment and j.summary().plan.loss_replans == 1
