@@ -22,6 +22,7 @@ import dataclasses
 import enum
 import types
 import typing
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, ClassVar
@@ -98,7 +99,7 @@ class Event:
         fit: a missing field, a value of the wrong type, an unknown enum word)."""
         if not isinstance(data, dict):
             raise EventFieldError(f"{cls.KIND}: expected an object, got {type(data).__name__}")
-        hints = _hints(cls)
+        rules = _rules(cls)
         kwargs: dict[str, Any] = {}
         names = set()
         for f in dataclasses.fields(cls):
@@ -109,7 +110,7 @@ class Event:
                 if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
                     raise EventFieldError(f"{cls.KIND}.{f.name}: missing")
                 continue
-            kwargs[f.name] = _fit(f"{cls.KIND}.{f.name}", hints[f.name], data[f.name])
+            kwargs[f.name] = _fit(rules[f.name], data[f.name])
         extra = {k: v for k, v in data.items() if k not in names}
         return cls(**kwargs, extra=extra)
 
@@ -378,39 +379,58 @@ def parse_event(kind: str, data: Any) -> Event:
 
 # --------------------------------------------------------------------------- field checks
 
-_HINTS: dict[type, dict[str, Any]] = {}
+_TYPE_CHECKS: dict[Any, Callable[[Any], bool]] = {
+    float: lambda v: isinstance(v, int | float) and not isinstance(v, bool),
+    int: lambda v: isinstance(v, int) and not isinstance(v, bool),
+    bool: lambda v: isinstance(v, bool),
+    str: lambda v: isinstance(v, str),
+    list: lambda v: isinstance(v, list),
+    dict: lambda v: isinstance(v, dict),
+}
 
 
-def _hints(cls: type) -> dict[str, Any]:
-    if cls not in _HINTS:
-        _HINTS[cls] = typing.get_type_hints(cls)
-    return _HINTS[cls]
+@dataclass(frozen=True)
+class _Rule:
+    """How one field of a kind is read: its declared type (top level), optional or not."""
+
+    where: str
+    tp: Any
+    nullable: bool
+    check: Callable[[Any], bool]
 
 
-def _fit(where: str, tp: Any, value: Any) -> Any:
+_RULES: dict[type, dict[str, _Rule]] = {}
+
+
+def _rules(cls: type) -> dict[str, _Rule]:
+    """Per field of ``cls``, its reading rule (resolved once per class)."""
+    if cls not in _RULES:
+        out = {}
+        for name, tp in typing.get_type_hints(cls).items():
+            if name in ("KIND", "extra"):
+                continue
+            nullable = False
+            if typing.get_origin(tp) in (typing.Union, types.UnionType):
+                nullable = type(None) in typing.get_args(tp)
+                (tp,) = [a for a in typing.get_args(tp) if a is not type(None)]
+            check = _TYPE_CHECKS.get(typing.get_origin(tp) or tp, lambda v: True)
+            out[name] = _Rule(f"{cls.KIND}.{name}", tp, nullable, check)  # type: ignore[attr-defined]
+        _RULES[cls] = out
+    return _RULES[cls]
+
+
+def _fit(rule: _Rule, value: Any) -> Any:
     """``value`` checked against the field's declared type (top level only); enum words become
     members. Raises EventFieldError."""
-    origin = typing.get_origin(tp)
-    if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in typing.get_args(tp):
-            return None
-        (tp,) = [a for a in typing.get_args(tp) if a is not type(None)]
-        origin = typing.get_origin(tp)
-    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+    if value is None and rule.nullable:
+        return None
+    if isinstance(rule.tp, type) and issubclass(rule.tp, enum.Enum):
         try:
-            return tp(value)
+            return rule.tp(value)
         except ValueError as exc:
-            raise EventFieldError(f"{where}: {value!r} is not a {tp.__name__}") from exc
-    ok = {
-        float: lambda v: isinstance(v, int | float) and not isinstance(v, bool),
-        int: lambda v: isinstance(v, int) and not isinstance(v, bool),
-        bool: lambda v: isinstance(v, bool),
-        str: lambda v: isinstance(v, str),
-        list: lambda v: isinstance(v, list),
-        dict: lambda v: isinstance(v, dict),
-    }.get(origin or tp, lambda v: True)
-    if not ok(value):
-        raise EventFieldError(f"{where}: {type(value).__name__} does not fit {tp}")
+            raise EventFieldError(f"{rule.where}: {value!r} is not a {rule.tp.__name__}") from exc
+    if not rule.check(value):
+        raise EventFieldError(f"{rule.where}: {type(value).__name__} does not fit {rule.tp}")
     return value
 
 
