@@ -342,6 +342,37 @@ class DeliveredEvent(Event):
     pose: list[float]
 
 
+@dataclass(frozen=True, kw_only=True)
+class LinkLostEvent(Event):
+    """On ``robot/<id>/event``: the robot's agent lost its link to the robot. The agent writes
+    it (``drivers/`` speaks only the wire contract: the same JSON, ``{"detail": ...}``)."""
+
+    KIND: ClassVar[str] = "link_lost"
+    detail: str = ""
+
+
+@dataclass(frozen=True, kw_only=True)
+class LinkRestoredEvent(Event):
+    """On ``robot/<id>/event``: the link is back, or a new agent started."""
+
+    KIND: ClassVar[str] = "link_restored"
+    detail: str = ""
+
+
+LINK_EVENTS: dict[str, type[Event]] = {c.KIND: c for c in (LinkLostEvent, LinkRestoredEvent)}
+
+
+def link_event(kind: str, data: Any) -> LinkLostEvent | LinkRestoredEvent | None:
+    """A robot event as the controller takes it: typed by its kind (a malformed ``detail`` is
+    dropped: the kind is what counts), None for any other kind."""
+    if kind not in LINK_EVENTS:
+        return None
+    ev = parse_event(kind, data)
+    if isinstance(ev, LinkLostEvent | LinkRestoredEvent):
+        return ev
+    return LinkLostEvent() if kind == LinkLostEvent.KIND else LinkRestoredEvent()
+
+
 EVENT_TYPES: dict[str, type[Event]] = {
     cls.KIND: cls
     for cls in (
@@ -361,6 +392,8 @@ EVENT_TYPES: dict[str, type[Event]] = {
         RearrangeEvent,
         TransportEvent,
         DeliveredEvent,
+        LinkLostEvent,
+        LinkRestoredEvent,
     )
 }
 

@@ -50,6 +50,8 @@ from controller.events import (
     Event,
     FailureEvent,
     GenericEvent,
+    LinkLostEvent,
+    LinkRestoredEvent,
     PhaseEvent,
     RearrangeEvent,
     RouteEvent,
@@ -315,11 +317,13 @@ class SceneBuilder:
 
     def _on_robot_event(self, t: float, key: wire.KeyParts, m: dict) -> list[SceneMessage]:
         kind = str(m.get("kind", ""))
-        data = m.get("data") if isinstance(m.get("data"), dict) else {}
-        if kind == "link_lost" and key.id in self.robots:
+        ev = parse_event(kind, m.get("data"))
+        lost = isinstance(ev, LinkLostEvent) or kind == LinkLostEvent.KIND  # even misshapen
+        if lost and key.id in self.robots:
             self.robots[key.id].lost = True
-        level = P.LOG_ERROR if kind == "link_lost" else P.LOG_INFO
-        detail = data.get("detail", "")
+        level = P.LOG_ERROR if lost else P.LOG_INFO
+        link = isinstance(ev, LinkLostEvent | LinkRestoredEvent)
+        detail = ev.detail if link else ev.to_dict().get("detail", "")  # another kind: as sent
         return [self._log(t, level, f"robot {key.id}: {kind} {detail}".strip(), key.id)]
 
     def _on_plan(self, t: float, key: wire.KeyParts, m: dict) -> list[SceneMessage]:

@@ -18,11 +18,14 @@ from controller.events import (
     ArrestEvent,
     FailureEvent,
     GenericEvent,
+    LinkLostEvent,
+    LinkRestoredEvent,
     PhaseEvent,
     Reason,
     RobotLostEvent,
     RouteEvent,
     TransportEvent,
+    link_event,
     parse_event,
 )
 from controller.io.recorder import read_log
@@ -155,3 +158,13 @@ def test_every_kind_is_registered_once_and_typed_fields_read_back():
                        cost_s=None, replans=0)  # fmt: skip
     assert parse_event("route", json.loads(json.dumps(route.to_dict()))) == route
     assert parse_event("phase", {"phase": "hold", "t": 2}) == PhaseEvent(phase="hold", t=2)
+
+
+def test_a_robots_link_events_are_typed_and_a_misshapen_one_keeps_its_kind():
+    lost = link_event("link_lost", {"detail": "no heartbeat"})
+    assert isinstance(lost, LinkLostEvent) and lost.detail == "no heartbeat"
+    assert lost.to_dict() == {"detail": "no heartbeat"}  # what drivers/agent.py writes
+    assert isinstance(link_event("link_restored", {}), LinkRestoredEvent)
+    # a detail that is not a string: the kind still counts (the robot's link is lost)
+    assert link_event("link_lost", {"detail": 7}) == LinkLostEvent()
+    assert link_event("battery_low", {"detail": "x"}) is None
