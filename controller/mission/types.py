@@ -1,4 +1,5 @@
-"""What a mission sees and returns each tick, and the names of its phases and failures.
+"""What a mission sees and returns each tick, and the names of its phases and failures
+(``Phase``, ``Reason`` and the typed ``Event``s live in ``controller.events``, re-exported here).
 
 ``FleetView`` in; the mission's plan stage returns an ``Intent`` (nominal world velocities and
 what the safety stage must know); its safety stage returns the ``MissionOutput`` (body-frame

@@ -40,7 +40,9 @@ def test_a_setting_named_after_a_config_key_takes_the_configs_default(cls, secti
     for f in dataclasses.fields(cls):
         stem = {f.name, f"{f.name}_deg", f"{f.name}_hz"}
         if stem & keys:
-            assert f.name in configured, f"{cls.__name__}.{f.name} repeats [{section}] default"
+            assert f.name in configured, (
+                f"{cls.__name__}.{f.name} repeats the default of [{section.__name__}]"
+            )
     for name, (key, convert) in configured.items():
         assert key in keys, (cls.__name__, name, key)
         want = getattr(section(), key)
