@@ -13,8 +13,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from controller import geometry  # noqa: E402
+from controller.events import CaptureEvent, RouteEvent, TransportEvent  # noqa: E402
 from controller.replay import metrics  # noqa: E402
-from controller.replay.log import RunLog, events_of, phases_of, track  # noqa: E402
+from controller.replay.log import RunLog, events_of, phases_of, track, typed_events  # noqa: E402
 from controller.scene.builder import PHASE_COLORS as SCENE_PHASE_COLORS  # noqa: E402
 
 PHASE_COLORS = {k: v[:3] for k, v in SCENE_PHASE_COLORS.items()}  # as in the Foxglove scene
@@ -115,12 +116,12 @@ def _object_outlines(ax, run: RunLog, poly: np.ndarray, obj: metrics.Track) -> N
 def _capture_points(ax, run: RunLog, obj: metrics.Track) -> str | None:
     """The capture points and push normals, placed with the object at the arrest (or where it
     was when the fleet last closed in); the label of the legend entry."""
-    caps = events_of(run, "capture")
+    caps = typed_events(run, CaptureEvent)
     if not caps or not len(obj):
         return None
-    data = caps[-1]["data"]
-    pts = np.asarray(data.get("points") or [], float).reshape(-1, 2)
-    nrm = np.asarray(data.get("normals") or [], float).reshape(-1, 2)
+    cap = caps[-1][1]
+    pts = np.asarray(cap.points, float).reshape(-1, 2)
+    nrm = np.asarray(cap.normals, float).reshape(-1, 2)
     if not len(pts):
         return None
     arrests = events_of(run, "arrest")
@@ -138,14 +139,15 @@ def _capture_points(ax, run: RunLog, obj: metrics.Track) -> str | None:
 
 
 def _route(ax, run: RunLog, poly: np.ndarray) -> bool:
-    routes = events_of(run, "route")
+    routes = typed_events(run, RouteEvent)
     if not routes:
         return False
-    wp = np.asarray(routes[-1]["data"].get("waypoints") or [], float).reshape(-1, 3)
+    route = routes[-1][1]
+    wp = np.asarray(route.waypoints, float).reshape(-1, 3)
     c = geometry.centroid(poly)
     cw = np.array([geometry.transform(c[None], q)[0] for q in wp]).reshape(-1, 2)
     ax.plot(cw[:, 0], cw[:, 1], "-", color="tab:purple", lw=1.8, alpha=0.8, zorder=2)
-    for sg in np.asarray(routes[-1]["data"].get("subgoals") or [], float).reshape(-1, 3):
+    for sg in np.asarray(route.subgoals, float).reshape(-1, 3):
         q = geometry.transform(poly, sg)
         ax.fill(*q.T, fill=False, ec="tab:purple", lw=0.6, ls="--", zorder=2)
     return True
@@ -359,36 +361,33 @@ def _plot_transport(run: RunLog, phases, path: Path) -> Path:
     poly = geometry.ensure_ccw(cfg.object_polygon())
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
     obj = _object_track(run)
-    routes = events_of(run, "route")
+    routes = typed_events(run, RouteEvent)
     if routes and len(obj):
-        t0 = routes[0]["t"]
+        t0 = routes[0][0]
         c = geometry.centroid(poly)
         keep = obj.t >= t0
         cent = np.array([geometry.transform(c[None], q)[0] for q in obj.pose[keep]]).reshape(-1, 2)
         # each sample against the route in force at its time (a re-plan replaces it)
-        starts = [r["t"] for r in routes]
+        starts = [t for t, _ in routes]
         which = metrics.phase_index(obj.t[keep], starts)
         dev = np.full(len(cent), np.nan)
-        for k, r in enumerate(routes):
-            wp = np.asarray(r["data"].get("waypoints") or [], float).reshape(-1, 3)
+        for k, (_, r) in enumerate(routes):
+            wp = np.asarray(r.waypoints, float).reshape(-1, 3)
             cw = np.array([geometry.transform(c[None], q)[0] for q in wp]).reshape(-1, 2)
             sel = which == k
             if sel.any() and len(cw):
                 dev[sel] = metrics.lateral_deviation(cent[sel], cw)
         ax1.plot(obj.t[keep], dev, color="tab:purple")
-        for r in routes[1:]:
-            ax1.axvline(r["t"], color="tab:purple", ls="--", lw=0.8)
+        for t, _ in routes[1:]:
+            ax1.axvline(t, color="tab:purple", ls="--", lw=0.8)
     ax1.set_ylabel("object off its route (m)")
-    plans = events_of(run, "transport")
+    caps = typed_events(run, CaptureEvent)
     forces: dict[str, list[tuple[float, float]]] = {}
-    for ev in plans:
-        d = ev["data"]
-        ids = d.get("robots") or (events_of(run, "capture") or [{"data": {}}])[-1]["data"].get(
-            "robots", []
-        )
-        first = (d.get("forces") or [[]])[0] or []
+    for t, plan in typed_events(run, TransportEvent):
+        ids = plan.robots or (caps[-1][1].robots if caps else [])
+        first = (plan.forces or [[]])[0] or []
         for rid, f in zip(ids, first, strict=False):
-            forces.setdefault(rid, []).append((ev["t"], float(f or 0.0)))
+            forces.setdefault(rid, []).append((t, float(f or 0.0)))
     for (rid, rows), col in zip(sorted(forces.items()), robot_colours(len(forces)), strict=True):
         a = np.asarray(rows)
         if np.any(a[:, 1] > 0):

@@ -103,12 +103,12 @@ def run(args) -> int:
         max_time=args.max_time,
         viz=args.viz,
         planners=planners,
-    ).run()
-    ok = summary["status"] == "ok"
+    ).run_summary()
+    figures = summary.to_json()
     if args.json:
-        emit_json(summary)
+        emit_json(figures)
     else:
         for k in SUMMARY_FIELDS:
-            if k in summary:
-                print(f"{k:>26}: {summary.get(k)}")
-    return 0 if ok else 1
+            if k in figures:
+                print(f"{k:>26}: {figures[k]}")
+    return 0 if summary.ok else 1

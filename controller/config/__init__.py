@@ -8,7 +8,9 @@ The package, by layer (each imports only the ones before it; no module imports t
   sub-tables, validation, ACL needs); their classes are in controller/runtime/wiring.py;
 - ``sections``: the section dataclasses and the registries of valid names;
 - ``acl``: the lab ACL profile's generator; ``security``: zenoh endpoints, identities, TLS, ACL;
-- ``validate``: cross-field rules, ``parse_config``, ``load_config``, ``config_to_dict``.
+- ``validate``: cross-field rules, ``parse_config``, ``load_config``, ``config_to_dict``;
+- ``derive`` (imports none of them): settings whose defaults are the sections' (``configured``,
+  ``from_section``): a default is written once, in its section.
 
 ``from controller.config import ...`` keeps working for every name of the former module.
 
@@ -17,6 +19,7 @@ Units are SI unless the key's name says otherwise (``_deg``, ``_hz``).
 
 from __future__ import annotations
 
+from controller.config.derive import configured, from_section
 from controller.config.driver_sections import (
     DRIVER_SPECS,
     DRIVERS,
@@ -105,6 +108,8 @@ from controller.config.validate import (
 __all__ = [
     "ACL_PROFILES",
     "ApproachSection",
+    "configured",
+    "from_section",
     "CAPTURE_NODE_BUDGET",
     "CAPTURE_GAS",
     "CLOSURE_MODES",

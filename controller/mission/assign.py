@@ -12,6 +12,7 @@ from scipy.optimize import linear_sum_assignment
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.events import ReassignEvent
 from controller.mission.types import Event, FleetView
 from controller.planning.approach import envelope, interception_times
 from controller.planning.capture_set import CaptureSet
@@ -93,4 +94,4 @@ class Reassigner:
             return None, []
         self.count += 1
         robots = [view.ids[i] for i in new]
-        return new, [("reassign", {"robots": robots, "t": view.t, "eta_s": [now, better]})]
+        return new, [ReassignEvent(robots=robots, t=view.t, eta_s=[now, better])]

@@ -38,12 +38,12 @@ the stand-in world never stops the object because the controller declared anythi
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.events import ArrestEvent, PhaseEvent
 from controller.mission.capture_phase import (
     CLOSED,
     CaptureSettings,
@@ -52,6 +52,7 @@ from controller.mission.capture_phase import (
     advance,
 )
 from controller.mission.guard import SafetyStage
+from controller.mission.summary import CaptureSummary
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase
 from controller.planning.approach import (
     STATION_GAP,
@@ -298,7 +299,7 @@ class CaptureMission:
         events: list[Event] = []
         if self.state.t0 is None:
             self.state = replace(self.state, t0=view.t)
-            events.append(("phase", {"phase": str(self.state.phase), "t": view.t}))
+            events.append(PhaseEvent(phase=self.state.phase, t=view.t))
         pose = self.goal_pose(view)
         goals = self.goals(pose)
         if not self._detours_planned:
@@ -308,17 +309,18 @@ class CaptureMission:
         m = self.measures(view, tgt, goals)
         step = advance(self.state, m, self.s)
         self.state = step.state
-        for kind, data in step.events:
-            if kind == "arrest":
-                data["contacts"] = [
-                    {"robot": view.ids[i], "point": [float(x) for x in p]}
-                    for i, p in zip(self.assignment, goals.points, strict=True)
-                ]
+        contacts = [
+            {"robot": view.ids[i], "point": [float(x) for x in p]}
+            for i, p in zip(self.assignment, goals.points, strict=True)
+        ]
+        events += [
+            replace(e, contacts=contacts) if isinstance(e, ArrestEvent) else e for e in step.events
+        ]
         closed = self.state.phase in CLOSED
         return Intent(
             vel,
             self.state.phase,
-            events + step.events,
+            events,
             object_pose=pose,
             touch=self.assigned if self.state.phase != Phase.APPROACH else None,
             # a caging robot's barrier never pushes it off the object's estimate: the physics
@@ -341,15 +343,15 @@ class CaptureMission:
         assert self.guard is not None
         return self.guard.apply(view, intent)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> CaptureSummary:
         assert self.guard is not None
         st = self.state
-        return {
-            "phase": str(st.phase),
-            "arrival_spread_s": st.arrival_spread,
-            "arrest_time_s": st.arrest_t,
-            "hold_displacement_estimated_m": st.hold_displacement if st.hold_t0 else None,
-            "escapes": st.escapes,
-            "contacts_lost": st.releases,
-            "infeasible_filter_calls": self.guard.counters.infeasible,
-        }
+        return CaptureSummary(
+            phase=str(st.phase),
+            arrival_spread_s=st.arrival_spread,
+            arrest_time_s=st.arrest_t,
+            hold_displacement_estimated_m=st.hold_displacement if st.hold_t0 else None,
+            escapes=st.escapes,
+            contacts_lost=st.releases,
+            infeasible_filter_calls=self.guard.counters.infeasible,
+        )

@@ -8,12 +8,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from controller.config import FleetConfig
+from controller.config import ApproachSection, FleetConfig, configured, from_section
+from controller.events import ArrestEvent, ContactLostEvent, EscapeEvent
 from controller.mission.sequence import CAPTURING, Cue, Failure, JobState, next_phase
 from controller.mission.sequence import Measures as SeqMeasures
 from controller.mission.types import Event, Phase, Reason
 
 CLOSED = (Phase.HOLD, Phase.ARRESTED, Phase.DONE)  # robots in contact, preloading
+_APPROACH = ApproachSection()  # the config's defaults: the settings' defaults of its keys
 
 
 @dataclass(frozen=True)
@@ -34,13 +36,13 @@ class CaptureSettings:
     top speed a robot plans an interception with).
     """
 
-    contact_tolerance: float = 0.015
-    envelope_tolerance: float = 0.08
-    hold_s: float = 2.0
-    hold_tolerance: float = 0.03
-    preload_depth: float = 0.0
-    timeout: float = 180.0
-    intercept_horizon: float = 8.0
+    contact_tolerance: float = configured(_APPROACH, "contact_tolerance")
+    envelope_tolerance: float = configured(_APPROACH, "envelope_tolerance")
+    hold_s: float = configured(_APPROACH, "hold_s")
+    hold_tolerance: float = configured(_APPROACH, "hold_tolerance")
+    preload_depth: float = configured(_APPROACH, "preload_depth")
+    timeout: float = configured(_APPROACH, "timeout")
+    intercept_horizon: float = configured(_APPROACH, "intercept_horizon")
     settle_s: float = 0.5
     release_factor: float = 2.0
     creep_gap: float = 0.03
@@ -53,16 +55,7 @@ class CaptureSettings:
 
     @classmethod
     def from_config(cls, cfg: FleetConfig) -> CaptureSettings:
-        ap = cfg.approach
-        return cls(
-            contact_tolerance=ap.contact_tolerance,
-            envelope_tolerance=ap.envelope_tolerance,
-            hold_s=ap.hold_s,
-            hold_tolerance=ap.hold_tolerance,
-            preload_depth=ap.preload_depth,
-            timeout=ap.timeout,
-            intercept_horizon=ap.intercept_horizon,
-        )
+        return from_section(cls, cfg.approach)
 
 
 @dataclass(frozen=True)
@@ -153,14 +146,13 @@ def _entered(st: CaptureState, m: Measures) -> CaptureState:
 
 
 def _arrest_event(st: CaptureState, m: Measures) -> Event:
-    data = {
-        "t": m.t,
-        "arrival_spread_s": st.arrival_spread,
-        "hold_s": m.t - st.hold_t0,
-        "hold_displacement_m": st.hold_displacement,
-        "gaps_m": m.gap.round(4).tolist(),
-    }
-    return ("arrest", data)
+    return ArrestEvent(
+        t=m.t,
+        arrival_spread_s=st.arrival_spread,
+        hold_s=m.t - st.hold_t0,
+        hold_displacement_m=st.hold_displacement,
+        gaps_m=m.gap.round(4).tolist(),
+    )
 
 
 def _recage(cage: np.ndarray | None, touching: np.ndarray, preload: np.ndarray) -> np.ndarray:
@@ -183,10 +175,10 @@ def _hold(st: CaptureState, m: Measures, s: CaptureSettings, events) -> tuple:
         cage=_recage(st.cage, touching, m.preload),
     )
     if np.any(m.gap > s.release_factor * s.contact_tolerance):
-        events.append(("contact_lost", {"t": m.t, "gaps_m": m.gap.round(4).tolist()}))
+        events.append(ContactLostEvent(t=m.t, gaps_m=m.gap.round(4).tolist()))
         return replace(st, releases=st.releases + 1, cage=None), Cue.CONTACT_LOST
     if moved > s.hold_tolerance and st.phase == Phase.HOLD:
-        events.append(("escape", {"t": m.t, "displacement_m": moved}))
+        events.append(EscapeEvent(t=m.t, displacement_m=moved))
         return replace(st, escapes=st.escapes + 1, cage=None), Cue.ESCAPED
     if st.phase == Phase.HOLD and m.t - st.hold_t0 >= s.hold_s and np.all(touching):
         return st, Cue.HELD

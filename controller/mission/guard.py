@@ -14,6 +14,7 @@ import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.events import SafetyStopEvent
 from controller.mission.tracking import RobotLimits, track_reversible
 from controller.mission.types import FleetView, Intent, MissionOutput, Phase
 from controller.planning.approach import limit_accel
@@ -99,7 +100,7 @@ class SafetyStage:
         if res.stopped.any():
             self.counters.infeasible += 1
             robots = [view.ids[i] for i in np.flatnonzero(res.stopped)]
-            out.events.append(("safety_stop", {"robots": robots}))
+            out.events.append(SafetyStopEvent(robots=robots))
         self.v_prev = res.velocities
         cmds = track_reversible(view.poses, res.velocities, self.limits)
         if intent.steady is not None:

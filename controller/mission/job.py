@@ -13,6 +13,7 @@ import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.events import CaptureEvent
 from controller.mission.assign import Reassigner, assign, interception_costs
 from controller.mission.capture import CaptureMission
 from controller.mission.capture_phase import CaptureSettings
@@ -22,6 +23,7 @@ from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spaw
 from controller.mission.reach import Reach
 from controller.mission.roster import Roster, parked
 from controller.mission.sequence import Cue, Failure, JobState, Measures, next_phase
+from controller.mission.summary import CapturePlanSummary, JobSummary
 from controller.mission.transport import TransportMission, route_planner_for
 from controller.mission.types import (
     FleetView,
@@ -301,21 +303,21 @@ class CaptureJob:
         self.assignment = assign(costs, self.roster.available)
         self.reassigner.assigned(view.t)
         self.inner = self._mission(view)
-        data = {
-            "points": self.capture.points.round(4).tolist(),
-            "normals": self.capture.normals.round(4).tolist(),
-            "robots": [view.ids[i] for i in self.assignment],
-            "objective": self.capture.objective,
-            "form_closure": self.capture.form_closure,
-            "robots_needed": len(self.capture.points),
-            "hold_capacity": self.capture.hold_capacity,
-            "reinforced": self.capture.reinforced,
-            "pinned": pinned,
-            "wall_contacts": self.capture.walls,
-            "unavailable": [view.ids[i] for i in np.flatnonzero(~self.roster.available)],
-        }
+        event = CaptureEvent(
+            points=self.capture.points.round(4).tolist(),
+            normals=self.capture.normals.round(4).tolist(),
+            robots=[view.ids[i] for i in self.assignment],
+            objective=self.capture.objective,
+            form_closure=self.capture.form_closure,
+            robots_needed=len(self.capture.points),
+            hold_capacity=self.capture.hold_capacity,
+            reinforced=self.capture.reinforced,
+            pinned=pinned,
+            wall_contacts=self.capture.walls,
+            unavailable=[view.ids[i] for i in np.flatnonzero(~self.roster.available)],
+        )
         intent = self.inner.plan(view)
-        intent.events.insert(0, ("capture", data))
+        intent.events.insert(0, event)
         return intent
 
     def _mission(self, view: FleetView):
@@ -372,27 +374,24 @@ class CaptureJob:
             )
         return self.inner.safety(view, intent)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JobSummary:
+        carry = None if self.transport is None else self.transport.summary()
         if self.capture is None:  # entered at route
-            return {} if self.transport is None else self.transport.summary()
-        out: dict[str, Any] = {
-            "capture_points": len(self.capture.points),
-            "capture_objective": self.capture.objective,
-            "form_closure": self.capture.form_closure,
-            "hold_capacity": self.capture.hold_capacity,
-            "reinforced_points": self.capture.reinforced,
-            "assigned": None
-            if self.assignment is None
-            else [self.cfg.robots[i].id for i in self.assignment],
-            "reassignments": self.reassigner.count,
-            "wall_replans": self.reach.replans,
-            "unreachable_nodes": len(self.reach.unreachable),
-            "robots_lost": [self.cfg.robots[i].id for i in self.roster.lost],
-            "outages": self.outage.outages,
-            "loss_replans": self.loss_replans,
-        }
-        if self.inner is not None and hasattr(self.inner, "summary"):
-            out.update(self.inner.summary())
-        if self.transport is not None:
-            out.update(self.transport.summary())
-        return out
+            return JobSummary(transport=carry)
+        ids = [r.id for r in self.cfg.robots]
+        plan = CapturePlanSummary(
+            capture_points=len(self.capture.points),
+            capture_objective=self.capture.objective,
+            form_closure=self.capture.form_closure,
+            hold_capacity=self.capture.hold_capacity,
+            reinforced_points=self.capture.reinforced,
+            assigned=None if self.assignment is None else [ids[i] for i in self.assignment],
+            reassignments=self.reassigner.count,
+            wall_replans=self.reach.replans,
+            unreachable_nodes=len(self.reach.unreachable),
+            robots_lost=[ids[i] for i in self.roster.lost],
+            outages=self.outage.outages,
+            loss_replans=self.loss_replans,
+        )
+        inner = None if self.inner is None else self.inner.summary()
+        return JobSummary(plan, inner, carry)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from controller.events import OutageEndEvent, OutageEvent
 from controller.mission.types import Event
 
 
@@ -46,14 +47,12 @@ class OutageWatch:
             self.start, self.robots = t, missing.copy()
             self.outages += 1
             robots = [ids[i] for i in np.flatnonzero(missing)]
-            events.append(("outage", {"t": t, "robots": robots, "grace_s": self.grace}))
+            events.append(OutageEvent(t=t, robots=robots, grace_s=self.grace))
             return np.zeros_like(gone), True, events
         if missing.any() and t - self.start < self.grace - 1e-9:
             self.robots |= missing
             return gone & ~relied, True, events  # nobody it relies on is lost yet
         lost = [ids[i] for i in np.flatnonzero(missing)]
-        events.append(
-            ("outage_end", {"t": t, "duration_s": round(t - self.start, 3), "lost": lost})
-        )
+        events.append(OutageEndEvent(t=t, duration_s=round(t - self.start, 3), lost=lost))
         self.start, self.robots = None, None
         return gone, False, events

@@ -11,10 +11,12 @@ from typing import Any
 import numpy as np
 
 from controller import geometry
-from controller.config import FleetConfig
+from controller.config import FleetConfig, TransportSection, configured
 from controller.mission.planners import JobOwned
 from controller.planning.transport_model import ObjectModel
 from controller.planning.transport_types import RouteSegment
+
+_TRANSPORT = TransportSection()  # the config's defaults: the settings' defaults of its keys
 
 
 @dataclass(frozen=True)
@@ -28,7 +30,7 @@ class ProgressSettings:
     subgoal_heading: float = math.radians(8.0)
     corridor: float = 0.4
     progress_step: float = 0.02
-    stall_timeout: float = 10.0
+    stall_timeout: float = configured(_TRANSPORT, "stall_timeout")
     progress_window: float = 0.6
 
 

@@ -10,6 +10,7 @@ import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.events import TransportEvent
 from controller.mission.grip import Contact, Grip
 from controller.mission.planners import JobOwned, Planners, PlanSlot, spawn_rng
 from controller.mission.types import Event, FleetView
@@ -136,8 +137,15 @@ class Pusher:
         }
         ids = [view.ids[i] for i in range(grip.n)]  # the plan's rows (the scene's pushers)
         lag = view.t - self.plan_t  # the state it was planned from is this old
-        data = {"t": view.t, "robots": ids, **plan.to_dict()}
-        events.append(("transport", {**data, "relocating": moving, "plan_age_s": round(lag, 6)}))
+        events.append(
+            TransportEvent(
+                t=view.t,
+                robots=ids,
+                plan=plan.to_dict(),
+                relocating=moving,
+                plan_age_s=round(lag, 6),
+            )
+        )
 
     def execute(self, view: FleetView, pose: np.ndarray, grip: Grip):
         """The plan's first interval, closed every tick: a robot holding a contact moves with

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from controller.config import FleetConfig
+from controller.events import RearrangeEvent
 from controller.mission.grip import Grip
 from controller.mission.planners import Planners, PlanSlot, spawn_rng
 from controller.mission.types import Event, FleetView
@@ -83,15 +84,13 @@ class Rearranger:
         self.since = view.t  # the timeout counts from the set's arrival
         grip.regrip(view, pose, new.points, new.normals)
         d = direction[:2]
-        data = {
-            "t": view.t,
-            "direction": np.round(d if np.any(d) else np.array([1.0, 0.0]), 4).tolist(),
-            "pushers": new.pushers,
-            "basis": new.basis,
-            "eq5_value": float(new.value),
-            "moving": [view.ids[i] for i in grip.moves],
-            "contacts": {
-                view.ids[i]: np.round(c.point, 4).tolist() for i, c in grip.targets.items()
-            },
-        }
-        events.append(("rearrange", data))
+        event = RearrangeEvent(
+            t=view.t,
+            direction=np.round(d if np.any(d) else np.array([1.0, 0.0]), 4).tolist(),
+            pushers=new.pushers,
+            basis=new.basis,
+            eq5_value=float(new.value),
+            moving=[view.ids[i] for i in grip.moves],
+            contacts={view.ids[i]: np.round(c.point, 4).tolist() for i, c in grip.targets.items()},
+        )
+        events.append(event)

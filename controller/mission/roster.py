@@ -8,6 +8,7 @@ import dataclasses
 
 import numpy as np
 
+from controller.events import RobotJoinedEvent, RobotLostEvent
 from controller.mission.types import Event, FleetView
 
 # s a robot's estimate may stay stale (no pose for fleet.stale_after) before the capture takes
@@ -45,7 +46,7 @@ class Roster:
         """Robots present with a fresh estimate again (or seen at last) are available again."""
         back = ~self.available & ~gone & view.present & ~view.stale
         self.available |= back
-        return [("robot_joined", {"t": view.t, "robot": view.ids[i]}) for i in np.flatnonzero(back)]
+        return [RobotJoinedEvent(t=view.t, robot=view.ids[i]) for i in np.flatnonzero(back)]
 
     def losses(
         self, view: FleetView, gone: np.ndarray, assignment: np.ndarray, phase: str
@@ -55,8 +56,8 @@ class Roster:
         self.available[new] = False
         self.lost += [int(i) for i in new]
         assigned = {int(i) for i in assignment}
-        events = [
-            ("robot_lost", {"t": view.t, "robot": view.ids[i], "phase": phase, "assigned": a})
+        events: list[Event] = [
+            RobotLostEvent(t=view.t, robot=view.ids[i], phase=phase, assigned=a)
             for i, a in ((int(i), int(i) in assigned) for i in new)
         ]
         return events, any(int(i) in assigned for i in new)

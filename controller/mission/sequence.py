@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from enum import StrEnum
 
+from controller.events import FailureEvent, PhaseEvent
 from controller.mission.types import Event, Phase, Reason
 
 
@@ -128,8 +129,8 @@ def next_phase(state: JobState, m: Measures, s: SequenceSettings | None = None) 
         return Step(state)
     if m.failure is not None:
         new = JobState(Phase.FAILED, m.t, m.failure)
-        failure = {"reason": str(m.failure.reason), "t": m.t, "detail": m.failure.detail}
-        return Step(new, (_phase_event(Phase.FAILED, m.t), ("failure", failure)))
+        failure = FailureEvent(reason=m.failure.reason, t=m.t, detail=m.failure.detail)
+        return Step(new, (PhaseEvent(phase=Phase.FAILED, t=m.t), failure))
     if m.cue is None:
         return Step(state)
     nxt = TRANSITIONS.get((state.phase, m.cue))
@@ -137,14 +138,10 @@ def next_phase(state: JobState, m: Measures, s: SequenceSettings | None = None) 
         return Step(state)
     if m.cue == Cue.SETTLED and s.carry:
         return Step(state)  # a job with a goal holds on until it carries the object
-    return Step(replace(state, phase=nxt, since=m.t), (_phase_event(nxt, m.t),))
+    return Step(replace(state, phase=nxt, since=m.t), (PhaseEvent(phase=nxt, t=m.t),))
 
 
 def entered_at(phase: Phase, t: float | None = None) -> JobState:
     """A job entered part way: ``--mission transport`` starts at ``route`` with the object
     held (the capture done before, by the same job or by hand)."""
     return JobState(phase, t)
-
-
-def _phase_event(phase: Phase, t: float) -> Event:
-    return ("phase", {"phase": str(phase), "t": t})

@@ -22,6 +22,7 @@ import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
+from controller.events import DeliveredEvent, RobotLostEvent, RouteEvent
 from controller.mission.grip import Contact, Grip
 from controller.mission.guard import SafetyStage
 from controller.mission.outage import OutageWatch
@@ -36,6 +37,7 @@ from controller.mission.sequence import (
     Measures,
     next_phase,
 )
+from controller.mission.summary import TransportSummary
 from controller.mission.transport_settings import SEQUENCE, TransportSettings
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.arrangement import can_push
@@ -88,8 +90,8 @@ class TransportMission:
         # every robot of the fleet takes part: those holding the object keep their contacts,
         # the others are free (re-arrangement recruits them when the holders cannot push)
         self.lp = ContactForceLP(max(self.n, 1), friction=o.contact_friction > 0)
-        self.grip = Grip(cfg, self.model, self.s.grip(), robots, points, normals)
-        self.way = RouteProgress(self.model, np.asarray(o.goal, float), self.s.progress())
+        self.grip = Grip(cfg, self.model, self.s.grip, robots, points, normals)
+        self.way = RouteProgress(self.model, np.asarray(o.goal, float), self.s.progress)
         self.rearranger = Rearranger(
             cfg, self.model, self.params.speed, self.params.strategy, self.s.turn_margin,
             self.planners, rng,
@@ -146,8 +148,7 @@ class TransportMission:
         for i in range(self.n):
             if gone[i] and i not in lost:
                 self.grip.drop(i)
-                data = {"t": view.t, "robot": view.ids[i], "phase": self.phase}
-                events.append(("robot_lost", data))
+                events.append(RobotLostEvent(t=view.t, robot=view.ids[i], phase=self.phase))
         return False
 
     def _cue(self, cue: Cue | None, t: float, events: list[Event], failure: Failure | None = None):
@@ -200,15 +201,15 @@ class TransportMission:
         if not res.ok:
             return self._fail(Reason.NO_ROUTE, res.reason, view, events)
         self.way.begin(res, view.t)
-        data = {
-            "t": view.t,
-            "waypoints": np.round(res.waypoints, 4).tolist(),
-            "subgoals": np.round(res.subgoals, 4).tolist(),
-            "length_m": res.length_m,
-            "cost_s": res.cost,
-            "replans": self.route_replans,
-        }
-        events.append(("route", data))
+        event = RouteEvent(
+            t=view.t,
+            waypoints=np.round(res.waypoints, 4).tolist(),
+            subgoals=np.round(res.subgoals, 4).tolist(),
+            length_m=res.length_m,
+            cost_s=res.cost,
+            replans=self.route_replans,
+        )
+        events.append(event)
         return self._begin_segment(view, pose, events)
 
     def _begin_segment(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
@@ -342,7 +343,7 @@ class TransportMission:
     def _deliver(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         self.done_t = view.t
         self._cue(Cue.DELIVERED, view.t, events)
-        events.append(("delivered", {"t": view.t, "pose": np.round(pose, 4).tolist()}))
+        events.append(DeliveredEvent(t=view.t, pose=np.round(pose, 4).tolist()))
         return self._done(view, pose, events)
 
     # --- done ---------------------------------------------------------------------------------
@@ -383,16 +384,16 @@ class TransportMission:
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
         return self.guard.apply(view, intent)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> TransportSummary:
         f = np.asarray(self.pusher.forces) if self.pusher.forces else np.zeros(0)
         route = self.way.route
-        return {
-            "transport_phase": str(self.phase),
-            "route_length_m": None if route is None else route.length_m,
-            "route_replans": self.route_replans,
-            "rearrangements": self.rearranger.count,
-            "relocations": self.grip.relocations,
-            "local_plans": self.pusher.plans,
-            "planned_force_mean_n": float(f.mean()) if len(f) else None,
-            "transport_failure": self.failure,
-        }
+        return TransportSummary(
+            transport_phase=str(self.phase),
+            route_length_m=None if route is None else route.length_m,
+            route_replans=self.route_replans,
+            rearrangements=self.rearranger.count,
+            relocations=self.grip.relocations,
+            local_plans=self.pusher.plans,
+            planned_force_mean_n=float(f.mean()) if len(f) else None,
+            transport_failure=self.failure,
+        )

@@ -1,4 +1,5 @@
-"""What a mission sees and returns each tick, and the names of its phases and failures.
+"""What a mission sees and returns each tick, and the names of its phases and failures
+(``Phase``, ``Reason`` and the typed ``Event``s live in ``controller.events``, re-exported here).
 
 ``FleetView`` in; the mission's plan stage returns an ``Intent`` (nominal world velocities and
 what the safety stage must know); its safety stage returns the ``MissionOutput`` (body-frame
@@ -9,47 +10,11 @@ node. Estimates are N×k arrays in config robot order, SI units.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import Any, Protocol
 
 import numpy as np
 
-
-class Phase(StrEnum):
-    """Mission phases, as they appear on ``plan/phase``, in ``fleet status`` and ``--json``."""
-
-    PLAN = "plan"  # waiting for every robot's and the object's first estimates
-    APPROACH = "approach"  # chase the capture points' images on the convex envelope
-    CLOSE_IN = "close_in"  # every robot on the envelope: move in to contact
-    HOLD = "hold"  # in contact: preload and watch the object stay put
-    ARRESTED = "arrested"  # the object held still through the hold
-    ROUTE = "route"  # plan the object's route to its goal
-    REARRANGE = "rearrange"  # robots move to the pushing contacts
-    TRANSPORT = "transport"  # push the object along the route
-    DONE = "done"
-    FAILED = "failed"
-    GOTO = "goto"  # GotoMission (HoldMission, the bring-up check, reports HOLD: every robot
-    # stopped; the word on the bus is "hold" either way)
-
-
-class Reason(StrEnum):
-    """Why a run failed (``failure.reason`` in ``fleet run --json``)."""
-
-    TIMEOUT = "timeout"
-    PINNED = "pinned"
-    ESCAPED = "escaped"
-    COLLISION = "collision"
-    ROBOTS_LOST = "robots_lost"
-    ROBOT_LOST = "robot_lost"
-    NO_CAPTURE = "no_capture"
-    ESTOP = "estop"
-    NO_ROUTE = "no_route"
-    STALLED = "stalled"
-    TOO_HEAVY = "too_heavy"  # the whole fleet at its force limits cannot push the object
-    NOT_DELIVERED = "not_delivered"  # the run ended with the object outside object.goal's tolerance
-
-
-Event = tuple[str, dict[str, Any]]
+from controller.events import Event, Phase, Reason  # noqa: F401 - the words of the wire
 
 
 class MissionError(RuntimeError):

@@ -146,6 +146,18 @@ def check_log(
     it), ``first_divergence`` (``{tick, t, robot, logged, replayed, error}`` or None),
     ``input_mismatches`` (ticks whose measurement count differs from the one the sim
     announced), ``mission``, ``mode``, ``lockstep``, ``message``."""
+    res, run, _bus, kind = replay(path, tolerance, mission, stop_at_first)
+    return res.summary(run, kind)
+
+
+def replay(
+    path: str | Path,
+    tolerance: float = DEFAULT_TOLERANCE,
+    mission: str | None = None,
+    stop_at_first: bool = True,
+) -> tuple[_Result, LoggedRun, MemoryBus, str]:
+    """:func:`check_log`'s replay itself: its result, the logged run, the in-memory bus with
+    everything today's controller published (``bus.sent``, by key), and the mission kind."""
     run = load_logged_run(path)
     kind = mission or mission_kind(run.mode)
     bus = MemoryBus(run.cfg.fleet.name)
@@ -174,7 +186,7 @@ def check_log(
         res.compare(tick, run, bus)
         if stop_at_first and res.first is not None:
             break
-    return res.summary(run, kind)
+    return res, run, bus, kind
 
 
 def _due(run: LoggedRun, item: _Input, tick: _Tick, margin: float) -> bool:

@@ -16,12 +16,20 @@ import math
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from controller import geometry, wire
 from controller.config import ConfigError, FleetConfig, InputError, parse_config
+from controller.events import (
+    ArrestEvent,
+    Event,
+    RearrangeEvent,
+    RouteEvent,
+    TransportEvent,
+    parse_event,
+)
 from controller.io.recorder import (
     LogRecord,
     drop_none,
@@ -31,6 +39,8 @@ from controller.io.recorder import (
     segments,
 )
 from controller.replay import metrics
+
+E = TypeVar("E", bound=Event)
 
 log = logging.getLogger(__name__)
 
@@ -173,6 +183,17 @@ def events_of(run: RunLog, kind: str) -> list[dict[str, Any]]:
     return sorted((e for e in run.events if e["kind"] == kind), key=lambda e: e["t"])
 
 
+def typed_events(run: RunLog, cls: type[E]) -> list[tuple[float, E]]:
+    """The run's plan events of one typed kind with their message stamps, in time order (an
+    event of that kind whose fields do not fit is left out: ``run.events`` keeps it raw)."""
+    out = []
+    for e in events_of(run, cls.KIND):
+        ev = parse_event(e["kind"], e["data"])
+        if isinstance(ev, cls):
+            out.append((e["t"], ev))
+    return out
+
+
 def track(rows: list) -> metrics.Track:
     """A track from logged rows (t, x, y, theta)."""
     return metrics.Track.from_rows(rows)
@@ -218,7 +239,7 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
     oest = _track(run.object_estimated)
     omeas = _track(run.object_measured)
     obest = otruth if len(otruth) else (oest if len(oest) else omeas)
-    arrests = [e for e in run.events if e["kind"] == "arrest"]
+    arrests = typed_events(run, ArrestEvent)
     phases = phases_of(run)
     out: dict[str, Any] = {
         "log": str(run.path),
@@ -245,9 +266,9 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         },
         "phases": phases,
         "events": run.events,
-        "arrested": bool(arrests),
-        "arrest_time_s": arrests[0]["t"] if arrests else None,
-        "arrival_spread_s": arrests[0]["data"].get("arrival_spread_s") if arrests else None,
+        "arrested": bool(events_of(run, "arrest")),
+        "arrest_time_s": arrests[0][0] if arrests else None,
+        "arrival_spread_s": arrests[0][1].arrival_spread_s if arrests else None,
         "estops": run.estops,
         "link_lost": sorted({e["robot"] for e in run.robot_events if e["kind"] == "link_lost"}),
         "ground_truth": bool(run.truth),
@@ -322,7 +343,7 @@ def transport_figures(
         return {"transported": False}
     ends = [p["t"] for p in phases if p["t"] > start and p["phase"] in ("done", "failed")]
     end = ends[0] if ends else None
-    routes = events_of(run, "route")
+    routes = [ev for _, ev in typed_events(run, RouteEvent)]
     keep = obj.t >= start
     if end is not None:
         keep &= obj.t <= end
@@ -337,18 +358,17 @@ def transport_figures(
     path = np.array([geometry.transform(centre[None], p)[0] for p in obj.pose[keep]])
     lat = np.zeros(0)
     if routes and keep.any():
-        wp = np.asarray(routes[0]["data"]["waypoints"], float)[:, :2]
+        wp = np.asarray(routes[0].waypoints, float).reshape(-1, 3)[:, :2]
         if len(wp) > 1:
             lat = metrics.lateral_deviation(obj.pose[keep, :2], wp)
-    planned = [
-        f for e in events_of(run, "transport") for f in (e["data"].get("forces") or [[]])[0] if f
-    ]
+    plans = typed_events(run, TransportEvent)
+    planned = [f for _, e in plans for f in (e.forces or [[]])[0] or [] if f]
     return {
         "transported": delivered and within,
         "goal_error_m": err,
         "goal_error_deg": err_deg,
         "transport_time_s": None if end is None else round(end - start, 3),
-        "route_length_m": routes[0]["data"].get("length_m") if routes else None,
+        "route_length_m": routes[0].length_m if routes else None,
         "object_path_length_m": metrics.path_length(path) if len(path) else 0.0,
         "lateral_deviation_rms_m": float(np.sqrt(np.mean(lat**2))) if len(lat) else None,
         "max_lateral_deviation_m": float(lat.max()) if len(lat) else None,
@@ -361,10 +381,10 @@ def transport_figures(
 def _relocations(run: RunLog) -> int:
     """Robots sent to a new contact: the movers of every re-arrangement, and each robot that
     starts relocating during the transport (it appears in a local plan's ``relocating``)."""
-    n = sum(len(e["data"].get("moving", [])) for e in events_of(run, "rearrange"))
+    n = sum(len(e.moving) for _, e in typed_events(run, RearrangeEvent))
     before: set[str] = set()
-    for e in events_of(run, "transport"):
-        now = set(e["data"].get("relocating") or {})
+    for _, e in typed_events(run, TransportEvent):
+        now = set(e.relocating)
         n += len(now - before)
         before = now
     return n

@@ -18,13 +18,16 @@ import numpy as np
 
 from controller import geometry, wire
 from controller.config import FleetConfig
+from controller.events import ArrestEvent, DeliveredEvent, FailureEvent, RouteEvent
 from controller.io.bus import Bus
 from controller.latch import released_at_start
+from controller.mission.summary import summary_of
 from controller.mission.types import Mission, Reason
 from controller.runtime.lockstep import ControllerLockstep, LockstepCoordinator
 from controller.runtime.node import ControllerNode
 from controller.runtime.planner import PlannerWorker
 from controller.runtime.recording import open_recorder
+from controller.runtime.summary import Checks, RunFailure, RunFigures, RunSummary, TransportFigures
 from controller.runtime.wiring import make_estimator, make_hub, make_sim_drivers
 from drivers.agent import Agent, AgentParams
 
@@ -143,10 +146,10 @@ class ArrestScore:
         if self.hold_start is not None and not self.carried:
             moved = float(np.max(np.linalg.norm(poly - self.hold_start, axis=1)))
             self.displacement = max(self.displacement or 0.0, moved)
-        for kind, data in out.events:
-            if kind == "arrest" and self.arrest_t is None:
+        for ev in out.events:
+            if isinstance(ev, ArrestEvent) and self.arrest_t is None:
                 self.arrest_t = t
-                robots = [c["robot"] for c in data.get("contacts", [])]
+                robots = ev.contact_robots
                 self.gaps = {
                     rid: float(
                         geometry.polygon_signed_distance(world.robot_pose(rid)[None, :2], poly)[0]
@@ -181,11 +184,11 @@ class TransportScore:
     def tick(self, t: float, dt: float, out, world) -> None:
         if out is None:
             return
-        for kind, data in out.events:
-            if kind == "route" and self.route is None:
-                self.route = np.asarray(data["waypoints"], float)[:, :2]
-                self.route_length = float(data.get("length_m", 0.0))
-            if kind == "delivered":
+        for ev in out.events:
+            if isinstance(ev, RouteEvent) and self.route is None:
+                self.route = np.asarray(ev.waypoints, float)[:, :2]
+                self.route_length = float(ev.length_m)
+            if isinstance(ev, DeliveredEvent):
                 self.delivered = True
         active = out.phase in self.PHASES
         if active and self.start_t is None:
@@ -211,11 +214,11 @@ class TransportScore:
             geometry.polygon_clearance(geometry.transform(self.poly, pose), obstacles, bounds),
         )
 
-    def figures(self, world) -> dict[str, Any]:
+    def figures(self, world) -> TransportFigures:
         """The ``fleet run --json`` transport fields (None where nothing was carried)."""
         goal = self.cfg.object.goal
         if goal is None or self.start_t is None:
-            return {"transported": False if goal is not None else None}
+            return TransportFigures(transported=False if goal is not None else None)
         pose = world.object_pose()
         err = float(np.linalg.norm(pose[:2] - np.asarray(goal[:2])))
         err_deg = float(np.degrees(abs(geometry.wrap_angle(pose[2] - goal[2]))))
@@ -225,46 +228,48 @@ class TransportScore:
         lat = np.asarray(self.lateral)
         f = np.asarray(self.forces)
         end = self.end_t if self.end_t is not None else None
-        return {
-            "transported": bool(self.delivered and within),
-            "goal_error_m": err,
-            "goal_error_deg": err_deg,
-            "transport_time_s": None if end is None else round(end - self.start_t, 3),
-            "route_length_m": self.route_length,
-            "object_path_length_m": float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))),
-            "lateral_deviation_rms_m": float(np.sqrt(np.mean(lat**2))) if len(lat) else None,
-            "max_lateral_deviation_m": float(lat.max()) if len(lat) else None,
-            "contact_force_mean_n": float(f.mean()) if len(f) else None,
-            "contact_force_max_n": float(f.max()) if len(f) else None,
-            "contact_impulse_ns": self.impulse,
-            "transport_object_min_clearance_m": None
-            if math.isinf(self.clearance)
-            else self.clearance,
-        }
+        return TransportFigures(
+            transported=bool(self.delivered and within),
+            goal_error_m=err,
+            goal_error_deg=err_deg,
+            transport_time_s=None if end is None else round(end - self.start_t, 3),
+            route_length_m=self.route_length,
+            object_path_length_m=float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))),
+            lateral_deviation_rms_m=float(np.sqrt(np.mean(lat**2))) if len(lat) else None,
+            max_lateral_deviation_m=float(lat.max()) if len(lat) else None,
+            contact_force_mean_n=float(f.mean()) if len(f) else None,
+            contact_force_max_n=float(f.max()) if len(f) else None,
+            contact_impulse_ns=self.impulse,
+            transport_object_min_clearance_m=None if math.isinf(self.clearance) else self.clearance,
+            carried=True,
+        )
 
 
 def _add(a: dict[str, int], b: dict[str, int]) -> dict[str, int]:
     return {k: a.get(k, 0) + b.get(k, 0) for k in a.keys() | b.keys()}
 
 
-def failure_of(result: Mapping[str, Any], verdict: Verdict, mission_failure: dict | None):
-    """The run's failure, ``{reason, t, detail}``, or None: the mission's own failure first,
-    then the first verdict failure, then a run that never finished."""
+def failure_of(
+    result: Mapping[str, Any], verdict: Verdict, mission_failure: RunFailure | None
+) -> RunFailure | None:
+    """The run's failure, or None: the mission's own failure first, then the first verdict
+    failure, then a run that never finished, then an object not delivered. ``result``: the
+    ``--json`` figures and checks, with the ``verdict``."""
     if mission_failure is not None:
         return mission_failure
     if result["verdict"]:
         first = min(result["verdict"], key=lambda f: verdict.when.get(f["reason"], math.inf))
-        return {**first, "t": verdict.when.get(first["reason"])}
+        return RunFailure(first["reason"], verdict.when.get(first["reason"]), first["detail"])
     if not result.get("done"):
         reason = Reason.ESTOP if result.get("estop") else Reason.TIMEOUT
         detail = f"sim time ran out ({result['sim_time_s']} s) in phase {result['mission_phase']}"
-        return {"reason": reason, "t": result["sim_time_s"], "detail": detail}
+        return RunFailure(reason, result["sim_time_s"], detail)
     if result.get("transported") is False:
         detail = (
             f"the object ended {result.get('goal_error_m', math.nan):.2f} m and "
             f"{result.get('goal_error_deg', math.nan):.1f} deg from object.goal (truth)"
         )
-        return {"reason": Reason.NOT_DELIVERED, "t": result["sim_time_s"], "detail": detail}
+        return RunFailure(Reason.NOT_DELIVERED, result["sim_time_s"], detail)
     return None
 
 
@@ -295,10 +300,15 @@ class DryRun:
         self.verdict = Verdict()
         self.score = ArrestScore(cfg)
         self.carry = TransportScore(cfg)
-        self.mission_failure: dict[str, Any] | None = None
+        self.mission_failure: RunFailure | None = None
         self._next_progress = 0.0
 
     def run(self) -> dict[str, Any]:
+        """The run; its ``fleet run --json`` object (:meth:`run_summary` for the typed one)."""
+        return self.run_summary().to_json()
+
+    def run_summary(self) -> RunSummary:
+        """The run, end to end; its typed summary."""
         cfg = self.cfg
         wall0 = time.monotonic()
         hub = make_hub(cfg, self.gui)
@@ -306,7 +316,6 @@ class DryRun:
         recorder = open_recorder(
             cfg, self.out, f"run/{cfg.sim.backend}", sim_time=True, viz=self.viz, who="fleet run"
         )
-        result: dict[str, Any] = {}
         try:
             with (
                 Bus(cfg.zenoh, cfg.fleet.name) as ctl_bus,
@@ -318,13 +327,13 @@ class DryRun:
                     lease_s=cfg.fleet.liveliness_lease,
                 ) as robot_bus,
             ):
-                result = self._run(hub, recorder, ctl_bus, robot_bus, wall0)
+                figures = self._run(hub, recorder, ctl_bus, robot_bus, wall0)
         finally:
             hub.world.close()
             recorder.close()
             if self.planners is not None:
                 self.planners.close()
-        return self._finish(result, recorder, wall0)
+        return self._finish(figures, recorder, wall0)
 
     @classmethod
     def of(cls, cfg: FleetConfig, kind: str, out: Path, **kw: Any) -> DryRun:
@@ -340,7 +349,7 @@ class DryRun:
             raise
         return cls(cfg, mission, out, planners=planners, **kw)
 
-    def _run(self, hub, recorder, ctl_bus: Bus, robot_bus: Bus, wall0: float) -> dict[str, Any]:
+    def _run(self, hub, recorder, ctl_bus: Bus, robot_bus: Bus, wall0: float) -> RunFigures:
         cfg = self.cfg
         ctl_bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
         # a fresh world with no operator and no e-stop history: the run itself releases the
@@ -425,67 +434,66 @@ class DryRun:
         extra = " ".join(f"{k} {v:.3f}" for k, v in p.items() if isinstance(v, float))
         log.info("t %6.1f s  %-9s %s  object %.2f m/s", t, out.phase, extra, speed)
 
-    def _summary(self, node, coord, ctl, world, ctl_bus: Bus, robot_bus: Bus) -> dict[str, Any]:
+    def _summary(self, node, coord, ctl, world, ctl_bus: Bus, robot_bus: Bus) -> RunFigures:
         out = node.last_output
-        mission = {**getattr(self.mission, "summary", dict)(), **node.timing_summary()}
-        estimator = getattr(node.est, "log_summary", dict)()
-        return {
-            "mission_phase": node.phase,
-            "done": bool(out.done) if out else False,
-            "failed": bool(out.failed) if out else False,
-            "estop": bool(node.estop),
-            "arrest_declared": self.score.arrest_t is not None,
-            "arrest_time_s": self.score.arrest_t,
-            "arrival_spread_s": mission.get("arrival_spread_s"),
-            "contact_gaps_at_arrest_m": self.score.gaps,
-            "hold_displacement_m": self.score.displacement,
-            "phases": self.score.phases,
-            "object_gave_up_at_s": world.object_gave_up_at,
-            "sim_time_s": round(coord.t, 4),
-            "ticks": coord.counters.ticks,
-            "input_timeouts": ctl.lag_waits,
-            "node": dict(vars(node.counters)),
-            "bad_payloads": ctl_bus.stats.total + robot_bus.stats.total,
-            "drops": _add(node.drops(), robot_bus.drops()),
-            "estimator": estimator,
-            "final_object_pose": [float(v) for v in world.object_pose()],
-            "rearrangements": mission.get("rearrangements"),
-            "relocations": mission.get("relocations"),
-            "plan_latency_s": {} if self.planners is None else self.planners.summary(),
-            **self.carry.figures(world),
-            "mission": mission,
-        }
+        mission = summary_of(self.mission)
+        return RunFigures(
+            mission_phase=node.phase,
+            done=bool(out.done) if out else False,
+            failed=bool(out.failed) if out else False,
+            estop=bool(node.estop),
+            arrest_declared=self.score.arrest_t is not None,
+            arrest_time_s=self.score.arrest_t,
+            arrival_spread_s=mission.arrival_spread_s,
+            contact_gaps_at_arrest_m=self.score.gaps,
+            hold_displacement_m=self.score.displacement,
+            phases=self.score.phases,
+            object_gave_up_at_s=world.object_gave_up_at,
+            sim_time_s=round(coord.t, 4),
+            ticks=coord.counters.ticks,
+            input_timeouts=ctl.lag_waits,
+            node=dict(vars(node.counters)),
+            bad_payloads=ctl_bus.stats.total + robot_bus.stats.total,
+            drops=_add(node.drops(), robot_bus.drops()),
+            estimator={},  # the contract's field; the filters report nothing of their own
+            final_object_pose=[float(v) for v in world.object_pose()],
+            rearrangements=mission.rearrangements,
+            relocations=mission.relocations,
+            plan_latency_s={} if self.planners is None else self.planners.summary(),
+            transport=self.carry.figures(world),
+            mission=mission,
+            timing=node.timing_summary(),
+        )
 
-    def _finish(self, result: dict[str, Any], recorder, wall0: float) -> dict[str, Any]:
+    def _finish(self, figures: RunFigures, recorder, wall0: float) -> RunSummary:
         v = self.verdict
         inf = math.isinf
-        result.update(
-            {
-                "min_clearance_m": None if inf(v.min_clearance_m) else v.min_clearance_m,
-                "max_object_penetration_m": v.max_object_penetration_m,
-                "obstacle_contacts": sorted(v.obstacle_contacts),
-                "object_min_clearance_m": None
-                if inf(v.object_min_clearance_m)
-                else v.object_min_clearance_m,
-                "missed_ticks": v.missed_ticks,
-                "watchdog_stops": v.watchdog_stops,
-                "clamped_commands": v.clamped_commands,
-                "vy_dropped": v.vy_dropped,
-                "wall_time_s": round(time.monotonic() - wall0, 3),
-                "log": str(recorder.location),
-                "messages_logged": recorder.written,
-            }
+        checks = Checks(
+            min_clearance_m=None if inf(v.min_clearance_m) else v.min_clearance_m,
+            max_object_penetration_m=v.max_object_penetration_m,
+            obstacle_contacts=sorted(v.obstacle_contacts),
+            object_min_clearance_m=None
+            if inf(v.object_min_clearance_m)
+            else v.object_min_clearance_m,
+            missed_ticks=v.missed_ticks,
+            watchdog_stops=v.watchdog_stops,
+            clamped_commands=v.clamped_commands,
+            vy_dropped=v.vy_dropped,
+            wall_time_s=round(time.monotonic() - wall0, 3),
+            log=str(recorder.location),
+            messages_logged=recorder.written,
         )
+        result = {**figures.to_json(), **checks.to_json()}
         result["verdict"] = judge(result)
-        failure = failure_of(result, v, self.mission_failure)
-        held = result.get("hold_displacement_m")
+        held = figures.hold_displacement_m
         escaped = held is not None and held > RULES.max_hold_displacement_m
-        result["arrested"] = bool(result.get("arrest_declared")) and not escaped
-        result["failure"] = failure
-        result["reason"] = None if failure is None else failure["reason"]
-        result["status"] = "ok" if failure is None else "failed"
-        result["phase"] = "failed" if failure is not None else result.get("mission_phase")
-        return result
+        return RunSummary(
+            figures,
+            checks,
+            result["verdict"],
+            arrested=figures.arrest_declared and not escaped,
+            failure=failure_of(result, v, self.mission_failure),
+        )
 
     def _handshake(self, node: ControllerNode, agents, coord, timeout: float = 20.0) -> None:
         """Wait until both sides see each other: the controller holds every robot's liveliness
@@ -505,7 +513,7 @@ class DryRun:
             time.sleep(0.01)
 
 
-def _mission_failure(out, t: float) -> dict[str, Any]:
+def _mission_failure(out, t: float) -> RunFailure:
     """The mission's own failure (its reason, and the detail of its ``failure`` event)."""
-    detail = next((d.get("detail", "") for k, d in out.events if k == "failure"), "")
-    return {"reason": out.reason or "failed", "t": t, "detail": detail}
+    detail = next((e.detail for e in out.events if isinstance(e, FailureEvent)), "")
+    return RunFailure(out.reason or "failed", t, detail)

@@ -30,6 +30,7 @@ import numpy as np
 
 from controller import wire
 from controller.config import FleetConfig
+from controller.events import LinkLostEvent, LinkRestoredEvent, link_event
 from controller.io.bus import Inbox
 from controller.latch import FRESH_WORLD, Latch, note_latch, role_of
 from controller.mission.types import FleetView, Mission, MissionOutput
@@ -116,7 +117,7 @@ class ControllerNode:
         self.latch_pending = False
         self.present = np.zeros(len(self.ids), dtype=bool)
         self.link_lost = np.zeros(len(self.ids), dtype=bool)
-        self._events_pending: dict[str, tuple[wire.PlanEvent, int]] = {}
+        self._events_pending: dict[str, tuple[LinkLostEvent | LinkRestoredEvent, int]] = {}
         self.arrested = False
         self.last_output: MissionOutput | None = None
         self.last_tick = 0.0
@@ -211,32 +212,33 @@ class ControllerNode:
         on a robot's event key (under the lab ACL only that robot's agent may)."""
         for item in self._robot_events.drain():
             rid = self._robot_id(item.key)
-            if rid in self.index and item.msg.kind in ("link_lost", "link_restored"):
+            ev = link_event(item.msg.kind, item.msg.data)
+            if rid in self.index and ev is not None:
                 until = self.counters.ticks + max(1, round(EVENT_GRACE * self.cfg.fleet.rate_hz))
-                self._events_pending[rid] = (item.msg, until)
-        for rid, (msg, until) in list(self._events_pending.items()):
+                self._events_pending[rid] = (ev, until)
+        for rid, (ev, until) in list(self._events_pending.items()):
             i = self.index[rid]
-            if bool(self.present[i]) == (msg.kind == "link_restored"):
+            if bool(self.present[i]) == isinstance(ev, LinkRestoredEvent):
                 del self._events_pending[rid]
-                self._apply_event(rid, msg)
+                self._apply_event(rid, ev)
             elif self.counters.ticks >= until:
                 del self._events_pending[rid]
                 self.counters.spoofed_events += 1
                 log.warning(
                     "robot %s: %s ignored: its liveliness token says otherwise (not its agent)",
                     rid,
-                    msg.kind,
+                    ev.kind,
                 )
 
-    def _apply_event(self, rid: str, msg: wire.PlanEvent) -> None:
+    def _apply_event(self, rid: str, ev: LinkLostEvent | LinkRestoredEvent) -> None:
         i = self.index[rid]
-        if msg.kind == "link_lost":
+        if isinstance(ev, LinkLostEvent):
             self.link_lost[i] = True
             self.counters.link_events += 1
-            log.error("robot %s reports a lost link: %s", rid, msg.data.get("detail"))
+            log.error("robot %s reports a lost link: %s", rid, ev.detail)
         else:
             if self.link_lost[i]:
-                log.warning("robot %s: link restored (%s)", rid, msg.data.get("detail"))
+                log.warning("robot %s: link restored (%s)", rid, ev.detail)
             self.link_lost[i] = False
             self.counters.link_restored += 1
 
@@ -381,12 +383,13 @@ class ControllerNode:
             self._cmd_pub[rid].put(wire.Twist2D(t=now, seq=self._seq, vx=vx, vy=vy, wz=wz, ttl=ttl))
             self.est.command(rid, now, vx, vy, wz)
             self.counters.commands += 1
-        for kind, data in out.events:
+        for ev in out.events:
             self._seq += 1
+            data = ev.to_dict()
             self.bus.put(
                 "plan",
-                wire.PlanEvent(t=now, seq=self._seq, kind=kind, phase=out.phase, data=data),
-                what=kind,
+                wire.PlanEvent(t=now, seq=self._seq, kind=ev.kind, phase=out.phase, data=data),
+                what=ev.kind,
             )
         self._publish_states(now, view)
         self.last_output = out  # before TickDone: the sim reads it once the tick is answered

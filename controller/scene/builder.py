@@ -44,6 +44,20 @@ import numpy as np
 
 from controller import geometry, wire
 from controller.config import FleetConfig
+from controller.events import (
+    ArrestEvent,
+    CaptureEvent,
+    Event,
+    FailureEvent,
+    GenericEvent,
+    LinkLostEvent,
+    LinkRestoredEvent,
+    PhaseEvent,
+    RearrangeEvent,
+    RouteEvent,
+    TransportEvent,
+    parse_event,
+)
 from controller.scene import primitives as P
 
 SCHEMA_DIR = Path(__file__).resolve().parent / "schemas"
@@ -136,7 +150,14 @@ STATS_SCHEMA: dict[str, Any] = {
 PHASE_ORDER = tuple(PHASE_COLORS)
 # messages stamped with the controller's (or the sim's) tick time: a later one starts a new tick
 FRAME_TRIGGERS = ("robot_cmd", "plan", "robot_state", "object_state", "truth_robot", "truth_object")
-PLAN_KINDS = ("capture", "route", "rearrange", "transport")
+# the plan events the scene draws, by the attribute that keeps the latest of each
+PLAN_TYPES: dict[str, type[Event]] = {
+    "capture": CaptureEvent,
+    "route": RouteEvent,
+    "rearrange": RearrangeEvent,
+    "transport": TransportEvent,
+}
+PLAN_KINDS = tuple(PLAN_TYPES)
 SHOWN_IN = {
     "capture": ("approach", "close_in", "hold", "arrested", "done"),
     "rearrange": ("rearrange",),
@@ -207,10 +228,10 @@ class SceneBuilder:
         self.path: list[tuple[float, float]] = []
         self.phase = "init"
         self.estop = False
-        self.capture: dict[str, Any] | None = None
-        self.route: dict[str, Any] | None = None
-        self.rearrange: dict[str, Any] | None = None
-        self.transport: dict[str, Any] | None = None
+        self.capture: CaptureEvent | None = None
+        self.route: RouteEvent | None = None
+        self.rearrange: RearrangeEvent | None = None
+        self.transport: TransportEvent | None = None
         self.frame_t: float | None = None
         self._next_frame = -math.inf
         self._next_static = -math.inf
@@ -296,26 +317,31 @@ class SceneBuilder:
 
     def _on_robot_event(self, t: float, key: wire.KeyParts, m: dict) -> list[SceneMessage]:
         kind = str(m.get("kind", ""))
-        data = m.get("data") if isinstance(m.get("data"), dict) else {}
-        if kind == "link_lost" and key.id in self.robots:
+        ev = parse_event(kind, m.get("data"))
+        lost = isinstance(ev, LinkLostEvent) or kind == LinkLostEvent.KIND  # even misshapen
+        if lost and key.id in self.robots:
             self.robots[key.id].lost = True
-        level = P.LOG_ERROR if kind == "link_lost" else P.LOG_INFO
-        detail = data.get("detail", "")
+        level = P.LOG_ERROR if lost else P.LOG_INFO
+        link = isinstance(ev, LinkLostEvent | LinkRestoredEvent)
+        detail = ev.detail if link else ev.to_dict().get("detail", "")  # another kind: as sent
         return [self._log(t, level, f"robot {key.id}: {kind} {detail}".strip(), key.id)]
 
     def _on_plan(self, t: float, key: wire.KeyParts, m: dict) -> list[SceneMessage]:
-        kind = key.what
-        data = m.get("data") if isinstance(m.get("data"), dict) else {}
+        """A plan event, typed (one of a kind the scene does not know, or that does not fit
+        its kind, is only logged: the plan drawn stays the last one that fitted)."""
+        ev = parse_event(key.what, m.get("data"))
         phase = str(m.get("phase") or self.phase)
-        if kind == "phase":
-            phase = str(data.get("phase", phase))
+        if isinstance(ev, PhaseEvent):
+            phase = str(ev.phase)
+        elif isinstance(ev, GenericEvent) and ev.kind == "phase":
+            phase = str(ev.data.get("phase", phase))  # a phase word this version lacks
         if phase != self.phase:
             self._dirty.update(PLAN_KINDS)  # what is shown depends on the phase
         self.phase = phase
-        if kind in PLAN_KINDS:
-            setattr(self, kind, data)
-            self._dirty.add(kind)
-        return [self._log(t, LEVELS.get(kind, P.LOG_INFO), describe(kind, phase, data))]
+        if isinstance(ev, tuple(PLAN_TYPES.values())):
+            setattr(self, ev.kind, ev)
+            self._dirty.add(ev.kind)
+        return [self._log(t, LEVELS.get(ev.kind, P.LOG_INFO), describe(ev, phase))]
 
     def _log(self, t: float, level: int, words: str, name: str = "controller") -> SceneMessage:
         st = t + self.offset
@@ -409,7 +435,7 @@ class SceneBuilder:
         action = actions.get(rid)
         if action is not None and self.phase == "transport":
             col, label = ACTION_COLORS.get(action, GREY), f"{rid} {action}"
-        elif self.capture is not None and rid in self.capture.get("robots", []):
+        elif self.capture is not None and rid in self.capture.robots:
             col, label = PHASE_COLORS.get(self.phase, GREY), rid
         else:
             col, label = GREY, rid
@@ -418,9 +444,10 @@ class SceneBuilder:
         return col, label
 
     def _actions(self) -> dict[str, str]:
-        tr = self.transport or {}
-        ids = _transport_ids(tr, self.capture)
-        return dict(zip(ids, tr.get("first_actions", []), strict=False))
+        if self.transport is None:
+            return {}
+        ids = _transport_ids(self.transport, self.capture)
+        return dict(zip(ids, _list(self.transport.plan.get("first_actions")), strict=False))
 
     def _robot_entities(self, st: float, everything: bool) -> list[dict[str, Any]]:
         out = []
@@ -482,25 +509,26 @@ class SceneBuilder:
         """The plan's entities that changed (emptied when their phase is over)."""
         out = []
         for kind in PLAN_KINDS:
-            data = getattr(self, kind)
-            if kind not in self._dirty or data is None:
+            ev = getattr(self, kind)
+            if kind not in self._dirty or ev is None:
                 continue
             if kind in SHOWN_IN and self.phase not in SHOWN_IN[kind]:
-                data = {}
-            out += getattr(self, f"_{kind}_entities")(st, data)
+                ev = None  # its phase is over: the entities emptied
+            out += getattr(self, f"_{kind}_entities")(st, ev)
         return out
 
-    def _rearrange_entities(self, st: float, data: dict[str, Any]) -> list[dict[str, Any]]:
+    def _rearrange_entities(self, st: float, ev: RearrangeEvent | None) -> list[dict[str, Any]]:
         pts = [
             P.sphere(p[0], p[1], 0.05, 0.08, ACTION_COLORS["relocate"])
-            for p in (data.get("contacts") or {}).values()
+            for p in (ev.contacts if ev is not None else {}).values()
             if _is_point(p)
         ]
         return [P.entity("rearrange", st, "object", frame_locked=True, spheres=pts)]
 
-    def _capture_entities(self, st: float, cap: dict[str, Any]) -> list[dict[str, Any]]:
+    def _capture_entities(self, st: float, cap: CaptureEvent | None) -> list[dict[str, Any]]:
         spheres, arrows = [], []
-        for p, n in zip(cap.get("points", []), cap.get("normals", []), strict=False):
+        points, normals = (cap.points, cap.normals) if cap is not None else ([], [])
+        for p, n in zip(points, normals, strict=False):
             if not (_is_point(p) and _is_point(n)):
                 continue
             spheres.append(P.sphere(p[0], p[1], 0.05, 0.07, CAPTURE))
@@ -511,28 +539,29 @@ class SceneBuilder:
             P.entity("capture", st, "object", frame_locked=True, spheres=spheres, arrows=arrows)
         ]
 
-    def _route_entities(self, st: float, route: dict[str, Any]) -> list[dict[str, Any]]:
-        wp = _points(route.get("waypoints"), 3)
+    def _route_entities(self, st: float, route: RouteEvent | None) -> list[dict[str, Any]]:
+        wp = _points(route.waypoints if route is not None else None, 3)
         lines = []
         if len(wp) > 1:
             lines.append(P.line(P.LINE_STRIP, wp[:, :2], ROUTE, 0.02, 0.04))
-        for sg in _points(route.get("subgoals"), 3):
+        for sg in _points(route.subgoals if route is not None else None, 3):
             lines.append(P.line(P.LINE_LOOP, geometry.transform(self.poly, sg), ROUTE, 0.02, 0.01))
         return [P.entity("route", st, WORLD, lines=lines)]
 
     def _route_poses(self, st: float) -> dict[str, Any]:
-        wp = _points(self.route.get("waypoints") if self.route else None, 3)
+        wp = _points(self.route.waypoints if self.route else None, 3)
         return {
             "timestamp": P.stamp(st),
             "frame_id": WORLD,
             "poses": [P.pose(p[0], p[1], 0.02, p[2]) for p in wp],
         }
 
-    def _transport_entities(self, st: float, tr: dict[str, Any]) -> list[dict[str, Any]]:
-        actions = tr.get("first_actions", [])
-        forces = (tr.get("forces") or [[]])[0] or []
+    def _transport_entities(self, st: float, tr: TransportEvent | None) -> list[dict[str, Any]]:
+        plan = tr.plan if tr is not None else {}
+        actions = _list(plan.get("first_actions"))
+        forces = _list((tr.forces or [[]])[0] if tr is not None else None)
         arrows = []
-        for k, p in enumerate(tr.get("contact_points", [])):
+        for k, p in enumerate(_list(plan.get("contact_points"))):
             f = _number(forces[k]) if k < len(forces) else None
             if not _is_point(p) or not f or f <= 0:
                 continue
@@ -543,7 +572,7 @@ class SceneBuilder:
             yaw = math.atan2(inward[1], inward[0])
             arrows.append(P.arrow(start[0], start[1], 0.12, yaw, length, col, 0.025))
         out = [P.entity("transport/forces", st, "object", frame_locked=True, arrows=arrows)]
-        pred = _points(tr.get("object_poses"), 3)
+        pred = _points(plan.get("object_poses"), 3)
         lines = []
         if len(pred) > 1:
             lines.append(P.line(P.LINE_STRIP, self._centroids(pred), ACTION_COLORS["push"], 0.03))
@@ -562,7 +591,7 @@ class SceneBuilder:
             local = geometry.inverse_transform(xy, self.object)
             obj_gap = float(np.min(geometry.polygon_signed_distance(local, self.poly) - radii))
         tr = self.transport if self.phase == "transport" else None
-        forces = [f for f in ((tr or {}).get("forces") or [[]])[0] or [] if _number(f)]
+        forces = [f for f in _list((tr.forces or [[]])[0] if tr else None) if _number(f)]
         return {
             "t": float(t),
             "phase": self.phase,
@@ -585,7 +614,7 @@ class SceneBuilder:
     def _deviation(self) -> float | None:
         if self.object is None or self.route is None:
             return None
-        wp = _points(self.route.get("waypoints"), 3)
+        wp = _points(self.route.waypoints, 3)
         if len(wp) < 2:
             return None
         cw = self._centroids(wp)
@@ -599,33 +628,29 @@ class SceneBuilder:
         return np.array([geometry.transform(c[None], q)[0] for q in poses]).reshape(-1, 2)
 
 
-def describe(kind: str, phase: str, data: dict[str, Any]) -> str:
+def describe(ev: Event, phase: str) -> str:
     """One log line for a plan event."""
-    match kind:
-        case "phase":
+    match ev:
+        case PhaseEvent():
             return f"phase: {phase}"
-        case "capture":
-            robots = data.get("robots", [])
+        case CaptureEvent(robots=robots):
             return (
                 f"capture planned: {len(robots)} robots {robots}, form closure "
-                f"{data.get('form_closure')}, objective {data.get('objective')}"
+                f"{ev.form_closure}, objective {ev.objective}"
             )
-        case "arrest":
-            return f"object arrested (arrival spread {data.get('arrival_spread_s')} s)"
-        case "route":
-            return (
-                f"route planned: {data.get('length_m')} m, "
-                f"{len(data.get('subgoals') or [])} subgoals"
-            )
-        case "rearrange":
-            return f"re-arranging for pushing: moving {data.get('moving')}"
-        case "transport":
-            acts = data.get("first_actions", [])
-            return f"local plan ({data.get('strategy')}, {data.get('status')}): {acts}"
-        case "failure":
-            return f"FAILED: {data.get('reason')}: {data.get('detail', '')}"
-    brief = json.dumps(data, separators=(",", ":"), default=str)
-    return f"{kind}: {brief[:300]}"
+        case ArrestEvent():
+            return f"object arrested (arrival spread {ev.arrival_spread_s} s)"
+        case RouteEvent():
+            return f"route planned: {ev.length_m} m, {len(ev.subgoals)} subgoals"
+        case RearrangeEvent():
+            return f"re-arranging for pushing: moving {ev.moving}"
+        case TransportEvent(plan=plan):
+            acts = plan.get("first_actions", [])
+            return f"local plan ({plan.get('strategy')}, {plan.get('status')}): {acts}"
+        case FailureEvent():
+            return f"FAILED: {ev.reason}: {ev.detail}"
+    brief = json.dumps(ev.to_dict(), separators=(",", ":"), default=str)
+    return f"{ev.kind}: {brief[:300]}"
 
 
 def _number(v: Any) -> float | None:
@@ -659,9 +684,12 @@ def _inward_normal(poly: np.ndarray, p: np.ndarray) -> np.ndarray:
     return -geometry.outward_normals(poly)[int(np.argmin(d[0]))]
 
 
-def _transport_ids(tr: dict[str, Any], capture: dict[str, Any] | None) -> list[str]:
+def _transport_ids(tr: TransportEvent, capture: CaptureEvent | None) -> list[str]:
     """The robot ids of a transport plan's rows (its ``robots``, else the capture's robots)."""
-    ids = tr.get("robots")
-    if isinstance(ids, list):
-        return [str(i) for i in ids]
-    return [str(i) for i in (capture or {}).get("robots", [])]
+    ids = tr.robots or (capture.robots if capture is not None else [])
+    return [str(i) for i in ids]
+
+
+def _list(value: Any) -> list:
+    """A plan's list field as a list (anything else, missing or malformed: empty)."""
+    return value if isinstance(value, list) else []

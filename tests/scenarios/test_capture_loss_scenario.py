@@ -6,9 +6,8 @@ arrest the object, in the ``ideal`` world over zenoh."""
 
 from __future__ import annotations
 
-from typing import Any
-
 from controller.mission.factory import build_mission
+from controller.mission.summary import JobSummary
 from controller.runtime import dry_run
 from controller.runtime.dry_run import DryRun, judge
 from tests.support.capture_scenarios import SCENARIOS, scenario
@@ -36,14 +35,14 @@ class CutLink:
                 self.drivers[i].fail_link("test: link cut mid-approach")
                 self.cut = (view.ids[i], view.t)
         if self.cut is not None and self.replanned_t is None:
-            if any(k == "robot_lost" for k, _ in intent.events):
+            if any(e.kind == "robot_lost" for e in intent.events):
                 self.replanned_t = view.t
         return intent
 
     def safety(self, view, intent):
         return self.job.safety(view, intent)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JobSummary:
         return self.job.summary()
 
 

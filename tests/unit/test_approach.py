@@ -135,7 +135,7 @@ def test_build_mission_with_a_capture_set():
     assert isinstance(build_mission(cfg, "stage"), GotoMission)
     assert isinstance(build_mission(cfg), CaptureJob)  # the GA plan, assigned on first sight
     s = m.summary()
-    assert s["phase"] == "approach" and s["arrival_spread_s"] is None
+    assert s.phase == "approach" and s.arrival_spread_s is None
 
 
 def test_interception_meets_an_oncoming_target_as_fast_as_the_robot_or_faster():

@@ -3,7 +3,7 @@
 - ``controller/planning``, ``controller/estimation``, ``controller/mission`` are pure: besides the
   standard library (no clock, threads, sockets, processes or global randomness) they import only
   numpy, scipy, osqp, filterpy, shapely, each other, and ``controller.config``,
-  ``controller.geometry`` and ``controller.wire``;
+  ``controller.geometry``, ``controller.wire`` and its typed events (``controller.events``);
 - ``controller/io`` is the only importer of zenoh, mcap and foxglove (the live view's SDK);
   ``controller/viz.py`` the only importer of matplotlib;
 - ``controller/runtime`` is the only part of ``controller/`` that imports ``drivers`` or
@@ -30,7 +30,7 @@ from tests.support.imports import type_checking_blocks
 
 PURE_FOLDERS = ("planning", "estimation", "mission")
 PURE_THIRD_PARTY = {"numpy", "scipy", "osqp", "filterpy", "shapely"}
-PURE_OURS = ("controller.config", "controller.geometry", "controller.wire")
+PURE_OURS = ("controller.config", "controller.events", "controller.geometry", "controller.wire")
 FORBIDDEN_STDLIB = {
     "time",
     "datetime",

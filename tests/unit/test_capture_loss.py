@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from controller.config import ConfigError
+from controller.events import by_kind
 from controller.mission.job import CaptureJob
 from controller.mission.roster import LOST_STALE_S
 from controller.mission.types import FleetView, Phase, step
@@ -50,7 +51,7 @@ def without(n: int, *gone: int) -> np.ndarray:
 
 
 def kinds(out) -> list[str]:
-    return [k for k, _ in out.events]
+    return [e.kind for e in out.events]
 
 
 def started(j: CaptureJob, ticks: int = 3) -> float:
@@ -69,20 +70,20 @@ def test_losing_an_assigned_robot_mid_approach_replans_over_the_robots_left():
     lost = int(j.assignment[0])
     out = step(j, view(j, t, present=without(j.n, lost)))
     assert kinds(out)[:2] == ["robot_lost", "capture"]
-    ev = dict(out.events)
-    assert ev["robot_lost"] == {
+    ev = by_kind(out.events)
+    assert ev["robot_lost"].to_dict() == {
         "t": t, "robot": j.cfg.robots[lost].id, "phase": "approach", "assigned": True,
     }  # fmt: skip
     assert lost not in j.assignment and len(set(j.assignment)) == len(j.assignment)
-    assert ev["capture"]["robots"] == [j.cfg.robots[i].id for i in j.assignment]
-    assert j.cfg.robots[lost].id in ev["capture"]["unavailable"]
+    assert ev["capture"].robots == [j.cfg.robots[i].id for i in j.assignment]
+    assert j.cfg.robots[lost].id in ev["capture"].unavailable
     # the same certificates as the first plan: form closure, the hold force held
     assert j.capture.form_closure and j.capture.hold_capacity >= 1.0
     assert len(j.capture.points) <= j.n - 1
     assert out.phase == Phase.APPROACH and not out.failed
     assert np.all(out.commands[lost] == 0.0)  # a lost robot is told nothing
-    summary = j.summary()
-    assert summary["loss_replans"] == 1 and summary["robots_lost"] == [j.cfg.robots[lost].id]
+    summary = j.summary().plan
+    assert summary.loss_replans == 1 and summary.robots_lost == [j.cfg.robots[lost].id]
 
 
 def test_a_stale_robot_is_lost_only_after_the_grace():
@@ -107,7 +108,7 @@ def test_losing_a_spare_only_marks_it_unavailable():
     spare = next(i for i in range(j.n) if i not in before)
     out = step(j, view(j, t, present=without(j.n, spare)))
     assert kinds(out) == ["robot_lost"]
-    assert dict(out.events)["robot_lost"]["assigned"] is False
+    assert by_kind(out.events)["robot_lost"].assigned is False
     assert np.array_equal(j.assignment, before) and not j.roster.available[spare]
     out = step(j, view(j, t + DT, present=without(j.n, spare)))
     assert "robot_lost" not in kinds(out)  # reported once
@@ -130,7 +131,7 @@ def test_losing_too_many_fails_safe_with_robots_lost():
     assert kinds(out)[0] == "outage_end"
     assert out.failed and out.reason == "robots_lost" and out.phase == Phase.FAILED
     assert np.all(out.commands == 0.0)
-    detail = dict(out.events)["failure"]["detail"]
+    detail = by_kind(out.events)["failure"].detail
     assert all(j.cfg.robots[i].id in detail for i in gone)
     assert kinds(out).count("robot_lost") == 3
     out = step(j, view(j, t + DT))  # they come back: the job stays failed, every robot stopped
@@ -161,7 +162,10 @@ def test_a_robot_back_emits_joined_once():
     first = int(j.assignment[0])
     step(j, view(j, t, present=without(j.n, first)))
     out = step(j, view(j, t + DT))
-    assert dict(out.events)["robot_joined"] == {"t": t + DT, "robot": j.cfg.robots[first].id}
+    assert by_kind(out.events)["robot_joined"].to_dict() == {
+        "t": t + DT,
+        "robot": j.cfg.robots[first].id,
+    }
     out = step(j, view(j, t + 2 * DT))
     assert "robot_joined" not in kinds(out)
 
@@ -178,7 +182,7 @@ def test_start_wait_starts_without_a_robot_never_seen(hold_force):
     out = step(j, view(j, t, unseen=[missing]))
     assert out.phase == Phase.APPROACH and "capture" in kinds(out)
     assert missing not in j.assignment
-    assert dict(out.events)["capture"]["unavailable"] == [j.cfg.robots[missing].id]
+    assert by_kind(out.events)["capture"].unavailable == [j.cfg.robots[missing].id]
     assert np.all(np.isfinite(out.commands)) and np.all(out.commands[missing] == 0.0)
     assert np.any(out.commands != 0.0)
     out = step(j, view(j, t + DT))  # seen at last: a spare
@@ -189,7 +193,7 @@ def test_start_wait_starts_without_a_robot_never_seen(hold_force):
 def test_every_robot_seen_starts_at_once():
     j = job(start_wait=100.0)
     out = step(j, view(j, 0.0))
-    assert out.phase == Phase.APPROACH and dict(out.events)["capture"]["unavailable"] == []
+    assert out.phase == Phase.APPROACH and by_kind(out.events)["capture"].unavailable == []
 
 
 def test_start_wait_is_validated_with_its_key_path():
@@ -218,10 +222,10 @@ def test_a_fleet_wide_silence_is_one_outage_that_the_job_rides_out():
         t += DT
     assert seen == ["outage"]
     out = step(j, view(j, t))
-    assert kinds(out)[0] == "outage_end" and dict(out.events)["outage_end"]["lost"] == []
+    assert kinds(out)[0] == "outage_end" and by_kind(out.events)["outage_end"].lost == []
     assert out.phase == Phase.APPROACH and np.any(out.commands != 0.0)
     assert np.array_equal(j.capture.points, points) and np.array_equal(j.assignment, assignment)
-    assert j.summary()["robots_lost"] == [] and j.summary()["outages"] == 1
+    assert j.summary().plan.robots_lost == [] and j.summary().plan.outages == 1
 
 
 def test_an_outage_loses_only_the_robots_still_missing_after_its_grace():
@@ -237,5 +241,5 @@ def test_an_outage_loses_only_the_robots_still_missing_after_its_grace():
         t += DT
     out = step(j, view(j, t, present=without(j.n, first)))
     assert kinds(out)[:3] == ["outage_end", "robot_lost", "capture"]
-    assert dict(out.events)["robot_lost"]["robot"] == j.cfg.robots[first].id
-    assert first not in j.assignment and j.summary()["loss_replans"] == 1
+    assert by_kind(out.events)["robot_lost"].robot == j.cfg.robots[first].id
+    assert first not in j.assignment and j.summary().plan.loss_replans == 1

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from controller.events import by_kind
 from controller.planning.arrangement import plan_arrangement
 from tests.support.transport_scenarios import CRATE, Scenario
 from tests.unit.test_transport_mission import _lp_ok, mission, view
@@ -78,6 +79,6 @@ def test_a_crate_too_heavy_for_the_robots_that_fit_fails_too_heavy_before_anyone
     m, cfg, poses = mission(heavy(CRATE, 0.4))
     out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
     assert out.failed and out.reason == "too_heavy" and np.all(out.velocities == 0.0)
-    detail = dict(out.events)["failure"]["detail"]
+    detail = by_kind(out.events)["failure"].detail
     assert "needs 14.4 N" in detail and "36.0 N in all" in detail
     assert m.pusher.plans == 0 and m.grip.relocations == 0 and m.rearranger.count == 1

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from controller import wire
+from controller.events import PhaseEvent
 from controller.mission.types import FleetView, Intent, MissionOutput, Phase
 from controller.runtime.node import ControllerNode
 from controller.runtime.wiring import make_estimator
@@ -25,7 +26,9 @@ class Recorder:
 
     def plan(self, view: FleetView) -> Intent:
         self.views.append(view)
-        return Intent(np.zeros((self.n, 2)), Phase.APPROACH, events=[("phase", {"x": 1})])
+        return Intent(
+            np.zeros((self.n, 2)), Phase.APPROACH, events=[PhaseEvent(phase=Phase.APPROACH, t=0.0)]
+        )
 
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
         cmds = np.tile([0.2, 0.0, 0.1], (self.n, 1))

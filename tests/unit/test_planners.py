@@ -10,10 +10,11 @@ import threading
 import numpy as np
 import pytest
 
+from controller.events import by_kind
 from controller.mission.guard import SafetyStage
 from controller.mission.planners import DeferredPlanners, InlinePlanners, PlanSlot
 from controller.mission.transport import TransportMission
-from controller.mission.types import Phase
+from controller.mission.types import Phase, Reason
 from controller.runtime.planner import PlannerWorker
 from tests.support.transport_scenarios import CRATE, Scenario, scenario_config
 from tests.unit.test_transport_mission import holders, view
@@ -38,12 +39,12 @@ def test_the_robots_hold_while_the_route_is_on_its_way_and_take_it_when_due():
     kinds = []
     for k in range(4):
         out = m.plan(view(cfg, k * DT, poses, cfg.object.start))
-        kinds += [e for e, _ in out.events]
+        kinds += [e.kind for e in out.events]
         assert m.phase == Phase.ROUTE and out.hold is not None and out.hold.all()
         assert not np.any(out.velocities)
     assert "route" not in kinds
     out = m.plan(view(cfg, 4 * DT, poses, cfg.object.start))
-    assert "route" in [e for e, _ in out.events]  # due at t + 4 ticks, not before
+    assert "route" in [e.kind for e in out.events]  # due at t + 4 ticks, not before
     assert m.phase in (Phase.TRANSPORT, Phase.REARRANGE)
 
 
@@ -79,7 +80,7 @@ def test_the_last_plan_is_executed_while_the_next_one_is_computed():
         assert m.pusher.last_plan is first and np.any(out.velocities)  # the robots push meanwhile
     # one plan per interval, as before; each one planned from a state 6 ticks old
     assert waited == round(first.interval / DT)
-    age = dict(out.events)["transport"]["plan_age_s"]
+    age = by_kind(out.events)["transport"].plan_age_s
     assert age == pytest.approx(6 * DT)
 
 
@@ -88,8 +89,8 @@ def test_a_failing_planner_stops_the_robots_with_the_reason():
     m._route_box.value = _Broken()
     out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
     assert out.failed and out.stop and m.phase == Phase.FAILED
-    failure = dict(out.events)["failure"]
-    assert failure["reason"] == "no_route" and "planner exploded" in failure["detail"]
+    failure = by_kind(out.events)["failure"]
+    assert failure.reason == Reason.NO_ROUTE and "planner exploded" in failure.detail
 
 
 class _Broken:

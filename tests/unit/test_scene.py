@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from controller import geometry, wire
+from controller.events import CaptureEvent, RearrangeEvent, RouteEvent, TransportEvent
 from controller.io.recorder import read_log
 from controller.scene import primitives as P
 from controller.scene.builder import (
@@ -83,34 +84,49 @@ TRANSPORT_PLAN = {
 }
 
 
+def transport_event(t: float) -> dict:
+    """A ``plan/transport`` payload as the push stage writes it, around ``TRANSPORT_PLAN``."""
+    plan = {k: v for k, v in TRANSPORT_PLAN.items() if k != "robots"}
+    robots = TRANSPORT_PLAN["robots"]
+    ev = TransportEvent(t=t, robots=robots, plan=plan, relocating={}, plan_age_s=0.0)
+    return ev.to_dict()
+
+
 @pytest.fixture
 def job():
     """Capture, route, re-arrangement and transport events over 3 s of 20 Hz ticks."""
     cfg = make_config(transport=True)  # with its goal
     s = Stream(cfg)
-    s.event(
-        0.05,
-        "capture",
-        "approach",
-        {"points": [[0, 0.2], [1, 0.2]], "normals": [[-1, 0], [1, 0]], "robots": ["r1", "r2"]},
-    )
+    capture = CaptureEvent(
+        points=[[0, 0.2], [1, 0.2]], normals=[[-1, 0], [1, 0]], robots=["r1", "r2"],
+        objective=1.0, form_closure=True, robots_needed=2, hold_capacity=1.0, reinforced=0,
+        pinned=False, wall_contacts=0, unavailable=[],
+    )  # fmt: skip
+    s.event(0.05, "capture", "approach", capture.to_dict())
     for k in range(1, 61):
         t = 0.05 * k
         if k == 20:
-            s.event(t, "phase", "hold", {"phase": "hold"})
+            s.event(t, "phase", "hold", {"phase": "hold", "t": t})
         if k == 30:
-            route = {
-                "waypoints": [[2, 3, 0], [5, 3, 0], [9.5, 9.5, 0]],
-                "subgoals": [[5, 3, 0], [9.5, 9.5, 0]],
-                "length_m": 11.0,
-            }
-            s.event(t, "route", "route", route)
+            route = RouteEvent(
+                t=t,
+                waypoints=[[2, 3, 0], [5, 3, 0], [9.5, 9.5, 0]],
+                subgoals=[[5, 3, 0], [9.5, 9.5, 0]],
+                length_m=11.0,
+                cost_s=12.0,
+                replans=0,
+            )
+            s.event(t, "route", "route", route.to_dict())
         if k == 35:
-            s.event(t, "rearrange", "rearrange", {"contacts": {"r1": [0.0, 0.3]}, "moving": ["r1"]})
+            rearrange = RearrangeEvent(
+                t=t, direction=[1.0, 0.0], pushers=1, basis="eq5", eq5_value=1.0,
+                moving=["r1"], contacts={"r1": [0.0, 0.3]},
+            )  # fmt: skip
+            s.event(t, "rearrange", "rearrange", rearrange.to_dict())
         if k == 40:
-            s.event(t, "transport", "transport", TRANSPORT_PLAN)
+            s.event(t, "transport", "transport", transport_event(t))
         s.tick(t, ring(cfg, t), obj=(2.0 + 0.01 * k, 3.0, 0.0))
-    s.event(3.0, "failure", "failed", {"reason": "stalled", "detail": "no progress"})
+    s.event(3.0, "failure", "failed", {"reason": "stalled", "t": 3.0, "detail": "no progress"})
     return cfg, s.done()
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from controller.events import FailureEvent, PhaseEvent
 from controller.mission import sequence as seq
 from controller.mission.factory import build_mission
 from controller.mission.job import CaptureJob
@@ -47,7 +48,8 @@ def test_every_way_out_of_every_phase(phase, cue, to):
     step = next_phase(JobState(phase, 1.0), Measures(7.5, cue), CARRY)
     assert step.state.phase == to and step.state.since == 7.5
     # every transition announces the phase it enters, a segment begun again included
-    assert step.events == (("phase", {"phase": str(to), "t": 7.5}),)
+    assert step.events == (PhaseEvent(phase=to, t=7.5),)
+    assert step.events[0].to_dict() == {"phase": str(to), "t": 7.5}  # the JSON as always
 
 
 def test_the_table_is_the_whole_map():
@@ -83,9 +85,13 @@ def test_every_failure_from_every_live_phase(phase, reason):
     )  # a failure wins over a cue of the same tick
     assert step.state.phase == P.FAILED and step.state.failure == Failure(reason, "why")
     assert step.events == (
-        ("phase", {"phase": "failed", "t": 4.0}),
-        ("failure", {"reason": str(reason), "t": 4.0, "detail": "why"}),
+        PhaseEvent(phase=P.FAILED, t=4.0),
+        FailureEvent(reason=reason, t=4.0, detail="why"),
     )
+    assert [e.to_dict() for e in step.events] == [
+        {"phase": "failed", "t": 4.0},
+        {"reason": str(reason), "t": 4.0, "detail": "why"},
+    ]
 
 
 @pytest.mark.parametrize("phase", sorted(seq.FINAL))
@@ -137,7 +143,7 @@ def test_the_transport_mission_is_the_same_job_entered_at_route():
     intent = job.plan(_view(cfg, 0.05, far, obj))
     # the carrying starts at route (the route computed at once here: nobody holds the object,
     # so the same tick goes on to re-arrange)
-    phases = [e[1]["phase"] for e in intent.events if e[0] == "phase"]
+    phases = [e.phase for e in intent.events if isinstance(e, PhaseEvent)]
     assert job.transport is not None and phases == ["route", "rearrange"], intent.events
     assert all(c is None for c in job.transport.grip.contacts.values())
     with pytest.raises(Exception, match="entered at plan or route"):

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from controller import geometry
+from controller.events import by_kind
 from controller.mission.guard import SafetyStage
 from controller.mission.transport import TransportMission
 from controller.mission.types import FleetView, Phase
@@ -54,13 +55,13 @@ OPEN = Scenario("open", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0))
 def test_first_tick_plans_the_route_and_publishes_it():
     m, cfg, poses = mission(OPEN)
     out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
-    kinds = [k for k, _ in out.events]
+    kinds = [e.kind for e in out.events]
     assert "route" in kinds
-    route = dict(out.events)["route"]
-    wp = np.asarray(route["waypoints"])
+    route = by_kind(out.events)["route"]
+    wp = np.asarray(route.waypoints)
     assert np.allclose(wp[0], cfg.object.start, atol=1e-6)
     assert np.allclose(wp[-1], cfg.object.goal, atol=1e-6)
-    assert route["length_m"] >= 3.0 - 1e-6
+    assert route.length_m >= 3.0 - 1e-6
     assert m.phase in (Phase.TRANSPORT, Phase.REARRANGE)
 
 
@@ -75,7 +76,7 @@ def test_no_route_fails_cleanly_and_stops_every_robot():
     out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
     assert out.failed and out.reason == "no_route" and out.stop
     assert np.all(out.velocities == 0.0)
-    assert dict(out.events)["failure"]["detail"]
+    assert by_kind(out.events)["failure"].detail
 
 
 def test_delivered_inside_the_settle_margin_then_backs_off_and_is_done():
@@ -86,7 +87,7 @@ def test_delivered_inside_the_settle_margin_then_backs_off_and_is_done():
     at_goal = poses + shift  # the fleet carried it there
     near = goal + [0.05, 0.0, 0.0]  # 5 cm off: inside 0.6 x 0.2 m
     out = m.plan(view(cfg, 10.0, at_goal, near))
-    assert m.phase == Phase.DONE and "delivered" in dict(out.events)
+    assert m.phase == Phase.DONE and "delivered" in by_kind(out.events)
     assert not out.done  # backing off first
     c = geometry.transform(m.model.centroid[None], near)[0]
     for i in range(len(cfg.robots)):
@@ -174,12 +175,12 @@ def test_a_lost_robot_leaves_the_job_and_is_told_nothing():
     present = np.ones(len(cfg.robots), bool)
     present[holder] = False
     out = m.plan(view(cfg, 0.05, poses, cfg.object.start, present))
-    lost = [d for k, d in out.events if k == "robot_lost"]
-    assert [d["robot"] for d in lost] == [cfg.robots[holder].id]
+    lost = [e for e in out.events if e.kind == "robot_lost"]
+    assert [e.robot for e in lost] == [cfg.robots[holder].id]
     assert m.grip.contacts[holder] is None and holder not in m.grip.moves
     assert np.all(out.velocities[holder] == 0.0)
     out = m.plan(view(cfg, 0.1, poses, cfg.object.start, present))
-    assert not [d for k, d in out.events if k == "robot_lost"]  # reported once
+    assert not [e for e in out.events if e.kind == "robot_lost"]  # reported once
 
 
 def test_a_stall_with_a_robot_lost_fails_with_robot_lost():
@@ -210,13 +211,13 @@ def test_a_fleet_wide_silence_pauses_the_transport_and_loses_nobody():
     seen = []
     while t < 1.05:
         out = m.plan(view(cfg, t, poses, cfg.object.start, nobody))
-        seen += [k for k, _ in out.events]
+        seen += [e.kind for e in out.events]
         assert out.stop and not out.failed
         t += 0.05
     assert seen == ["outage"] and not m.grip.lost
     assert m.way.progress_t - stall0 == pytest.approx(1.0, abs=0.06)  # paused, not stalled
     out = m.plan(view(cfg, t, poses, cfg.object.start))
-    assert [k for k, _ in out.events][0] == "outage_end" and not m.grip.lost
+    assert [e.kind for e in out.events][0] == "outage_end" and not m.grip.lost
     assert m.grip.contacts == contacts
 
 
@@ -234,7 +235,7 @@ def test_an_object_the_whole_fleet_cannot_push_fails_too_heavy_before_anyone_pus
         m, cfg, poses = mission(sc)
         out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
         assert out.failed and out.reason == "too_heavy" and np.all(out.velocities == 0.0)
-        detail = dict(out.events)["failure"]["detail"]
+        detail = by_kind(out.events)["failure"].detail
         need = friction * mass * 9.81
         assert f"needs {need:.1f} N" in detail and "36.0 N in all" in detail
         assert (need <= 36.0) is fleet_ok

@@ -11,6 +11,7 @@ import pytest
 from matplotlib.colors import to_hex
 
 from controller import viz
+from controller.events import ArrestEvent, CaptureEvent, PhaseEvent, RouteEvent, TransportEvent
 from controller.replay.log import RunLog
 from tests.support.config import make_config
 
@@ -40,18 +41,25 @@ def synthetic_run(cfg, seconds: float = 10.0) -> RunLog:
     # the object drifts out of the room's east wall: the plot must not clip it
     run.object_truth = [(ti, 12.0 + 0.1 * ti, 3.0, 0.0) for ti in t]
     ev = run.events
-    ev.append({"t": 0.05, "kind": "capture", "phase": "approach",
-               "data": {"points": [[0, 0.2], [1, 0.2]], "normals": [[-1, 0], [1, 0]],
-                        "robots": ["r1", "r2"]}})  # fmt: skip
-    ev.append({"t": 4.0, "kind": "phase", "phase": "close_in", "data": {}})
-    ev.append({"t": 6.0, "kind": "arrest", "phase": "arrested", "data": {}})
-    ev.append({"t": 7.0, "kind": "route", "phase": "route",
-               "data": {"waypoints": [[12.0, 3.0, 0.0], [9.0, 9.0, 0.0]],
-                        "subgoals": [[9.0, 9.0, 0.0]]}})  # fmt: skip
+
+    def add(t: float, phase: str, event) -> None:
+        ev.append({"t": t, "kind": event.kind, "phase": phase, "data": event.to_dict()})
+
+    add(0.05, "approach", CaptureEvent(
+        points=[[0, 0.2], [1, 0.2]], normals=[[-1, 0], [1, 0]], robots=["r1", "r2"],
+        objective=1.0, form_closure=True, robots_needed=2, hold_capacity=1.0, reinforced=0,
+        pinned=False, wall_contacts=0,
+    ))  # fmt: skip
+    add(4.0, "close_in", PhaseEvent(phase="close_in", t=4.0))
+    add(6.0, "arrested", ArrestEvent(t=6.0, arrival_spread_s=0.5, hold_s=2.0,
+                                     hold_displacement_m=0.01, gaps_m=[0.0, 0.0]))  # fmt: skip
+    add(7.0, "route", RouteEvent(t=7.0, waypoints=[[12.0, 3.0, 0.0], [9.0, 9.0, 0.0]],
+                                 subgoals=[[9.0, 9.0, 0.0]], length_m=6.7, cost_s=7.0,
+                                 replans=0))  # fmt: skip
     for k, tt in enumerate((8.0, 8.5, 9.0)):
-        ev.append({"t": tt, "kind": "transport", "phase": "transport",
-                   "data": {"robots": ["r1", "r2"], "forces": [[2.0 + k, 0.0]],
-                            "first_actions": ["push", "follow"]}})  # fmt: skip
+        plan = {"forces": [[2.0 + k, 0.0]], "first_actions": ["push", "follow"]}
+        add(tt, "transport", TransportEvent(t=tt, robots=["r1", "r2"], plan=plan,
+                                            relocating={}, plan_age_s=0.0))  # fmt: skip
     return run
 
 
