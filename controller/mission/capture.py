@@ -111,14 +111,7 @@ class CaptureMission:
         self.dt = 1.0 / cfg.fleet.rate_hz
         self.obstacles = self.guard.obstacles
         self.object_poly = self.guard.object_poly
-        self.params = PlannerParams(
-            max_turn=np.deg2rad(ap.max_turn_deg),
-            projection=ap.projection,
-            alpha=np.deg2rad(ap.alpha_deg),
-            alpha_growth=ap.alpha_growth,
-            alpha_max=np.deg2rad(ap.alpha_max_deg),
-            ride_reach=1.0 if ap.intercept == "oncoming" else None,
-        )
+        self.params = PlannerParams.from_config(ap)
         self.assigned = np.zeros(self.n, bool)
         self.assigned[self.assignment] = True
         self.state = CaptureState(contact_t=np.full(len(self.points), np.nan))

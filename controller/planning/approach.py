@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller import geometry
+from controller.config import ApproachSection, configured, from_section
 
 NO_HIT, EDGE, CORNER, HEAD_ON = "none", "edge", "corner", "head_on"
 
@@ -137,19 +138,31 @@ def robot_rotation(
     return None
 
 
+_APPROACH = ApproachSection()  # the config's defaults
+
+
 @dataclass(frozen=True)
 class PlannerParams:
-    max_turn: float  # rad per tick
-    projection: float
-    alpha: float  # rad
-    alpha_growth: float
-    alpha_max: float  # rad
+    """The projective planner's parameters (Sharma Table I), each configured default the
+    ``[approach]`` section's, converted to SI (rad)."""
+
+    max_turn: float = configured(_APPROACH, "max_turn_deg", np.deg2rad)  # rad per tick
+    projection: float = configured(_APPROACH, "projection")
+    alpha: float = configured(_APPROACH, "alpha_deg", np.deg2rad)  # rad
+    alpha_growth: float = configured(_APPROACH, "alpha_growth")
+    alpha_max: float = configured(_APPROACH, "alpha_max_deg", np.deg2rad)  # rad
     gain: float = 1.5  # 1/s, proportional on the distance to the goal
     # m over which the goal's own velocity (feed-forward) fades in as the robot nears it; None:
     # always all of it (the rule before, a baseline for bench/arrest.py). A far goal is a
     # meeting point already predicted (interception): riding on the target's velocity on the
     # way there slows a robot that comes at an object head-on to the difference of the speeds
     ride_reach: float | None = 1.0
+
+    @classmethod
+    def from_config(cls, ap) -> PlannerParams:
+        """From an ``ApproachSection``: ``intercept = "oncoming"`` rides on the object's
+        velocity within the last metre, ``"classic"`` all the way."""
+        return from_section(cls, ap, ride_reach=1.0 if ap.intercept == "oncoming" else None)
 
 
 def plan_velocities(

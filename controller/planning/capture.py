@@ -53,7 +53,14 @@ from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment, linprog
 
 from controller import geometry
-from controller.config import CAPTURE_NODE_BUDGET, capture_budget_error, edge_node_counts
+from controller.config import (
+    CAPTURE_NODE_BUDGET,
+    CaptureSection,
+    capture_budget_error,
+    configured,
+    edge_node_counts,
+    from_section,
+)
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -68,35 +75,29 @@ MAX_CLOSURE_SET = 200
 CONSTRAINTS = ("robots", "fleet", "moments", "translation", "one_per_edge", "spacing", "closure")
 
 
+_CAPTURE = CaptureSection()  # the config's defaults
+
+
 @dataclass(frozen=True)
 class CaptureParams:
-    spacing: float = 0.1
-    clearance: float = 0.02
-    k: float = 1.0
-    epsilon: float = 0.1
-    tau: float = 1e-9
-    population: int = 60
-    crossover: float = 0.8
-    mutation: float = 0.12
-    generations: int = 600
-    closure: str = "exact"
-    ga: str = "ours"  # "paper": run_paper_ga, Sharma's GA as published (the baseline)
+    """The capture GA's parameters, each default the ``[capture]`` section's (``configured``);
+    ``ga = "paper"``: run_paper_ga, Sharma's GA as published (the baseline)."""
+
+    spacing: float = configured(_CAPTURE, "spacing")
+    clearance: float = configured(_CAPTURE, "clearance")
+    k: float = configured(_CAPTURE, "k")
+    epsilon: float = configured(_CAPTURE, "epsilon")
+    tau: float = configured(_CAPTURE, "tau")
+    population: int = configured(_CAPTURE, "population")
+    crossover: float = configured(_CAPTURE, "crossover")
+    mutation: float = configured(_CAPTURE, "mutation")
+    generations: int = configured(_CAPTURE, "generations")
+    closure: str = configured(_CAPTURE, "closure")
+    ga: str = configured(_CAPTURE, "ga")
 
     @classmethod
     def from_config(cls, c) -> CaptureParams:
-        return cls(
-            spacing=c.spacing,
-            clearance=c.clearance,
-            k=c.k,
-            epsilon=c.epsilon,
-            tau=c.tau,
-            population=c.population,
-            crossover=c.crossover,
-            mutation=c.mutation,
-            generations=c.generations,
-            closure=c.closure,
-            ga=c.ga,
-        )
+        return from_section(cls, c)
 
     @property
     def min_robots(self) -> int:

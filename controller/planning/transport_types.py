@@ -20,13 +20,14 @@ rows are intervals and columns robots):
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from controller.config import TRANSPORT_STRATEGIES
+from controller.config import TRANSPORT_STRATEGIES, TransportSection, configured, from_section
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -117,33 +118,37 @@ class TransportState:
     serpentine_group: int | None = None
 
 
+_TRANSPORT = TransportSection()  # the config's defaults
+
+
 @dataclass(frozen=True)
 class TransportParams:
     """Local-planner parameters, built in one place from ``[transport]``
-    (:meth:`from_config`). Units: s, m, m/s, N; weights per unit named in the config."""
+    (:meth:`from_config`), each default the section's (``configured``: written once, in the
+    config). Units: s, m, m/s, N; weights per unit named in the config."""
 
-    strategy: str = "sa"
-    intervals: int = 8
-    interval: float = 0.5
-    iterations: int = 100
-    initial_temperature: float = 0.3
-    cooling: float = 0.95
-    schedule: str = "geometric"
-    initial_actions: str = "lp"
-    block_moves: float = 0.5
-    speed: float = 0.15
-    lookahead: float = 0.3
-    slide_speed: float = 0.2
-    push_bias: float = 0.02
-    relocation_spacing: float = 0.1
-    k_collision: float = 100.0
-    k_equilibrium: float = 100.0
-    k_force: float = 0.01
-    k_change: float = 0.05
-    k_deviation: float = 1.0
-    k_progress: float = 10.0
-    serpentine_deviation: float = 0.15
-    serpentine_min_deviation: float = 0.03
+    strategy: str = configured(_TRANSPORT, "strategy")
+    intervals: int = configured(_TRANSPORT, "intervals")
+    interval: float = configured(_TRANSPORT, "interval")
+    iterations: int = configured(_TRANSPORT, "iterations")
+    initial_temperature: float = configured(_TRANSPORT, "initial_temperature")
+    cooling: float = configured(_TRANSPORT, "cooling")
+    schedule: str = configured(_TRANSPORT, "schedule")
+    initial_actions: str = configured(_TRANSPORT, "initial_actions")
+    block_moves: float = configured(_TRANSPORT, "block_moves")
+    speed: float = configured(_TRANSPORT, "speed")
+    lookahead: float = configured(_TRANSPORT, "lookahead")
+    slide_speed: float = configured(_TRANSPORT, "slide_speed")
+    push_bias: float = configured(_TRANSPORT, "push_bias")
+    relocation_spacing: float = configured(_TRANSPORT, "relocation_spacing")
+    k_collision: float = configured(_TRANSPORT, "k_collision")
+    k_equilibrium: float = configured(_TRANSPORT, "k_equilibrium")
+    k_force: float = configured(_TRANSPORT, "k_force")
+    k_change: float = configured(_TRANSPORT, "k_change")
+    k_deviation: float = configured(_TRANSPORT, "k_deviation")
+    k_progress: float = configured(_TRANSPORT, "k_progress")
+    serpentine_deviation: float = configured(_TRANSPORT, "serpentine_deviation")
+    serpentine_min_deviation: float = configured(_TRANSPORT, "serpentine_min_deviation")
     contact_tolerance: float = 0.01  # m: closer counts as touching, deeper as a collision
 
     def __post_init__(self) -> None:
@@ -157,10 +162,8 @@ class TransportParams:
     @classmethod
     def from_config(cls, t: Any, **overrides: Any) -> TransportParams:
         """From a ``TransportSection`` (controller.config); ``overrides`` replace fields."""
-        names = {f for f in cls.__dataclass_fields__ if f != "contact_tolerance"}
-        values = {n: getattr(t, n) for n in names if hasattr(t, n)}
-        values.update(overrides)
-        return cls(**values)
+        params = from_section(cls, t)
+        return dataclasses.replace(params, **overrides) if overrides else params
 
 
 @dataclass(frozen=True)

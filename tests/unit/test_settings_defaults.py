@@ -10,12 +10,15 @@ import math
 
 import pytest
 
-from controller.config import ApproachSection, TransportSection, from_section
+from controller.config import ApproachSection, CaptureSection, TransportSection, from_section
 from controller.config.derive import config_fields
 from controller.mission.capture_phase import CaptureSettings
 from controller.mission.grip import GripSettings
 from controller.mission.progress import ProgressSettings
 from controller.mission.transport_settings import TransportSettings
+from controller.planning.approach import PlannerParams
+from controller.planning.capture import CaptureParams
+from controller.planning.transport_types import TransportParams
 from tests.support.config import make_config
 
 # every settings dataclass of the missions, with the config section whose keys it may take
@@ -24,6 +27,9 @@ SETTINGS = [
     (TransportSettings, TransportSection),
     (ProgressSettings, TransportSection),
     (GripSettings, TransportSection),
+    (TransportParams, TransportSection),  # the planners' parameters
+    (CaptureParams, CaptureSection),
+    (PlannerParams, ApproachSection),
 ]
 
 
