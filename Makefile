@@ -27,8 +27,8 @@ lint: $(STAMP)
 # the lockstep tiers (units, dry runs, replays) on both cores, then the real-time processes alone
 # (3 workers were no faster than 2 on the whole lockstep pass: 667 s vs 655 s)
 test: lint
-	$(BIN)/python -m pytest -q -n 2 -m "not serial"
-	$(BIN)/python -m pytest -q -m serial
+	$(BIN)/python -m pytest -q -n 2 -m "not serial" --durations=15
+	$(BIN)/python -m pytest -q -m serial --durations=15
 
 test-fast: lint
 	$(BIN)/python -m pytest -q -m "not e2e"
