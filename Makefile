@@ -27,7 +27,7 @@ lint: $(STAMP)
 # the lockstep tiers (units, dry runs, replays) on both cores, then the real-time processes alone
 # (3 workers were no faster than 2 on the whole lockstep pass: 667 s vs 655 s)
 test: lint
-	$(BIN)/python -m pytest -q -n 2 -m "not serial" --durations=15
+	$(BIN)/python -m pytest -q -n 2 --dist worksteal -m "not serial" --durations=15
 	$(BIN)/python -m pytest -q -m serial --durations=15
 
 test-fast: lint

@@ -1,6 +1,6 @@
 """The whole job in real time, the lab way: ``fleet world`` + ``fleet daemon --mission capture``
 + six ``fleet driver`` processes on 127.0.0.1 (the top-level fleet.toml's job with its goal
-brought 2.5 m near, as in test_reproducible: capture, route, re-arrangement and transport in a
+brought 2.5 m near: capture, route, re-arrangement and transport in a
 minute of wall time instead of two and a half; ``sim.world = "process"``). The daemon plans
 off its control loop, so the object is captured and delivered to ``object.goal`` with (almost)
 no late tick and no watchdog stop of a robot while the controller drives it."""

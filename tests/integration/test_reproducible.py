@@ -1,6 +1,6 @@
 """The dry run is reproducible with planning off the tick: two ``fleet run --json`` of the
-top-level fleet.toml (its goal brought 2.5 m from the start, so the whole job, every planner
-kind included, takes a fifth of the time), the second with a CPU hog on every core beside it,
+top-level fleet.toml (its goal brought 1.3 m from the start, so the whole job, every planner
+kind included, takes a sixth of the time), the second with a CPU hog on every core beside it,
 give the same outcome (the plans come after their modelled latency in sim time, whatever the
 wall clock did)."""
 
@@ -23,7 +23,7 @@ CLOSE = ("goal_error_m", "goal_error_deg", "sim_time_s")
 HOG = "import time\nend = time.monotonic() + 600\nwhile time.monotonic() < end:\n    pass\n"
 
 
-NEAR_GOAL = [4.5, 3.4, 0.0]
+NEAR_GOAL = [3.3, 3.2, 0.0]
 
 
 def near_config(tmp_path):
@@ -61,5 +61,7 @@ def test_the_dry_run_of_fleet_toml_gives_the_same_outcome_idle_and_loaded(tmp_pa
         assert first[k] == second[k], k
     for k in CLOSE:
         assert abs(first[k] - second[k]) <= 1e-9, k
-    assert first["plan_latency_s"]["transport"]["n"] == second["plan_latency_s"]["transport"]["n"]
+    latency = first["plan_latency_s"]
+    assert all(latency[kind]["n"] >= 1 for kind in ("route", "rearrange", "transport")), latency
+    assert latency["transport"]["n"] == second["plan_latency_s"]["transport"]["n"]
     assert first["missed_ticks"] == second["missed_ticks"] == 0

@@ -42,7 +42,7 @@ def test_every_strategy_runs_in_a_closed_loop_test():
     assert all(name in globals() for name in list(CLOSED_LOOP.values())[1:])
 
 
-def run(strategy: str, tmp_path) -> tuple[dict, object]:
+def run(strategy: str, tmp_path, max_time: float | None = None) -> tuple[dict, object]:
     sc = Scenario(
         "open-floor-ideal",
         CRATE,
@@ -51,7 +51,8 @@ def run(strategy: str, tmp_path) -> tuple[dict, object]:
         patch={"transport": {"strategy": strategy}},
     )
     cfg = scenario_config(sc)
-    res = DryRun(cfg, build_mission(cfg, "transport"), tmp_path / f"{strategy}.mcap").run()
+    out = tmp_path / f"{strategy}.mcap"
+    res = DryRun(cfg, build_mission(cfg, "transport"), out, max_time=max_time).run()
     return res, cfg
 
 
@@ -67,8 +68,10 @@ def test_serpentine_pushes_the_object_most_of_the_way_cleanly(tmp_path):
     """Serpentine as published runs without breaking the hardware contract and carries the
     crate most of the way. Whether it ends inside the tolerance depends on the seed's Eq. 5
     draw (0.18 m on one, 1.09 m on another: it hovers short of the goal); the suite's figure is
-    1 of 15 delivered (README, bench/transport_compare.py), so only the progress is asserted."""
-    res, cfg = run("serpentine", tmp_path)
+    4 of 60 delivered (README, bench/transport_compare.py), so only the progress is asserted, at
+    150 s of sim time (it gains about 1.5 cm/s here: 1.65 m left of 4.03 at 150 s, 1.09 at the
+    200 s timeout; the last 50 s cost 20 s of CI time and prove nothing more)."""
+    res, cfg = run("serpentine", tmp_path, max_time=150.0)
     assert judge(res) == []
     start = math.dist(cfg.object.start[:2], cfg.object.goal[:2])
     assert res["goal_error_m"] <= 0.5 * start, res.get("failure")
