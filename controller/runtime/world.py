@@ -194,6 +194,27 @@ def world_config(cfg: FleetConfig, vehicles: Iterable[str] = ()) -> FleetConfig:
     )
 
 
+def _chosen(cfg: FleetConfig, which: str | None, driver: str, flag: str, name: str) -> list:
+    """The robots of ``driver`` a ``fleet world`` flag names: none (``which`` None), every one
+    (``"all"``) or the comma-separated ids (ConfigError naming an id that is not one of them)."""
+    if which is None:
+        return []
+    mine = [r for r in cfg.robots if r.driver == driver]
+    if which.strip() == "all":
+        return mine
+    by_id = {r.id: r for r in mine}
+    chosen = []
+    for rid in (w.strip() for w in which.split(",") if w.strip()):
+        if rid not in by_id:
+            raise ConfigError(
+                cfg.source,
+                "robots",
+                f"{flag} {rid!r}: not a {name} robot; {name} robots: {sorted(by_id)}",
+            )
+        chosen.append(by_id[rid])
+    return chosen
+
+
 def emulated_vehicles(cfg: FleetConfig, which: str | None) -> tuple[str, ...]:
     """The MAVLink robots ``fleet world --mavlink [IDS]`` makes bodies of the world: none
     (``which`` None), every one (``"all"``) or the comma-separated ids. ConfigError naming the
@@ -201,22 +222,7 @@ def emulated_vehicles(cfg: FleetConfig, which: str | None) -> tuple[str, ...]:
     loopback (``udpin`` on any host, ``udpout``/``tcp`` to 127.0.0.1)."""
     from sim_backend.mavlink_vehicle import vehicle_url
 
-    if which is None:
-        return ()
-    mavlink = [r for r in cfg.robots if r.driver == "mavlink"]
-    if which.strip() == "all":
-        chosen = mavlink
-    else:
-        by_id = {r.id: r for r in mavlink}
-        chosen = []
-        for rid in (w.strip() for w in which.split(",") if w.strip()):
-            if rid not in by_id:
-                raise ConfigError(
-                    cfg.source,
-                    "robots",
-                    f"--mavlink {rid!r}: not a MAVLink robot; MAVLink robots: {sorted(by_id)}",
-                )
-            chosen.append(by_id[rid])
+    chosen = _chosen(cfg, which, "mavlink", "--mavlink", "MAVLink")
     for r in chosen:
         try:
             vehicle_url(r.url)
@@ -231,22 +237,7 @@ def ros2_bodies(cfg: FleetConfig, which: str | None) -> tuple[str, ...]:
     None), every one (``"all"``) or the comma-separated ids. ConfigError naming the id when it
     is not a ROS 2 robot of the config, or naming ``robots[i].ros2.connect`` when an endpoint
     of its router is not on loopback (the world answers it there)."""
-    if which is None:
-        return ()
-    ros2 = [r for r in cfg.robots if r.driver == "ros2"]
-    if which.strip() == "all":
-        chosen = ros2
-    else:
-        by_id = {r.id: r for r in ros2}
-        chosen = []
-        for rid in (w.strip() for w in which.split(",") if w.strip()):
-            if rid not in by_id:
-                raise ConfigError(
-                    cfg.source,
-                    "robots",
-                    f"--ros2 {rid!r}: not a ROS 2 robot; ROS 2 robots: {sorted(by_id)}",
-                )
-            chosen.append(by_id[rid])
+    chosen = _chosen(cfg, which, "ros2", "--ros2", "ROS 2")
     for r in chosen:
         for endpoint in r.ros2.connect:
             host = endpoint.partition("/")[2].rpartition(":")[0]
