@@ -60,6 +60,9 @@ class Reason(StrEnum):
     STALLED = "stalled"
     TOO_HEAVY = "too_heavy"  # the whole fleet at its force limits cannot push the object
     NOT_DELIVERED = "not_delivered"  # the run ended with the object outside object.goal's tolerance
+    # the dry run's lockstep: the controller's answers or its commands stopped arriving (ticks
+    # missed in a row); the run is cut short, its outcome unknown
+    LOCKSTEP_LOST = "lockstep_lost"
 
 
 class EventFieldError(ValueError):

@@ -301,6 +301,7 @@ class DryRun:
         self.score = ArrestScore(cfg)
         self.carry = TransportScore(cfg)
         self.mission_failure: RunFailure | None = None
+        self.run_failure: RunFailure | None = None  # the dry run itself broke (lockstep lost)
         self._next_progress = 0.0
 
     def run(self) -> dict[str, Any]:
@@ -324,7 +325,10 @@ class DryRun:
                     cfg.fleet.name,
                     listen=[],
                     connect=list(cfg.zenoh.listen),
-                    lease_s=cfg.fleet.liveliness_lease,
+                    # the robots' side shares this process and the sim clock: a wall-clock
+                    # stall of the machine that the lockstep rides out (sim.tick_timeout) must
+                    # not cut its link either (fleet.liveliness_lease is for lab robots)
+                    lease_s=max(cfg.fleet.liveliness_lease, cfg.sim.tick_timeout),
                 ) as robot_bus,
             ):
                 figures = self._run(hub, recorder, ctl_bus, robot_bus, wall0)
@@ -411,6 +415,16 @@ class DryRun:
             self.verdict.update(coord.t, world.check())
             if ctl.error is not None:
                 raise RuntimeError("controller loop failed") from ctl.error
+            if coord.lost:
+                n = coord.counters.missed_in_a_row
+                detail = (
+                    f"the controller missed {n} ticks in a row (sim.tick_timeout "
+                    f"{self.cfg.sim.tick_timeout:g} s each): its answers or its commands "
+                    "stopped arriving; the run was cut short"
+                )
+                log.error("lockstep lost at t=%.2f s: %s", coord.t, detail)
+                self.run_failure = RunFailure(Reason.LOCKSTEP_LOST, round(coord.t, 4), detail)
+                break
             out = node.last_output
             self.score.tick(coord.t, out, world)
             self.carry.tick(coord.t, coord.dt, out, world)
@@ -492,7 +506,7 @@ class DryRun:
             checks,
             result["verdict"],
             arrested=figures.arrest_declared and not escaped,
-            failure=failure_of(result, v, self.mission_failure),
+            failure=self.run_failure or failure_of(result, v, self.mission_failure),
         )
 
     def _handshake(self, node: ControllerNode, agents, coord, timeout: float = 20.0) -> None:

@@ -35,10 +35,18 @@ from sim_backend.hub import SimHub
 log = logging.getLogger(__name__)
 
 
+# ticks missed in a row after which the lockstep is lost: the run ends (``lockstep_lost``)
+# instead of waiting ``sim.tick_timeout`` per tick for answers that do not come (one stalled
+# bench run waited 10 s a tick for 30 minutes, another 19 minutes and was then counted a
+# timeout); a controller that is only slow misses one tick, not three in a row
+MAX_MISSED_IN_A_ROW = 3
+
+
 @dataclass
 class LockstepCounters:
     ticks: int = 0
     missed: int = 0  # ticks the controller did not answer in time
+    missed_in_a_row: int = 0
     measurements: int = 0
 
 
@@ -79,7 +87,8 @@ class LockstepCoordinator:
         }
         self._seq = 0
         self._answered = -1
-        self._commands_due = 0
+        self._commands_due = 0  # the controller's count of the commands it has published
+        self._written_off = 0  # of those, the ones that never arrived (given up on)
 
     def publishers_for_handshake(self) -> list:
         """Publishers the controller side must have matched before the first tick."""
@@ -144,7 +153,9 @@ class LockstepCoordinator:
                 return self._wait_commands(deadline)
 
     def _seen(self) -> int:
-        return sum(a.commands_seen() for a in self.agents)
+        """Commands the agents received, plus those written off as lost: what the controller's
+        cumulative count is compared with."""
+        return sum(a.commands_seen() for a in self.agents) + self._written_off
 
     def _wait_commands(self, deadline: float) -> bool:
         """Wait until the agents hold every command the controller says it published."""
@@ -154,10 +165,28 @@ class LockstepCoordinator:
                 timeout=max(0.0, deadline - time.monotonic()),
             )
         if not ok:
-            seen = self._seen()
-            log.warning("%d commands never arrived", self._commands_due - seen)
-            self._commands_due = seen  # resynchronise: do not wait for them again
+            missing = self._commands_due - self._seen()
+            per_robot = ", ".join(
+                f"{a.params.robot_id} {a.commands_seen()}" for a in self.agents
+            )
+            log.warning(
+                "%d commands never arrived (the controller says %d sent; received per robot: %s)",
+                missing,
+                self._commands_due,
+                per_robot,
+            )
+            # written off: the next ticks wait only for their own commands (without this, one
+            # lost command made every later tick wait tick_timeout for it again). One that
+            # still comes after its tick_timeout is counted twice: a later tick may then go on
+            # one command early (the run has missed a tick already: it is not the lockstep run)
+            self._written_off += missing
         return ok
+
+    @property
+    def lost(self) -> bool:
+        """Whether the controller missed ``MAX_MISSED_IN_A_ROW`` ticks in a row: its answers or
+        its commands stopped arriving, and waiting on would only repeat the timeout."""
+        return self.counters.missed_in_a_row >= MAX_MISSED_IN_A_ROW
 
     def tick(self) -> bool:
         """One lockstep tick; returns whether the controller answered in time."""
@@ -176,7 +205,10 @@ class LockstepCoordinator:
         ok = self.wait_done(self.step_index)
         if not ok:
             self.counters.missed += 1
+            self.counters.missed_in_a_row += 1
             log.warning("controller missed tick %d (t=%.2f s)", self.step_index, now)
+        else:
+            self.counters.missed_in_a_row = 0
         for agent in self.agents:
             agent.handle_inputs(now)
             agent.enforce(now)
