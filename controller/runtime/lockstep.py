@@ -166,9 +166,7 @@ class LockstepCoordinator:
             )
         if not ok:
             missing = self._commands_due - self._seen()
-            per_robot = ", ".join(
-                f"{a.params.robot_id} {a.commands_seen()}" for a in self.agents
-            )
+            per_robot = ", ".join(f"{a.params.robot_id} {a.commands_seen()}" for a in self.agents)
             log.warning(
                 "%d commands never arrived (the controller says %d sent; received per robot: %s)",
                 missing,
