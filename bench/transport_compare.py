@@ -33,7 +33,7 @@ import os
 import sys
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -274,14 +274,15 @@ def run_all(
         log(f"  {len(jobs) - len(todo)} runs read back from {rows_file}")
 
     def run(batch: list[tuple]) -> list[dict]:
-        out = []
         if workers <= 1:
-            results = map(run_case, batch)
-            out = _collect(results, batch, rows_file)
-        else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                out = _collect(pool.map(run_case, batch), batch, rows_file)
-        return out
+            return [_keep(job, run_case(job), rows_file) for job in batch]
+        got: dict = {}
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(run_case, job): i for i, job in enumerate(batch)}
+            for fut in as_completed(futures):  # written as each ends, not in job order
+                i = futures[fut]
+                got[i] = _keep(batch[i], fut.result(), rows_file)
+        return [got[i] for i in range(len(batch))]
 
     new = run(todo)
     if retry_invalid:
@@ -294,15 +295,13 @@ def run_all(
     return [got[_key(j)] for j in jobs]
 
 
-def _collect(results, batch: list[tuple], rows_file: Path | None) -> list[dict]:
-    out = []
-    for job, r in zip(batch, results, strict=True):
-        r = {**r, "label": job[3]}
-        out.append(r)
-        if rows_file is not None:
-            with rows_file.open("a") as f:
-                f.write(json.dumps(r, default=lambda x: None if x is None else float(x)) + "\n")
-    return out
+def _keep(job: tuple, row: dict, rows_file: Path | None) -> dict:
+    """The row with its set's label, appended to ``rows_file`` (if any) right away."""
+    row = {**row, "label": job[3]}
+    if rows_file is not None:
+        with rows_file.open("a") as f:
+            f.write(json.dumps(row, default=lambda x: None if x is None else float(x)) + "\n")
+    return row
 
 
 def _num(v: float) -> str:
