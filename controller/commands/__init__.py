@@ -24,17 +24,41 @@ def require_log_target(cfg, out, explicit: bool) -> None:
     raise ConfigError(cfg.source, "log.dir", problem)
 
 
+def stop_on_signals():
+    """A ``threading.Event`` set on SIGINT or SIGTERM. The handler only writes a byte to a pipe;
+    a relay thread sets the event. ``Event.set()`` in the handler itself deadlocks when the
+    signal lands while the main thread is inside ``stop.wait()`` holding the event's lock (the
+    handler then waits for that lock forever): a ``fleet hub`` its daemon had started never
+    stopped on the SIGTERM of its daemon's death."""
+    import os
+    import signal
+    import threading
+
+    stop = threading.Event()
+    r, w = os.pipe()
+    os.set_blocking(w, False)
+
+    def relay() -> None:
+        os.read(r, 1)
+        stop.set()
+
+    def handler(*_) -> None:
+        try:
+            os.write(w, b"\0")
+        except OSError:  # the pipe full: a byte is already on its way
+            pass
+
+    threading.Thread(target=relay, name="signal-relay", daemon=True).start()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, handler)
+    return stop
+
+
 def serve_until_signalled(args, serve) -> int:
     """Run a long-lived service (``fleet hub``, ``fleet world``): ``serve(cfg, stop, duration)``
     until SIGINT/SIGTERM sets ``stop`` or ``--duration`` s pass. A BusError maps to exit 1
     (cli.exit_code)."""
-    import signal
-    import threading
-
     from controller.config import load_config
 
     cfg = load_config(args.config)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    return serve(cfg, stop, args.duration)
+    return serve(cfg, stop_on_signals(), args.duration)

@@ -7,11 +7,9 @@ The controller on the lab network (``controller.runtime.daemon``). Stops on SIGI
 
 from __future__ import annotations
 
-import signal
-import threading
 from pathlib import Path
 
-from controller.commands import add_config_argument, require_log_target
+from controller.commands import add_config_argument, require_log_target, stop_on_signals
 from controller.config import MISSION_KINDS
 
 
@@ -49,9 +47,7 @@ def run(args) -> int:
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name, "daemon")
     require_log_target(cfg, out, bool(args.out))  # exit 2 before anything starts
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()
     planners = PlannerWorker.for_config(cfg, lockstep=False)  # the slow plans off the loop
     mission = build_mission(cfg, args.mission, planners=planners)  # MissionError: exit 1
     return run_daemon(

@@ -12,11 +12,9 @@ be read, or is unsafe (drivers/mavlink/failsafe.py; otherwise a warning).
 
 from __future__ import annotations
 
-import signal
 import sys
-import threading
 
-from controller.commands import add_config_argument
+from controller.commands import add_config_argument, stop_on_signals
 
 
 def add_arguments(parser, word: str) -> None:
@@ -40,9 +38,7 @@ def run(args) -> int:
     cfg = load_config(args.config)
     if args.robot_id not in cfg.robot_ids:
         raise ConfigError(cfg.source, "robots", f"no robot {args.robot_id!r}; ids: {cfg.robot_ids}")
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()
     code, message = run_agent(
         cfg, args.robot_id, stop, args.duration, args.connect_timeout, strict=args.strict
     )

@@ -8,13 +8,11 @@ Foxglove scene channels beside the bus's.
 
 from __future__ import annotations
 
-import signal
 import sys
-import threading
 import time
 from pathlib import Path
 
-from controller.commands import add_config_argument
+from controller.commands import add_config_argument, stop_on_signals
 
 
 def add_arguments(parser, word: str) -> None:
@@ -35,9 +33,7 @@ def run(args) -> int:
 
     cfg = load_config(args.config)
     out = Path(args.out) if args.out else default_log_path(cfg.log.dir, cfg.fleet.name, "record")
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_on_signals()
     connect = args.connect or list(cfg.zenoh.listen)
     # the config goes in too: replay needs the robots' sizes and the room (clearance, verdict)
     recorder = open_recorder(cfg, out, "record", who="fleet record")
