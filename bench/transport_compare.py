@@ -20,8 +20,14 @@
    (mass, floor friction ×U(0.9, 1.1), CoM ±1 cm; pybullet only), N runs per strategy.
 
 Usage: ``python bench/transport_compare.py [--seeds 5] [--scenarios 2] [--sweep 0]
-[--workers 2] [--backend pybullet] [--planner-seeds 10]``. A closed-loop run takes about a
-minute of wall time on a quiet 2-core machine (more under load): size the run to the machine.
+[--workers 2] [--backend pybullet] [--planner-seeds 10] [--rows runs.jsonl] [--retry-invalid]``.
+A closed-loop run takes about a minute of wall time on a quiet 2-core machine (more under load):
+size the run to the machine. ``--rows``: each run's row is appended as it ends, and a bench run
+again with the same file skips the runs already there (a killed bench resumes). A run whose
+lockstep missed a tick is not the seed's reproducible run: it is marked ``valid: false``, left
+out of the statistics and listed in ``invalid_runs`` (``--retry-invalid`` runs it once more).
+``--merge A.json B.json ...`` pools outputs (a later file's run replaces an earlier one's),
+``--table OUT.json`` prints the README's table.
 """
 
 from __future__ import annotations
