@@ -197,9 +197,9 @@ def run_case(job: tuple) -> dict:
         "lateral_deviation_rms_m": res.get("lateral_deviation_rms_m"),
         "rearrangements": res.get("rearrangements"),
         "missed_ticks": res.get("missed_ticks"),
-        # a run whose lockstep missed a tick is not the reproducible run (lockstep_lost: its
-        # outcome unknown): left out of the statistics, counted, re-run with --retry-invalid
-        "valid": not res.get("missed_ticks") and res.get("reason") != "lockstep_lost",
+        # a run whose lockstep missed a tick (lockstep_lost: three in a row) is not the
+        # reproducible run: left out of the statistics, counted, re-run with --retry-invalid
+        "valid": not res.get("missed_ticks"),
         "wall_s": round(time.perf_counter() - t0, 1),
     }
 
@@ -254,11 +254,13 @@ def aggregate(rows: list[dict], strategies, rng: np.random.Generator) -> dict:
     return out
 
 
-def _key(job_or_row) -> tuple:
-    if isinstance(job_or_row, dict):
-        r = job_or_row
-        return (r.get("label", ""), r["scenario"], r["seed"], r["strategy"])
-    sc, strategy, seed, label = job_or_row
+def _key(r: dict) -> tuple:
+    """A row's run: its set, scenario, seed and strategy."""
+    return (r.get("label", ""), r["scenario"], r["seed"], r["strategy"])
+
+
+def _job_key(job: tuple) -> tuple:
+    sc, strategy, seed, label = job
     return (label, sc.name, seed, strategy)
 
 
@@ -275,7 +277,7 @@ def run_all(
                 r = json.loads(line)
                 if r.get("valid", True):
                     done[_key(r)] = r
-    todo = [j for j in jobs if _key(j) not in done]
+    todo = [j for j in jobs if _job_key(j) not in done]
     if len(todo) < len(jobs):
         log(f"  {len(jobs) - len(todo)} runs read back from {rows_file}")
 
@@ -298,7 +300,7 @@ def run_all(
             redo = {_key(r): r for r in run(again)}
             new = [redo.get(_key(r), r) for r in new]
     got = {**done, **{_key(r): r for r in new}}
-    return [got[_key(j)] for j in jobs]
+    return [got[_job_key(j)] for j in jobs]
 
 
 def _keep(job: tuple, row: dict, rows_file: Path | None) -> dict:
