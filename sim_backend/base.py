@@ -71,6 +71,20 @@ class World(Protocol):
         where the world has no forces)."""
         ...
 
+    def hold_object(self) -> None:
+        """The object's drive holds its start pose (its path not begun) until
+        :meth:`start_object`."""
+        ...
+
+    def start_object(self) -> None:
+        """The object's path begins now (a no-op once begun)."""
+        ...
+
+    @property
+    def object_waiting(self) -> bool:
+        """Whether the object's path has not begun (:meth:`hold_object`)."""
+        ...
+
     @property
     def object_alive(self) -> bool:
         """Whether the object's own drive is still on. It goes limp ("compromised": it moves

@@ -59,6 +59,18 @@ class IdealWorld:
     def object_alive(self) -> bool:
         return self._give_up.alive
 
+    def hold_object(self) -> None:
+        """The object's drive holds its start pose until :meth:`start_object`."""
+        self._script = self._script.held()
+
+    def start_object(self) -> None:
+        """The object's path begins now (``fleet world``: at the operator's first resume)."""
+        self._script = self._script.begun(self._t)
+
+    @property
+    def object_waiting(self) -> bool:
+        return self._script.waiting()
+
     @property
     def object_gave_up_at(self) -> float | None:
         return self._give_up.gave_up_at

@@ -9,6 +9,7 @@ velocity plus a bounded pull back onto it (line, sine), or a flight away from th
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -69,9 +70,26 @@ class GiveUp:
 
 @dataclass(frozen=True)
 class ObjectScript:
+    """The object's scripted drive. ``started_at`` (s of sim time) is when its path begins;
+    None: not yet (the drive holds the start pose; ``fleet world`` waits for the operator's
+    first resume, ``sim.object_start``)."""
+
     motion: MotionSection
     start: tuple[float, float, float]
     pull_gain: float = 1.0  # 1/s, gain of the pull back onto the path
+    started_at: float | None = 0.0
+
+    def waiting(self) -> bool:
+        """Whether the path has not begun yet (the drive holds the start pose)."""
+        return self.started_at is None
+
+    def held(self) -> ObjectScript:
+        """This script waiting: its path begins at :meth:`begun`."""
+        return dataclasses.replace(self, started_at=None)
+
+    def begun(self, t: float) -> ObjectScript:
+        """This script with its path begun at ``t`` (s; itself when it had begun already)."""
+        return self if self.started_at is not None else dataclasses.replace(self, started_at=t)
 
     def _axes(self) -> tuple[np.ndarray, np.ndarray]:
         h = self.motion.heading
@@ -83,9 +101,9 @@ class ObjectScript:
         m = self.motion
         p0 = np.array(self.start[:2], dtype=float)
         u, n = self._axes()
-        if m.kind in ("static", "inert"):
+        if m.kind in ("static", "inert") or self.started_at is None:
             return np.array([*p0, self.start[2]]), np.zeros(3)
-        s = m.speed * t
+        s = m.speed * max(0.0, t - self.started_at)
         if m.kind == "sine":
             k = 2.0 * math.pi / m.wavelength
             pos = p0 + s * u + m.amplitude * math.sin(k * s) * n
@@ -100,7 +118,12 @@ class ObjectScript:
     ) -> np.ndarray:
         """World-frame (vx, vy, wz) the object's drive should follow now."""
         m = self.motion
-        if m.kind == "evade" and robot_xy is not None and len(robot_xy):
+        if (
+            m.kind == "evade"
+            and self.started_at is not None
+            and robot_xy is not None
+            and len(robot_xy)
+        ):
             d = np.asarray(pose[:2]) - np.asarray(robot_xy)
             dist = np.linalg.norm(d, axis=1)
             i = int(np.argmin(dist))

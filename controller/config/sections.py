@@ -44,6 +44,7 @@ SIM_WORLDS = ("solo", "process")
 # the dry run's bus: "private" a free 127.0.0.1 port of its own (two runs side by side), or
 # "config" the [zenoh] endpoints as written (tools attach to the run there)
 SIM_BUSES = ("private", "config")
+OBJECT_STARTS = ("resume", "now")  # sim.object_start: when `fleet world` begins the object's path
 FILTERS = ("ekf", "ukf")
 ZENOH_MODES = ("peer", "client", "router")
 # access-control profiles generated from the config (controller/acl.py); else zenoh.acl is a file
@@ -394,6 +395,11 @@ class SimSection:
     # reports are off its true pose by a fixed offset drawn U(−x, x), U(−y, y) per run, world
     # frame (m); the controller steers the robot that far off where it means it to be
     robot_position_error: Point = _rule((0.0, 0.0))
+    # `fleet world` (a rehearsal): when the object's path begins. "resume": at the operator's
+    # first resume (the e-stop released by a hub or controller), its drive holding the start
+    # pose until then, so a slow bring-up cannot carry it into an obstacle before the job
+    # begins; "now": when the world starts. The dry run begins it at sim time 0 either way.
+    object_start: str = _rule("resume", choices=OBJECT_STARTS)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -65,6 +65,7 @@ ROS2_CMD_TIMEOUT = 0.5  # s: a ROS 2 body stops when cmd_vel is silent this long
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost")
 MIN_LOOP_HZ = 50.0  # the world's I/O loop: commands in, samples out, at least this often
 HELD_UP = 0.25  # s: a loop iteration later than this is reported (samples went out late)
+RESUME_POLL = 0.25  # s between the latch queries of a world waiting for the operator's resume
 
 
 class WorldServer:
@@ -342,6 +343,35 @@ def _ros2_session(open_session, endpoints: tuple[str, ...]):
         return open_session(connect=list(endpoints), mode="client"), "joined"
 
 
+class ResumeWatch:
+    """The operator's first resume, as the world sees it (``sim.object_start = "resume"``): a
+    thread asks every latch holder every :data:`RESUME_POLL` s until a hub or a controller
+    answers *released* (a robot's answer never counts: a robot may stop the fleet, never
+    release it), then sets :attr:`released` and ends."""
+
+    def __init__(self, bus, stop: threading.Event) -> None:
+        self.bus = bus
+        self.stop = stop
+        self.released = threading.Event()
+        self.thread = threading.Thread(target=self._run, name="resume-watch", daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        from controller.latch import TRUSTED_ROLES, role_of
+
+        key = self.bus.estop_wildcard()
+        while not self.stop.is_set():
+            try:
+                replies = list(self.bus.query_replies(key, wire.EStop, RESUME_POLL))
+            except Exception:  # noqa: BLE001 - the session closing under us: stop asking
+                return
+            for k, msg in replies:
+                if role_of(k, self.bus.fleet) in TRUSTED_ROLES and not msg.engaged:
+                    self.released.set()
+                    return
+            self.stop.wait(RESUME_POLL)
+
+
 def run_world(
     cfg: FleetConfig,
     stop: threading.Event,
@@ -368,6 +398,10 @@ def run_world(
                 bus, hub, wall0 - hub.t, noise.xy, noise.theta, vehicles + ros2_ids
             )
             bodies = Ros2Bodies(cfg, hub, ros2_ids, wall0 - hub.t)
+            resume = None
+            if cfg.sim.object_start == "resume":
+                hub.world.hold_object()
+                resume = ResumeWatch(bus, stop)
             urls = {e.robot_id: e.url for e in emulators}
             ros = {rid: list(b.settings.connect) for rid, b in bodies.robots.items()}
             print(
@@ -377,7 +411,14 @@ def run_world(
                 file=sys.stderr,
                 flush=True,
             )
-            stats = _serve(cfg, server, stop, duration, mono0, emulators, bodies)
+            if resume is not None:
+                print(
+                    "fleet world: the object holds its start pose until an operator's first "
+                    'resume (sim.object_start = "resume")',
+                    file=sys.stderr,
+                    flush=True,
+                )
+            stats = _serve(cfg, server, stop, duration, mono0, emulators, bodies, resume)
     finally:
         for e in emulators:
             e.stop()
@@ -430,6 +471,7 @@ def _serve(
     mono0: float,
     emulators=(),
     bodies: Ros2Bodies | None = None,
+    resume: ResumeWatch | None = None,
 ) -> tuple[float, float]:
     """The real-time loop. Returns (wall seconds served, seconds spent stepping physics)."""
     hub = server.hub
@@ -448,6 +490,10 @@ def _serve(
             )
         last = mono
         server.apply_commands(mono)
+        if resume is not None and resume.released.is_set():
+            hub.world.start_object()
+            resume = None
+            log.info("the object's path begins at sim time %.2f s (the operator's resume)", hub.t)
         target = t_start + mono - mono0
         pump_vehicles(emulators, target)  # MAVLink in, stamped at the wall clock's sim time
         if bodies is not None:

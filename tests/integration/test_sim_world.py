@@ -213,6 +213,32 @@ def test_live_object_follows_its_sine_script(worlds, backend):
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
+def test_a_held_script_waits_at_its_start_then_runs_its_path_from_the_start(worlds, backend):
+    """``fleet world`` with ``sim.object_start = "resume"``: however long the bring-up takes,
+    the object stays at its start; its path then begins where a fresh one would."""
+    motion = {"kind": "sine", "speed": 0.1, "amplitude": 0.4, "wavelength": 2.0, "max_force": 4.0}
+    cfg = config(start=(2.0, 5.0, 0.0), motion=motion, backend=backend)
+    w = worlds(cfg)
+    w.hold_object()
+    assert w.object_waiting
+    w.step(60.0)  # a minute of bring-up
+    assert np.allclose(w.object_pose(), [2.0, 5.0, 0.0], atol=2e-3)
+    assert w.object_alive  # holding its start is not being thwarted
+    w.start_object()
+    t0 = w.t
+    assert not w.object_waiting
+    script = ObjectScript(cfg.object.motion, cfg.object.start)
+    for _ in range(10):
+        w.step(0.5)
+        ref, _ = script.reference(w.t - t0)  # the fresh path, shifted to the resume
+        assert np.linalg.norm(w.object_pose()[:2] - ref[:2]) < 0.03
+    assert w.object_pose()[0] > 2.4
+    w.start_object()  # a second resume changes nothing
+    ref, _ = script.reference(w.t - t0)
+    assert np.linalg.norm(w.object_pose()[:2] - ref[:2]) < 0.03
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 def test_held_object_gives_up_by_its_own_physics_then_stays_put(worlds, backend):
     """A driven object that cannot follow its script (a 20 N robot in its way) goes limp after
     ``give_up_after`` s of being thwarted: the world decides, nobody tells it. Limp, it stays
