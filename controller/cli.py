@@ -27,6 +27,8 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("driver",), "driver", "one robot's agent: its driver bound to the bus"),
     (("hub",), "hub", "the fleet's zenoh hub, keeper of the latched e-stop"),
     (("world",), "world", "the shared stand-in world as its own process (lab rehearsal)"),
+    (("up",), "up", "the whole lab from one config: hub, world, agents, daemon, a console"),
+    (("down",), "down", "stop a lab that fleet up --detach started (--wait: after the job)"),
     (("status",), "remote", "query a running daemon's status"),
     (("estop",), "remote", "engage the latched emergency stop"),
     (("resume",), "remote", "release the emergency stop"),

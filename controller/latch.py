@@ -193,7 +193,11 @@ def note_latch(holder: str, change: Change | None) -> None:
         log.warning("%s: e-stop %s by %s (epoch %d) %s", holder, word, m.source, m.epoch, how)
     elif change.changed:
         how = change.how
-        log.warning(
+        # an engaged e-stop is worth a warning wherever it shows; a release is an operator's
+        # ordinary act (info)
+        level = logging.WARNING if m.engaged else logging.INFO
+        log.log(
+            level,
             "%s: e-stop %s by %s (message epoch %d, %s)",
             holder,
             change.after,

@@ -1,0 +1,89 @@
+"""How a ``fleet up`` lab ended, for a person and for ``--json``: the job's verdict read from the
+daemon's MCAP (``fleet replay``'s figures, judged from the world's truth when rehearsing), or
+the lab's own reason when it ended before the job did (a part not ready, the world gone, the
+operator's stop)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from controller.runtime.lab import Lab
+
+
+def _job_figures(log: Path) -> dict[str, Any] | None:
+    """``fleet replay --json``'s object for the daemon's log (None when there is none)."""
+    if not log.exists() or log.stat().st_size == 0:
+        return None
+    from controller.replay.log import load_run, metrics_of
+
+    try:
+        return metrics_of(load_run(log))
+    except Exception as exc:  # noqa: BLE001 - a log that cannot be read: say so, keep going
+        return {"error": f"the daemon's log could not be read: {exc}"}
+
+
+def lab_outcome(lab: Lab, daemon_code: int | None, interrupted: bool) -> dict[str, Any]:
+    """The lab's end as one JSON-ready object: ``status`` ("ok", "failed", "stopped"),
+    ``exit`` (0, 1), ``verdict`` (one line), ``reason``, the run folder and log, bring-up
+    time, restarts, and ``job`` (the replay's figures of the daemon's log)."""
+    from controller import outcome
+
+    log = lab.run_dir / "daemon.mcap"
+    job = _job_figures(log)
+    restarts = {p.name: p.restarts for p in lab.parts if p.restarts}
+    base = {
+        "run_dir": str(lab.run_dir),
+        "log": str(log) if log.exists() else None,
+        "ready_s": None if lab.ready_s is None else round(lab.ready_s, 1),
+        "restarts": restarts,
+        "daemon_exit": daemon_code,
+        "job": job,
+    }
+    if lab.failure is not None:
+        status, reason = "failed", lab.failure
+        verdict = f"FAILED before the job ended: {lab.failure}"
+    elif interrupted and daemon_code is None:
+        status, reason = "stopped", "interrupted"
+        phase = _last_phase(job)
+        verdict = f"STOPPED by the operator in phase {phase}; every robot e-stopped"
+    else:
+        summary = dict(job or {})
+        if daemon_code not in (0, None):
+            summary.setdefault("status", "failed")
+        status = "ok" if daemon_code == 0 else "failed"
+        summary["status"] = status
+        reason = (summary.get("failure") or {}).get("reason") if status != "ok" else None
+        verdict = outcome.verdict_line(summary)
+    return {
+        "status": status,
+        "exit": 0 if status == "ok" else 1,
+        "verdict": verdict,
+        "reason": reason,
+        **base,
+    }
+
+
+def _last_phase(job: dict[str, Any] | None) -> str:
+    phases = (job or {}).get("phases") or []
+    if phases and isinstance(phases[-1], dict):
+        return str(phases[-1].get("phase", "?"))
+    return "?"
+
+
+def print_outcome(result: dict[str, Any], as_json: bool) -> None:
+    """The verdict line, the job's figures, the next step; or one JSON object."""
+    from controller import outcome
+
+    if as_json:
+        sys.stdout.write(json.dumps(result, default=str, allow_nan=False) + "\n")
+        return
+    print(result["verdict"])
+    job = result.get("job")
+    if job and "error" not in job:
+        print(outcome.outcome_table(job))
+    for step in outcome.next_steps(job or {}, result.get("log")):
+        print(f"next: {step}")
+    print(f"logs: {result['run_dir']}")
