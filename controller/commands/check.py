@@ -21,6 +21,12 @@ import sys
 from controller.commands import add_config_argument
 from controller.config import ConfigError, certificate_problem, load_config, log_dir_problem
 
+EXAMPLES = """examples:
+  fleet check                          check ./fleet.toml
+  fleet check --config lab.toml        check another config
+  fleet check --config lab.toml --json one JSON object: ok, errors [{key, message}, ...]
+"""
+
 
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)

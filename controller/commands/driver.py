@@ -16,6 +16,13 @@ import sys
 
 from controller.commands import add_config_argument, stop_on_signals
 
+EXAMPLES = """examples:
+  fleet driver r1                            robot r1 of ./fleet.toml (sim: a world of its own)
+  fleet driver r1 --config fleet.toml --duration 30
+  fleet driver r1 --connect-timeout 120      wait longer for a slow fleet world to serve r1
+  fleet driver r1 --strict                   (MAVLink robots) refuse an unsafe vehicle timeout
+"""
+
 
 def add_arguments(parser, word: str) -> None:
     parser.add_argument("robot_id", help="the robot's id in the config")
