@@ -91,3 +91,11 @@ def test_version_from_the_command_line():
         timeout=60,
     )
     assert out.returncode == 0 and out.stdout.startswith("fleet ") and out.stderr == ""
+
+
+def test_driver_waits_a_minute_for_its_robot_by_default():
+    args = build_parser().parse_args(["driver", "r1"])
+    assert args.connect_timeout == 60.0
+    assert (
+        build_parser().parse_args(["driver", "r1", "--connect-timeout", "5"]).connect_timeout == 5
+    )
