@@ -17,8 +17,12 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
+# the dry run's exit status is make run's; then how to call fleet without make
 run: $(STAMP)
-	$(BIN)/fleet run --config fleet.toml
+	@echo "$(BIN)/fleet run --config fleet.toml"
+	@$(BIN)/fleet run --config fleet.toml; status=$$?; \
+	echo "fleet is in $(BIN): run $(BIN)/fleet --help, or source $(BIN)/activate"; \
+	exit $$status
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -1,9 +1,12 @@
 """The ``fleet`` command line: ``main(argv) -> int``.
 
 Each subcommand lives in ``controller/commands/<name>.py`` with ``add_arguments(parser)`` and
-``run(args) -> int``; modules are imported only when their command runs, so ``fleet check``
-never loads pybullet or zenoh. Exit status: 0 done, 1 the job failed, 2 bad input or config.
-``--json`` prints one JSON object on stdout and nothing else there; progress goes to stderr.
+``run(args) -> int``; their heavy imports happen only when their command runs, so ``fleet check``
+never loads pybullet or zenoh. A command's ``--help`` teaches it: its description is the
+module's ``DESCRIPTION`` or docstring (the synopsis left out: argparse prints the usage), its
+epilog the module's ``EXAMPLES`` (a string, or a dict by command word for a module serving
+several). Exit status: 0 done, 1 the job failed, 2 bad input or config. ``--json`` prints one
+JSON object on stdout and nothing else there; progress goes to stderr.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ import argparse
 import importlib
 import json
 import logging
+import re
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -45,6 +49,31 @@ GROUPS = {
     "plan": ("run a planner alone, offline", "what"),
     "log": ("work on log files (MCAP)", "action"),
 }
+# a group's --help: (description, examples)
+GROUP_HELP = {
+    "plan": (
+        "Run one of the controller's planners alone, offline, on a config's scenario (or a\n"
+        "shipped route map): no robots, no bus. Each prints its plan (--json: one object) and\n"
+        "exits 0 with a plan, 1 without one, 2 on bad input.",
+        """examples:
+  fleet plan capture                         the capture points for ./fleet.toml's object
+  fleet plan route --map yamashita --goal 4  the object's route on a shipped map
+""",
+    ),
+    "log": (
+        "Work on the MCAP logs that fleet run, fleet daemon and fleet record write (read them\n"
+        "with fleet replay).",
+        """examples:
+  fleet log recover runs/demo.mcap runs/demo-fixed.mcap   a valid copy of a crash-cut log
+  fleet log layout --out layout.json                      the Foxglove layout, to import
+""",
+    ),
+}
+START_HERE = """start here:
+  fleet run                       the dry run of ./fleet.toml in pybullet (what make run does)
+  fleet check --config F          validate a config: every error, naming its key
+  fleet COMMAND --help            what a command does, with examples
+"""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -54,23 +83,91 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="fleet", description="Robot fleet controller: capture and transport.")
+    parser = _Parser(
+        prog="fleet",
+        description="Robot fleet controller: capture and transport.",
+        epilog=START_HERE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
+    parser.add_argument(
+        "--version", action="version", version=f"fleet {version()}", help="print the version"
+    )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     groups: dict[str, Any] = {}
     for words, module, help_ in COMMANDS:
+        mod = importlib.import_module(f"controller.commands.{module}")
+        texts = {
+            "help": help_,
+            "description": description(mod),
+            "epilog": examples(mod, words[-1]),
+            "formatter_class": argparse.RawDescriptionHelpFormatter,
+        }
         if len(words) == 1:
-            p = sub.add_parser(words[0], help=help_)
+            p = sub.add_parser(words[0], **texts)
         else:
             if words[0] not in groups:
                 ghelp, dest = GROUPS[words[0]]
-                g = sub.add_parser(words[0], help=ghelp)
+                gdesc, gexamples = GROUP_HELP.get(words[0], (None, None))
+                g = sub.add_parser(
+                    words[0],
+                    help=ghelp,
+                    description=gdesc,
+                    epilog=gexamples,
+                    formatter_class=argparse.RawDescriptionHelpFormatter,
+                )
                 groups[words[0]] = g.add_subparsers(dest=dest, required=True, parser_class=_Parser)
-            p = groups[words[0]].add_parser(words[1], help=help_)
+            p = groups[words[0]].add_parser(words[1], **texts)
         p.set_defaults(_module=module, _words=words)
-        mod = importlib.import_module(f"controller.commands.{module}")
         mod.add_arguments(p, words[-1])
     return parser
+
+
+# a docstring's synopsis: ``fleet run [--config F] ...`` (argparse prints the usage itself)
+_SYNOPSIS = re.compile(r"^``fleet [^`]*``[:.]?\s*")
+
+
+def description(mod: Any) -> str | None:
+    """A command's --help text: its module's ``DESCRIPTION``, else its docstring without the
+    synopsis and without the reST double backquotes."""
+    text = getattr(mod, "DESCRIPTION", None)
+    if text is not None:
+        return text.strip()
+    paragraphs = []
+    for para in (mod.__doc__ or "").strip().split("\n\n"):
+        para, synopsis = _SYNOPSIS.subn("", para.strip())
+        if synopsis:  # what followed it: a one-line summary, wrapped with the synopsis
+            para = " ".join(para.split())
+        if para:
+            paragraphs.append((para[:1].upper() + para[1:]).replace("``", ""))
+    return "\n\n".join(paragraphs) or None
+
+
+def examples(mod: Any, word: str) -> str | None:
+    """A command's examples (its module's ``EXAMPLES``: a string, or a dict by command word)."""
+    text = getattr(mod, "EXAMPLES", None)
+    if isinstance(text, dict):
+        text = text.get(word)
+    return text
+
+
+def version() -> str:
+    """The installed distribution's version, else (a source tree run without installing) the
+    one in pyproject.toml."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    try:
+        return dist_version("fleet-controller")
+    except PackageNotFoundError:
+        import tomllib
+        from pathlib import Path
+
+        pyproject = Path(__file__).resolve().parent.parent / "pyproject.toml"
+        try:
+            return str(tomllib.loads(pyproject.read_text())["project"]["version"])
+        except (OSError, KeyError, tomllib.TOMLDecodeError):
+            return "unknown"
 
 
 def emit_json(obj: Any) -> None:

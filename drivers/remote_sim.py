@@ -78,16 +78,18 @@ class RemoteSimDriver:
         item = self._poses.get(timeout=max(0.0, timeout))
         if item is None:
             raise ConnectTimeout(
-                f"robot {self.robot_id!r}: no pose from the world process on {self.pose_key} "
-                f"within {timeout:g} s (is `fleet world` running with this robot?)"
+                f"no pose from the world process for robot {self.robot_id} after {timeout:g} s "
+                f"on {self.pose_key} (is fleet world running with this robot? a slow machine "
+                "may need a longer --connect-timeout)"
             )
         self._take([item])
         wait = threading.Event()
         while not self._pub.matching():
             if self._mono() >= deadline:
                 raise ConnectTimeout(
-                    f"robot {self.robot_id!r}: the world process does not take commands on "
-                    f"{self._pub.key} (within {timeout:g} s)"
+                    f"the world process took no command for robot {self.robot_id} on "
+                    f"{self._pub.key} after {timeout:g} s (a slow machine may need a longer "
+                    "--connect-timeout)"
                 )
             wait.wait(0.01)  # polling the match (a handshake with a deadline)
         self._connected = True

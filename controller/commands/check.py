@@ -1,11 +1,18 @@
-"""``fleet check [--config F] [--json]``: validate a config; exit 2 naming the key path.
+"""``fleet check [--config F] [--json]``: validate a config; exit 2 naming every error's key path.
 
 Everything ``fleet run`` would fail on before it starts: an unreadable or binary file, bad TOML,
 unknown keys and values out of range, malformed zenoh endpoints, polygons, robots starting
 outside the room, on an obstacle or on each other, identities shared between robots, the
 controller and operators, and a ``log.dir`` that cannot be written (a temporary file, removed).
 Beyond the loader it reads the certificates named in the config that exist here: two identities
-with the same common name are refused."""
+with the same common name are refused.
+
+Every error is reported in one run, a line each (file, key path, what is wrong), then their
+count; only a file that cannot be read or parsed stops at once, and the rules between keys (a
+robot inside the room, ...) run once every key passed its own check. ``--json`` prints one
+object: ``ok``, ``file``, and on errors ``path`` and ``error`` (the first one) and ``errors``
+(``[{key, message}, ...]``, all of them); when ok ``fleet``, ``robots``, ``obstacles``,
+``notes``."""
 
 from __future__ import annotations
 
@@ -13,6 +20,12 @@ import sys
 
 from controller.commands import add_config_argument
 from controller.config import ConfigError, certificate_problem, load_config, log_dir_problem
+
+EXAMPLES = """examples:
+  fleet check                          check ./fleet.toml
+  fleet check --config lab.toml        check another config
+  fleet check --config lab.toml --json one JSON object: ok, errors [{key, message}, ...]
+"""
 
 
 def add_arguments(parser, word: str) -> None:
@@ -24,18 +37,18 @@ def run(args) -> int:
     from controller.cli import emit_json
 
     try:
-        cfg = load_config(args.config)
-        problem = log_dir_problem(cfg.log.dir)  # what `fleet run` would fail on at its start
-        if problem:
-            raise ConfigError(cfg.source, "log.dir", problem)
-        shared = certificate_problem(cfg)  # the certificates readable here, by common name
-        if shared:
-            raise ConfigError(cfg.source, *shared)
+        cfg = load_config(args.config, all_errors=True)
     except ConfigError as exc:
-        if args.json:
-            emit_json({"ok": False, "file": exc.source, "path": exc.path, "error": exc.message})
-        print(f"fleet check: {exc}", file=sys.stderr)
-        return 2
+        return _failed(args, getattr(exc, "errors", [exc]))
+    errors = []
+    problem = log_dir_problem(cfg.log.dir)  # what `fleet run` would fail on at its start
+    if problem:
+        errors.append(ConfigError(cfg.source, "log.dir", problem))
+    shared = certificate_problem(cfg)  # the certificates readable here, by common name
+    if shared:
+        errors.append(ConfigError(cfg.source, *shared))
+    if errors:
+        return _failed(args, errors)
     summary = {
         "ok": True,
         "file": cfg.source,
@@ -50,3 +63,26 @@ def run(args) -> int:
         print(f"{cfg.source}: ok ({len(cfg.robots)} robots, {len(cfg.obstacles)} obstacles)")
         print("".join(f"note: {n}\n" for n in cfg.notes), end="")
     return 0
+
+
+def _failed(args, errors: list[ConfigError]) -> int:
+    """Every error a line on stderr, then their count; ``--json``: the first one as before
+    (``path``, ``error``) and all of them (``errors``). Exit 2."""
+    from controller.cli import emit_json
+
+    first = errors[0]
+    if args.json:
+        emit_json(
+            {
+                "ok": False,
+                "file": first.source,
+                "path": first.path,
+                "error": first.message,
+                "errors": [{"key": e.path, "message": e.message} for e in errors],
+            }
+        )
+    for e in errors:
+        print(f"fleet check: {e}", file=sys.stderr)
+    n = len(errors)
+    print(f"fleet check: {n} error{'s' if n > 1 else ''} in {first.source}", file=sys.stderr)
+    return 2

@@ -12,6 +12,13 @@ from pathlib import Path
 from controller.commands import add_config_argument, require_log_target, stop_on_signals
 from controller.config import MISSION_KINDS
 
+EXAMPLES = """examples:
+  fleet hub --config fleet.toml &                 the hub first (else the daemon starts one)
+  fleet daemon --config fleet.toml --mission hold bring-up: every robot held stopped
+  fleet daemon --config fleet.toml --out runs/lab.mcap --viz
+                                                  the whole job, logged, live in Foxglove
+"""
+
 
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)

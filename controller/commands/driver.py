@@ -16,12 +16,31 @@ import sys
 
 from controller.commands import add_config_argument, stop_on_signals
 
+EXAMPLES = """examples:
+  fleet driver r1                            robot r1 of ./fleet.toml (sim: a world of its own)
+  fleet driver r1 --config fleet.toml --duration 30
+  fleet driver r1 --connect-timeout 120      wait longer for a slow fleet world to serve r1
+  fleet driver r1 --strict                   (MAVLink robots) refuse an unsafe vehicle timeout
+"""
+
+#: s ``fleet driver`` waits for its robot's first answer by default: a ``fleet world`` under
+#: heavy load once took 71-83 s to start (2-3 s measured at a load average of 5 on 2 cores)
+CONNECT_TIMEOUT = 60.0
+
 
 def add_arguments(parser, word: str) -> None:
     parser.add_argument("robot_id", help="the robot's id in the config")
     add_config_argument(parser)
     parser.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
-    parser.add_argument("--connect-timeout", type=float, default=10.0, help="seconds")
+    parser.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=CONNECT_TIMEOUT,
+        metavar="S",
+        help=f"seconds to wait for the robot's first answer: its vehicle, or with sim.world = "
+        f'"process" the fleet world serving it (default: {CONNECT_TIMEOUT:g}; a world on a '
+        "loaded machine has taken over a minute to start)",
+    )
     parser.add_argument(
         "--strict",
         action="store_true",

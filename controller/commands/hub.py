@@ -10,6 +10,12 @@ from __future__ import annotations
 
 from controller.commands import add_config_argument, serve_until_signalled
 
+EXAMPLES = """examples:
+  fleet hub                               the hub of ./fleet.toml on its zenoh.listen endpoints
+  fleet hub --config lab/secure.toml      the lab's secure profile (TLS, users, ACL)
+  fleet hub --duration 600                stop after ten minutes
+"""
+
 
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)

@@ -8,6 +8,11 @@ plots of clearance and speeds, the phase over time, the e-stop state and the log
 
 from __future__ import annotations
 
+EXAMPLES = """examples:
+  fleet log layout                    the path of the shipped layout.json
+  fleet log layout --out layout.json  a copy here, to import in Foxglove
+"""
+
 
 def add_arguments(parser, word: str) -> None:
     parser.add_argument("--out", default=None, help="write a copy of the layout here")

@@ -7,6 +7,11 @@ of log time). Exit 2 when IN is missing or OUT is IN; a complete IN is copied as
 
 from __future__ import annotations
 
+EXAMPLES = """examples:
+  fleet log recover runs/demo.mcap runs/demo-fixed.mcap         a valid copy of a cut log
+  fleet log recover runs/demo.mcap runs/demo-fixed.mcap --json  what was recovered, as JSON
+"""
+
 
 def add_arguments(parser, word: str) -> None:
     parser.add_argument("input", help="the MCAP file (cut or complete)")

@@ -18,6 +18,12 @@ import sys
 
 from controller.commands import add_config_argument
 
+EXAMPLES = """examples:
+  fleet plan capture                          the capture points for ./fleet.toml's object
+  fleet plan capture --config fleet.toml --json
+  fleet plan capture --plot capture.png       and a figure of the plan
+"""
+
 
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)

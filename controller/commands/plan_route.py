@@ -37,11 +37,23 @@ JSON_FIELDS = (
 )
 
 
+EXAMPLES = """examples:
+  fleet plan route                             the object's route in ./fleet.toml's room
+  fleet plan route --map yamashita --goal 4    on a shipped map, toward its goal 4
+  fleet plan route --heuristic euclid --wh 2 --json --plot route.png
+"""
+
+
 def add_arguments(parser, word: str) -> None:
     parser.add_argument("--config", default=None, help=f"fleet config (default: {DEFAULT_CONFIG})")
     parser.add_argument("--map", default=None, help="a route map: shipped name or TOML path")
     parser.add_argument("--goal", default="4", help="goal of the --map (number or name)")
-    parser.add_argument("--heuristic", choices=HEURISTICS, default=None)
+    parser.add_argument(
+        "--heuristic",
+        choices=HEURISTICS,
+        default=None,
+        help="the A* heuristic (default: the config's route.heuristic)",
+    )
     parser.add_argument("--wg", type=float, choices=(0.0, 1.0), default=None, help="0 or 1")
     parser.add_argument("--wh", type=float, default=None, help="heuristic weight >= 0")
     parser.add_argument("--json", action="store_true", help="print one JSON object")

@@ -14,6 +14,11 @@ from pathlib import Path
 
 from controller.commands import add_config_argument, stop_on_signals
 
+EXAMPLES = """examples:
+  fleet record                                       the fleet of ./fleet.toml, until Ctrl-C
+  fleet record --config fleet.toml --out runs/rehearsal.mcap --duration 60
+"""
+
 
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)

@@ -18,6 +18,21 @@ import sys
 
 from controller.commands import add_config_argument
 
+EXAMPLES = {
+    "status": """examples:
+  fleet status                          the running daemon's phase, e-stop and robots
+  fleet status --config fleet.toml --json
+""",
+    "estop": """examples:
+  fleet estop --reason "person in the room"   stop every robot; wait for each to confirm
+  fleet estop --config fleet.toml --json --timeout 5
+""",
+    "resume": """examples:
+  fleet resume                                release the e-stop once the room is clear
+  fleet resume --config lab/secure.toml --user operator --password-file lab/secrets/operator.pw
+""",
+}
+
 
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)

@@ -22,6 +22,13 @@ from pathlib import Path
 from controller.commands import DEFAULT_CONFIG
 from controller.config import MISSION_KINDS
 
+EXAMPLES = """examples:
+  fleet run --out runs/demo.mcap && fleet replay runs/demo.mcap   a dry run, then its metrics
+  fleet replay runs/demo.mcap --plots runs/demo-plots --json
+  fleet replay runs/demo.mcap --check          today's controller against the logged commands
+  fleet replay runs/demo.mcap --republish --wait 5   play it back on the bus (for Foxglove)
+"""
+
 
 def add_arguments(parser, word: str) -> None:
     parser.add_argument("log", help="MCAP file of a run, or a folder of its segments")

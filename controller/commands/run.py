@@ -43,6 +43,14 @@ SUMMARY_FIELDS = (
 )
 
 
+EXAMPLES = """examples:
+  fleet run                                 the dry run of ./fleet.toml (what make run does)
+  fleet run --config lab/secure.toml --json one JSON object of figures on stdout
+  fleet run --backend ideal --max-time 60   the fast ideal backend, 60 s of sim time
+  fleet run --out runs/demo.mcap --viz      a named log; watch live in Foxglove meanwhile
+"""
+
+
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)
     parser.add_argument("--out", help="MCAP log (default: <log.dir>/<fleet>-run-<time>.mcap)")

@@ -12,6 +12,11 @@ from __future__ import annotations
 
 from controller.config import SIM_BACKENDS
 
+EXAMPLES = """examples:
+  fleet sweep fleet.toml lab/secure.toml                  a dry run of each, then a table
+  fleet sweep fleet.toml --backend ideal --max-time 60 --json --out-dir runs/sweep
+"""
+
 
 def add_arguments(parser, word: str) -> None:
     parser.add_argument("configs", nargs="+", metavar="CONFIG", help="fleet configs to run")

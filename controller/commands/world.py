@@ -19,6 +19,12 @@ from __future__ import annotations
 
 from controller.commands import add_config_argument, serve_until_signalled
 
+EXAMPLES = """examples:
+  fleet world --config fleet.toml        the shared world (with sim.world = "process"), then
+  fleet driver r1 --config fleet.toml    a driver per robot, and fleet daemon
+  fleet world --duration 600 --mavlink   and every MAVLink robot of the config emulated
+"""
+
 
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)

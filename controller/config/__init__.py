@@ -2,7 +2,8 @@
 
 The package, by layer (each imports only the ones before it; no module imports this one):
 
-- ``load``: the error types (``ConfigError`` with the key path) and the walker that converts
+- ``load``: the error types (``ConfigError`` with the key path; ``ConfigErrors``, every error
+  of one pass) and the walker that converts
   TOML tables against dataclasses (types, ranges, choices, unknown keys with a did-you-mean);
 - ``driver_sections``: the drivers' config entries (:data:`DRIVER_SPECS`: ``[robots.<driver>]``
   sub-tables, validation, ACL needs); their classes are in controller/runtime/wiring.py;
@@ -34,6 +35,7 @@ from controller.config.driver_sections import (
 from controller.config.load import (
     MAX_TOML_DEPTH,
     ConfigError,
+    ConfigErrors,
     InputError,
     nesting_error,
     override,
@@ -115,6 +117,7 @@ __all__ = [
     "CLOSURE_MODES",
     "CaptureSection",
     "ConfigError",
+    "ConfigErrors",
     "DRIVERS",
     "DRIVER_SPECS",
     "DriverSpec",

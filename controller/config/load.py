@@ -9,6 +9,8 @@ unknown keys, a did-you-mean. It knows no section: those are controller/config/s
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 import difflib
 import math
@@ -16,6 +18,7 @@ import re
 import tomllib
 import types
 import typing
+from collections.abc import Iterator
 from dataclasses import field
 from pathlib import Path
 from typing import Any
@@ -33,6 +36,65 @@ class ConfigError(ValueError):
         self.message = message
         where = f"{source}: " if source else ""
         super().__init__(f"{where}{path or '<root>'}: {message}")
+
+
+class ConfigErrors(ConfigError):
+    """Every error found in one pass over a config (``parse_config(..., all_errors=True)``,
+    ``fleet check``), in the order found; it reads as the first one, so a handler of one
+    ConfigError shows what it showed before."""
+
+    def __init__(self, errors: list[ConfigError]):
+        first = errors[0]
+        super().__init__(first.source, first.path, first.message)
+        self.errors = list(errors)
+
+
+class _Reported(Exception):
+    """A table, array or rule whose errors are already collected: what holds it cannot be
+    built or checked either (raised only while collecting)."""
+
+
+#: the errors being collected (:func:`collecting`), or None: the first error is raised
+_COLLECT: contextvars.ContextVar[list[ConfigError] | None] = contextvars.ContextVar(
+    "config_errors", default=None
+)
+
+
+@contextlib.contextmanager
+def collecting() -> Iterator[list[ConfigError]]:
+    """Within it the walker and the cross-field rules note each independent error in the list
+    yielded and go on (:func:`found`) instead of raising the first one."""
+    token = _COLLECT.set([])
+    try:
+        yield _COLLECT.get()  # type: ignore[misc]
+    finally:
+        _COLLECT.reset(token)
+
+
+def found(exc: ConfigError) -> None:
+    """Raise ``exc``, or, while :func:`collecting`, note it and return."""
+    errors = _COLLECT.get()
+    if errors is None:
+        raise exc
+    errors.append(exc)
+
+
+def attempt(fn: typing.Callable[..., Any], *args: Any) -> Any:
+    """``fn(*args)``; while :func:`collecting`, a ConfigError it raises is noted and
+    :data:`FAILED` returned (and so for one whose errors it noted itself)."""
+    errors = _COLLECT.get()
+    n = len(errors) if errors is not None else 0
+    try:
+        out = fn(*args)
+    except ConfigError as exc:
+        found(exc)
+        return FAILED
+    except _Reported:
+        return FAILED
+    return FAILED if errors is not None and len(errors) > n else out
+
+
+FAILED: Any = object()  # what :func:`attempt` returns for a rule that failed
 
 
 class InputError(ValueError):
@@ -99,8 +161,11 @@ def _tuple(tp: Any, value: Any, path: str, src: str) -> tuple:
     args = typing.get_args(tp)
     if not isinstance(value, list):
         raise ConfigError(src, path, f"expected {_type_name(tp)}, got {value!r}")
-    if len(args) == 2 and args[1] is Ellipsis:
-        return tuple(_convert(args[0], v, f"{path}[{i}]", src) for i, v in enumerate(value))
+    if len(args) == 2 and args[1] is Ellipsis:  # each item on its own ([[robots]] entries)
+        items = [attempt(_convert, args[0], v, f"{path}[{i}]", src) for i, v in enumerate(value)]
+        if FAILED in items:
+            raise _Reported
+        return tuple(items)
     if len(value) != len(args):
         raise ConfigError(src, path, f"expected {_type_name(tp)}, got {len(value)}: {value!r}")
     return tuple(
@@ -155,24 +220,33 @@ def _build(cls: type, table: dict[str, Any], path: str, src: str) -> Any:
         for f in dataclasses.fields(cls)
         if f.name not in _NOT_KEYS and not f.metadata.get("internal")
     }
+    bad = False
     for key in table:
         if key not in fields:
             where = f"{path}.{key}" if path else key
             close = difflib.get_close_matches(key, list(fields), n=1)
             hint = f"; did you mean {close[0]!r}?" if close else ""
             valid = ", ".join(fields)
-            raise ConfigError(src, where, f"unknown key{hint} (valid keys: {valid})")
+            found(ConfigError(src, where, f"unknown key{hint} (valid keys: {valid})"))
+            bad = True
     kwargs: dict[str, Any] = {}
     for name, f in fields.items():
         where = f"{path}.{name}" if path else name
-        if name not in table:
-            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise ConfigError(src, where, f"missing required key ({_type_name(hints[name])})")
-            continue
-        value = _convert(hints[name], table[name], where, src)
-        _check_rules(f.metadata, value, where, src)
-        kwargs[name] = value
+        if name in table:
+            kwargs[name] = attempt(_field, hints[name], f.metadata, table[name], where, src)
+            bad = bad or kwargs[name] is FAILED
+        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            found(ConfigError(src, where, f"missing required key ({_type_name(hints[name])})"))
+            bad = True
+    if bad:
+        raise _Reported
     return cls(**kwargs)
+
+
+def _field(tp: Any, meta: typing.Mapping[str, Any], value: Any, path: str, src: str) -> Any:
+    value = _convert(tp, value, path, src)
+    _check_rules(meta, value, path, src)
+    return value
 
 
 def parse_table(cls: type, table: Any, path: str, source: str = "") -> Any:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from controller.config.acl import acl_for
-from controller.config.load import ConfigError
+from controller.config.load import ConfigError, found
 from controller.config.sections import (
     ACL_PROFILES,
     ZENOH_IP_PROTOCOLS,
@@ -91,7 +91,7 @@ def _check_zenoh(section: ZenohSection, src: str) -> None:
         for i, endpoint in enumerate(getattr(section, key)):
             problem = endpoint_error(endpoint, listen=key == "listen")
             if problem:
-                raise ConfigError(src, f"zenoh.{key}[{i}]", problem)
+                found(ConfigError(src, f"zenoh.{key}[{i}]", problem))
 
 
 def certificate_common_name(path: str) -> str | None:

@@ -17,9 +17,15 @@ import numpy as np
 from controller import geometry
 from controller.config.driver_sections import DRIVER_SPECS
 from controller.config.load import (
+    FAILED,
     ConfigError,
+    ConfigErrors,
     _build,
     _convert,
+    _Reported,
+    attempt,
+    collecting,
+    found,
     nesting_error,
     read_toml,
 )
@@ -60,7 +66,7 @@ def _polygon(poly: Polygon, path: str, src: str) -> Polygon:
     return tuple((float(x), float(y)) for x, y in q)
 
 
-def _validate_robot(cfg: FleetConfig, i: int, obstacles: tuple[Obstacle, ...], src: str) -> None:
+def _place_robot(cfg: FleetConfig, i: int, obstacles: tuple[Obstacle, ...], src: str) -> None:
     """A robot starts inside the room and clear of every obstacle."""
     r = cfg.robots[i]
     path = f"robots[{i}]"
@@ -75,22 +81,30 @@ def _validate_robot(cfg: FleetConfig, i: int, obstacles: tuple[Obstacle, ...], s
             raise ConfigError(
                 src, f"{path}.start", f"robot {r.id!r} at ({x}, {y}) overlaps obstacles[{j}]"
             )
-    if r.spec.validate is not None:
-        r.spec.validate(cfg, i, src)
 
 
-def _validate_robots(cfg: FleetConfig, obstacles: tuple[Obstacle, ...], src: str) -> None:
+def _validate_robots(cfg: FleetConfig, obstacles: Any, src: str) -> None:
+    """Unique ids and each robot's driver rules; with valid ``world.bounds`` and ``obstacles``
+    (else FAILED) where each robot starts. Each robot's errors are its own (collected)."""
     if not cfg.robots:
         raise ConfigError(src, "robots", "expected at least one [[robots]] entry")
     seen: dict[str, int] = {}
     for i, r in enumerate(cfg.robots):
         if r.id in seen:
-            raise ConfigError(
-                src, f"robots[{i}].id", f"duplicate robot id {r.id!r} (also robots[{seen[r.id]}])"
+            found(
+                ConfigError(
+                    src,
+                    f"robots[{i}].id",
+                    f"duplicate robot id {r.id!r} (also robots[{seen[r.id]}])",
+                )
             )
-        seen[r.id] = i
-        _validate_robot(cfg, i, obstacles, src)
-    _check_start_discs(cfg.robots, src)
+        seen.setdefault(r.id, i)
+        if obstacles is not FAILED:
+            attempt(_place_robot, cfg, i, obstacles, src)
+        if r.spec.validate is not None:
+            attempt(r.spec.validate, cfg, i, src)
+    if obstacles is not FAILED:
+        _check_start_discs(cfg.robots, src)
 
 
 def _check_start_discs(robots: tuple[RobotConfig, ...], src: str) -> None:
@@ -103,12 +117,14 @@ def _check_start_discs(robots: tuple[RobotConfig, ...], src: str) -> None:
             if gaps[i, j] < -1e-9:
                 a, b = robots[i], robots[j]
                 d = float(np.hypot(*(xy[j] - xy[i])))
-                raise ConfigError(
-                    src,
-                    f"robots[{j}].start",
-                    f"robot {b.id!r} at {list(b.start[:2])} overlaps robot {a.id!r} "
-                    f"(robots[{i}]) at {list(a.start[:2])}: centres {d:.3g} m apart, radii "
-                    f"sum {a.radius + b.radius:.3g} m",
+                found(
+                    ConfigError(
+                        src,
+                        f"robots[{j}].start",
+                        f"robot {b.id!r} at {list(b.start[:2])} overlaps robot {a.id!r} "
+                        f"(robots[{i}]) at {list(a.start[:2])}: centres {d:.3g} m apart, radii "
+                        f"sum {a.radius + b.radius:.3g} m",
+                    )
                 )
 
 
@@ -204,25 +220,50 @@ def _object(cfg: FleetConfig, src: str) -> tuple[ObjectSection, tuple[str, ...]]
 
 
 def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
-    """Cross-field rules, after every key was checked on its own."""
-    (x0, y0), (x1, y1) = cfg.world.bounds
+    """Cross-field rules, after every key was checked on its own. The first error is raised; or,
+    while collecting (``parse_config(..., all_errors=True)``), every rule runs whose inputs are
+    valid: where robots and the object stand is checked only within valid ``world.bounds`` and
+    around valid obstacles."""
+    bounds = attempt(_check_bounds, cfg.world.bounds, src)
+    obstacles = attempt(_obstacles, cfg, src)
+    if bounds is FAILED:
+        obstacles = FAILED  # the placements below need both
+    merged = attempt(_object, cfg, src)  # (the object, the notes with its merged vertices)
+    attempt(_check_timestep, cfg, src)
+    attempt(_check_zenoh, cfg.zenoh, src)
+    attempt(_validate_robots, cfg, obstacles, src)
+    if obstacles is not FAILED and merged is not FAILED:
+        attempt(_check_object_poses, merged[0], obstacles, cfg.world.bounds, src)
+    if bounds is not FAILED:
+        attempt(check_route_grid, cfg.world.bounds, cfg.route, src)
+    secured = attempt(_validate_zenoh, cfg, src)
+    if FAILED in (secured, obstacles, merged):
+        raise _Reported
+    obj, notes = merged
+    notes += _driver_notes(cfg)
+    return dataclasses.replace(secured, obstacles=obstacles, object=obj, source=src, notes=notes)
+
+
+def _check_bounds(bounds: tuple[Point, Point], src: str) -> None:
+    (x0, y0), (x1, y1) = bounds
     if not (x1 > x0 and y1 > y0):
         raise ConfigError(
             src, "world.bounds", "expected [[xmin, ymin], [xmax, ymax]] with max > min"
         )
-    obstacles = tuple(
-        dataclasses.replace(o, polygon=_polygon(o.polygon, f"obstacles[{i}].polygon", src))
-        for i, o in enumerate(cfg.obstacles)
+
+
+def _obstacles(cfg: FleetConfig, src: str) -> tuple[Obstacle, ...]:
+    """The obstacles with their polygons validated, each on its own."""
+    out = tuple(
+        attempt(_obstacle, o, f"obstacles[{i}].polygon", src) for i, o in enumerate(cfg.obstacles)
     )
-    obj, notes = _object(cfg, src)
-    notes += _driver_notes(cfg)
-    _check_timestep(cfg, src)
-    _check_zenoh(cfg.zenoh, src)
-    _validate_robots(cfg, obstacles, src)
-    _check_object_poses(obj, obstacles, cfg.world.bounds, src)
-    check_route_grid(cfg.world.bounds, cfg.route, src)
-    cfg = _validate_zenoh(cfg, src)
-    return dataclasses.replace(cfg, obstacles=obstacles, object=obj, source=src, notes=notes)
+    if FAILED in out:
+        raise _Reported
+    return out
+
+
+def _obstacle(o: Obstacle, path: str, src: str) -> Obstacle:
+    return dataclasses.replace(o, polygon=_polygon(o.polygon, path, src))
 
 
 def _driver_notes(cfg: FleetConfig) -> tuple[str, ...]:
@@ -320,18 +361,30 @@ def validated_polygon(poly: Any, path: str, source: str = "") -> Polygon:
     return _polygon(p, path, source)
 
 
-def parse_config(data: dict[str, Any], source: str = "") -> FleetConfig:
-    """Validate a parsed TOML document into a FleetConfig (raises ConfigError)."""
+def parse_config(data: dict[str, Any], source: str = "", all_errors: bool = False) -> FleetConfig:
+    """Validate a parsed TOML document into a FleetConfig (raises ConfigError: the first error;
+    with ``all_errors`` ConfigErrors, every error found in one pass: unknown keys, types and
+    ranges of every section and robot, then, when they all passed, the cross-field rules
+    whose inputs are valid)."""
     deep = nesting_error(data)
     if deep:
         raise ConfigError(source, *deep)
-    cfg = _build(FleetConfig, data, "", source)
-    return _validate(cfg, source)
+    if not all_errors:
+        return _validate(_build(FleetConfig, data, "", source), source)
+    with collecting() as errors:
+        cfg = attempt(_build, FleetConfig, data, "", source)
+        if cfg is not FAILED:  # the cross-field rules need every key's own check passed
+            cfg = attempt(_validate, cfg, source)
+    if errors:
+        raise ConfigErrors(errors)
+    return cfg
 
 
-def load_config(path: str | Path) -> FleetConfig:
-    """Read and validate a fleet.toml (raises ConfigError naming the file and key path)."""
-    return parse_config(read_toml(path), str(Path(path)))
+def load_config(path: str | Path, all_errors: bool = False) -> FleetConfig:
+    """Read and validate a fleet.toml (raises ConfigError naming the file and key path; with
+    ``all_errors`` ConfigErrors listing every error, see :func:`parse_config`). A file that
+    cannot be read or is not TOML is one error."""
+    return parse_config(read_toml(path), str(Path(path)), all_errors)
 
 
 # never written to logs or --json: passwords (a password_file is named, not read)

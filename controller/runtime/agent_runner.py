@@ -60,7 +60,7 @@ def run_agent(
     robot_id: str,
     stop: threading.Event,
     duration: float = 0.0,
-    connect_timeout: float = 10.0,
+    connect_timeout: float = 60.0,
     *,
     strict: bool = False,
 ) -> tuple[int, str]:

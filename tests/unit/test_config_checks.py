@@ -297,3 +297,103 @@ def test_two_certificates_with_one_common_name_are_refused(tmp_path, capsys):
     path = _write(tmp_path, mutate)
     load_config(path)  # the loader reads no certificate (a robot's computer has only its own)
     _check_fails(path, "robots[1].zenoh_certificate", "common name 'r1'", capsys)
+
+
+# --------------------------------------------------------------------------- every error at once
+
+
+def _three_mistakes(d):
+    d["fleet"]["rate_hzz"] = 20  # unknown key
+    d["capture"]["population"] = "many"  # wrong type
+    d["robots"][1]["radius"] = -1.0  # out of range, in a robot's entry
+
+
+THREE = {
+    "fleet.rate_hzz": "unknown key; did you mean 'rate_hz'?",
+    "capture.population": "expected an integer, got 'many'",
+    "robots[1].radius": "expected a value > 0, got -1.0",
+}
+
+
+def _check_lines(path: Path, capsys) -> tuple[list[str], dict]:
+    assert main(["check", "--config", str(path)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert main(["check", "--config", str(path), "--json"]) == 2
+    return captured.err.splitlines(), json.loads(capsys.readouterr().out)
+
+
+def test_check_reports_three_independent_mistakes_in_one_run(tmp_path, capsys):
+    path = _write(tmp_path, _three_mistakes)
+    lines, out = _check_lines(path, capsys)
+    for key, words in THREE.items():  # a line each, with the file and the key path
+        assert [ln for ln in lines if f"fleet check: {path}: {key}: " in ln and words in ln], lines
+    assert lines[-1] == f"fleet check: 3 errors in {path}"
+    assert len(lines) == 4
+    # --json: the former fields name the first error (document order), `errors` all of them
+    assert out["ok"] is False and out["file"] == str(path)
+    assert [e["key"] for e in out["errors"]] == [
+        "fleet.rate_hzz",
+        "robots[1].radius",
+        "capture.population",
+    ]
+    assert out["path"] == "fleet.rate_hzz" and out["error"] == out["errors"][0]["message"]
+    for e in out["errors"]:
+        assert THREE[e["key"]] in e["message"]
+
+
+def test_the_other_commands_still_stop_at_the_first_error(tmp_path, capsys):
+    path = _write(tmp_path, _three_mistakes)
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert info.value.path == "fleet.rate_hzz" and not hasattr(info.value, "errors")
+    with pytest.raises(ConfigError) as info:
+        load_config(path, all_errors=True)
+    assert len(info.value.errors) == 3
+    assert str(info.value) == str(info.value.errors[0])  # reads as the first one
+    assert main(["run", "--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "fleet.rate_hzz" in err and "capture.population" not in err
+
+
+def test_cross_field_rules_are_reported_together(tmp_path, capsys):
+    def mutate(d):
+        d["sim"]["timestep"] = 0.5  # longer than a tick at 20 Hz
+        d["zenoh"]["listen"] = ["tcp/127.0.0.1:99999"]
+        d["robots"][0]["start"] = [100.0, 1.0, 0.0]  # outside the room
+        x, y, _ = d["robots"][2]["start"]
+        d["robots"][4]["start"] = [x + 0.15, y, 0.0]  # on robots[2]
+
+    lines, out = _check_lines(_write(tmp_path, mutate), capsys)
+    keys = [e["key"] for e in out["errors"]]
+    assert keys == ["sim.timestep", "zenoh.listen[0]", "robots[0].start", "robots[4].start"]
+    assert lines[-1].endswith("4 errors in " + out["file"])
+
+
+def test_rules_that_need_a_failed_one_are_not_run(tmp_path, capsys):
+    """Inverted bounds: no robot, object or route is reported outside them (noise), but an
+    independent rule (the timestep) still is."""
+
+    def mutate(d):
+        d["world"]["bounds"] = [[10.0, 10.0], [0.0, 0.0]]
+        d["sim"]["timestep"] = 0.5
+
+    _, out = _check_lines(_write(tmp_path, mutate), capsys)
+    assert [e["key"] for e in out["errors"]] == ["world.bounds", "sim.timestep"]
+
+
+def test_a_key_error_stops_before_the_cross_field_rules(tmp_path, capsys):
+    def mutate(d):
+        d["sim"]["timestep"] = 0.5  # a cross-field rule: not checked yet
+        d["robots"][0]["start"] = "here"
+
+    _, out = _check_lines(_write(tmp_path, mutate), capsys)
+    assert [e["key"] for e in out["errors"]] == ["robots[0].start"]
+
+
+def test_bad_toml_is_one_error(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text("[fleet\nname = 1\n[capture]\npopulation = 'x'\n")
+    lines, out = _check_lines(path, capsys)
+    assert len(out["errors"]) == 1 and "not valid TOML" in out["error"]
+    assert lines[-1] == f"fleet check: 1 error in {path}"

@@ -73,3 +73,12 @@ def test_a_silent_world_is_a_lost_link_that_comes_back(rig):
     drv.close()
     drv.close()
     assert drv.poll() == []
+
+
+def test_connect_timeout_names_what_it_waited_for_and_the_flag(rig):
+    _, _, drv = rig
+    with pytest.raises(ConnectTimeout) as info:
+        drv.connect(timeout=0.0)
+    msg = str(info.value)
+    assert msg.startswith("no pose from the world process for robot r1 after 0 s")
+    assert "is fleet world running with this robot?" in msg and "--connect-timeout" in msg
