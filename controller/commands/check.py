@@ -11,8 +11,14 @@ from __future__ import annotations
 
 import sys
 
-from controller.commands import add_config_argument
-from controller.config import ConfigError, certificate_problem, load_config, log_dir_problem
+from controller.commands import add_config_argument, config_path
+from controller.config import (
+    ConfigError,
+    InputError,
+    certificate_problem,
+    load_config,
+    log_dir_problem,
+)
 
 
 def add_arguments(parser, word: str) -> None:
@@ -24,7 +30,14 @@ def run(args) -> int:
     from controller.cli import emit_json
 
     try:
-        cfg = load_config(args.config)
+        path = config_path(args)
+    except InputError as exc:  # no --config and no fleet.toml here
+        if args.json:
+            emit_json({"ok": False, "file": str(args.config), "path": "", "error": str(exc)})
+        print(f"fleet check: {exc}", file=sys.stderr)
+        return 2
+    try:
+        cfg = load_config(path)
         problem = log_dir_problem(cfg.log.dir)  # what `fleet run` would fail on at its start
         if problem:
             raise ConfigError(cfg.source, "log.dir", problem)
