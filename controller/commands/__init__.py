@@ -1,12 +1,32 @@
 """One module per ``fleet`` subcommand: ``add_arguments(parser, word)`` and ``run(args) -> int``."""
 
 DEFAULT_CONFIG = "fleet.toml"
+#: what a command that needs a config says when none was given and none is in this folder
+NO_CONFIG_HERE = "no fleet.toml here: write one with fleet init (or pass --config F)"
+
+
+class _DefaultConfig(str):
+    """``--config``'s default, told apart from a ``--config fleet.toml`` given by the user."""
 
 
 def add_config_argument(parser) -> None:
     parser.add_argument(
-        "--config", default=DEFAULT_CONFIG, help="fleet config (default: fleet.toml)"
+        "--config",
+        default=_DefaultConfig(DEFAULT_CONFIG),
+        help="fleet config (default: fleet.toml)",
     )
+
+
+def config_path(args) -> str:
+    """``args.config``; an InputError (exit 2) saying how to get one when no ``--config`` was
+    given and there is no fleet.toml in the current folder (never a packaged example instead)."""
+    from pathlib import Path
+
+    from controller.config import InputError
+
+    if isinstance(args.config, _DefaultConfig) and not Path(args.config).exists():
+        raise InputError(NO_CONFIG_HERE)
+    return args.config
 
 
 def require_log_target(cfg, out, explicit: bool) -> None:

@@ -18,8 +18,14 @@ from __future__ import annotations
 
 import sys
 
-from controller.commands import add_config_argument
-from controller.config import ConfigError, certificate_problem, load_config, log_dir_problem
+from controller.commands import add_config_argument, config_path
+from controller.config import (
+    ConfigError,
+    InputError,
+    certificate_problem,
+    load_config,
+    log_dir_problem,
+)
 
 EXAMPLES = """examples:
   fleet check                          check ./fleet.toml
@@ -37,7 +43,14 @@ def run(args) -> int:
     from controller.cli import emit_json
 
     try:
-        cfg = load_config(args.config, all_errors=True)
+        path = config_path(args)
+    except InputError as exc:  # no --config and no fleet.toml here
+        if args.json:
+            emit_json({"ok": False, "file": str(args.config), "path": "", "error": str(exc)})
+        print(f"fleet check: {exc}", file=sys.stderr)
+        return 2
+    try:
+        cfg = load_config(path, all_errors=True)
     except ConfigError as exc:
         return _failed(args, getattr(exc, "errors", [exc]))
     errors = []

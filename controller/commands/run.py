@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from controller.commands import add_config_argument, require_log_target
+from controller.commands import add_config_argument, config_path, require_log_target
 from controller.config import MISSION_KINDS, SIM_BACKENDS
 
 # what the plain (not --json) summary prints: the capture, the transport, the loop's health
@@ -84,7 +84,7 @@ def run(args) -> int:
     from controller.runtime.dry_run import DryRun
     from controller.runtime.planner import PlannerWorker
 
-    cfg = load_config(args.config)
+    cfg = load_config(config_path(args))  # InputError without a config: exit 2
     if cfg.sim.bus == "private" and cfg.sim.world == "solo":
         from controller.runtime.sweep import on_free_port
 
