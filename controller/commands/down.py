@@ -15,7 +15,7 @@ import signal
 import sys
 import time
 
-from controller.commands import add_config_argument
+from controller.commands import add_config_argument, config_path
 
 EXAMPLES = """examples:
   fleet down --config lab.toml            # stop the lab now (e-stop first)
@@ -54,7 +54,7 @@ def run(args) -> int:
     from controller.config import load_config
     from controller.runtime.lab import read_state, state_path
 
-    cfg = load_config(args.config)
+    cfg = load_config(config_path(args))
     path = state_path(cfg)
     state = read_state(path)
     if state is None:

@@ -61,6 +61,10 @@ def run(args) -> int:
         with open(out, "w" if args.force else "x", encoding="utf-8") as f:
             f.write(text)
     except FileExistsError:
+        if out.read_bytes() == text.encode("utf-8"):  # the example already: nothing to do
+            print(f"fleet init: {out} is the {ex.kind} example already")
+            _next(ex, out)
+            return 0
         raise InputError(
             f"{out} exists: not overwritten (fleet init {ex.kind} --force replaces it, "
             "--out F writes another file)"
@@ -68,7 +72,12 @@ def run(args) -> int:
     except OSError as exc:
         raise InputError(f"cannot write {out}: {exc.strerror or exc}") from exc
     print(f"fleet init: wrote {out}, the {ex.kind} example")
+    _next(ex, out)
+    return 0
+
+
+def _next(ex, out: Path) -> None:
+    """The commands to run next with the config written."""
     config = shlex.quote(str(out))
     for i, cmd in enumerate(ex.next):
         print(f"{'next' if i == 0 else 'then'}: {cmd.format(config=config)}")
-    return 0

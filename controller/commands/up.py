@@ -22,7 +22,7 @@ import sys
 import time
 from pathlib import Path
 
-from controller.commands import add_config_argument, stop_on_signals
+from controller.commands import add_config_argument, config_path, stop_on_signals
 from controller.config import MISSION_KINDS
 
 EXAMPLES = """examples:
@@ -110,7 +110,7 @@ def run(args) -> int:
     from controller.config import load_config
     from controller.runtime.lab import new_run_dir
 
-    cfg = load_config(args.config)
+    cfg = load_config(config_path(args))
     check_lab_config(cfg, args.mavlink, args.ros2)
     other = running_lab(cfg)
     if other is not None:

@@ -190,6 +190,11 @@ def test_fleet_init_never_overwrites_without_force(tmp_path, monkeypatch, capsys
     assert mine.read_text() == "# my lab\n"
     assert main(["init", "mixed", "--force"]) == 0
     assert mine.read_text(encoding="utf-8") == example_text("mixed")
+    # the example already there (the repository's lab.toml): nothing to overwrite, exit 0
+    capsys.readouterr()
+    assert main(["init", "mixed"]) == 0
+    assert "is the mixed example already" in capsys.readouterr().out
+    assert main(["init", "rehearsal"]) == 2  # another example's text: refused
 
 
 def test_fleet_init_out_writes_there_creating_its_folder(tmp_path, capsys):
