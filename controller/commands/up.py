@@ -62,6 +62,18 @@ def add_arguments(parser, word: str) -> None:
         help="rehearse ROS 2 robots as bodies of the stand-in world (all, or ids)",
     )
     parser.add_argument(
+        "--remote",
+        default="",
+        metavar="IDS",
+        help="robots whose agents run on their own computers (fleet driver ID there): not "
+        "started here, waited for on the bus all the same (comma-separated ids)",
+    )
+    parser.add_argument(
+        "--viz",
+        action="store_true",
+        help="the daemon serves the fleet live to Foxglove on ws://127.0.0.1:<viz.port>",
+    )
+    parser.add_argument(
         "--detach",
         action="store_true",
         help="return once the lab is up (it runs on; fleet down stops it)",
@@ -96,6 +108,17 @@ def check_lab_config(cfg, mavlink: str | None, ros2: str | None) -> None:
     ros2_bodies(cfg, ros2)
 
 
+def remote_ids(cfg, text: str) -> tuple[str, ...]:
+    """The ids of ``--remote`` (ConfigError naming one that is not a robot of the config)."""
+    from controller.config import ConfigError
+
+    ids = tuple(w.strip() for w in text.split(",") if w.strip())
+    for rid in ids:
+        if rid not in cfg.robot_ids:
+            raise ConfigError(cfg.source, "robots", f"--remote {rid!r}: ids: {cfg.robot_ids}")
+    return ids
+
+
 def running_lab(cfg) -> dict | None:
     """The state of a lab of this fleet whose supervisor still runs, else None."""
     from controller.runtime.lab import pid_alive, read_state, state_path
@@ -112,6 +135,7 @@ def run(args) -> int:
 
     cfg = load_config(config_path(args))
     check_lab_config(cfg, args.mavlink, args.ros2)
+    remote_ids(cfg, args.remote)
     other = running_lab(cfg)
     if other is not None:
         print(
@@ -134,7 +158,15 @@ def _foreground(args, cfg, run_dir: Path) -> int:
 
     stop = stop_on_signals()
     parts = plan_parts(
-        cfg, args.config, run_dir, args.mission, args.mavlink, args.ros2, args.ready_timeout
+        cfg,
+        args.config,
+        run_dir,
+        args.mission,
+        args.mavlink,
+        args.ros2,
+        args.ready_timeout,
+        remote=remote_ids(cfg, args.remote),
+        viz=args.viz,
     )
     tty = sys.stdout.isatty() and not args.plain and not args.json
     console = make_console(args.config, live=tty)
@@ -181,6 +213,7 @@ def _detach(args, cfg, run_dir: Path) -> int:
         argv += (["--mavlink", args.mavlink] if args.mavlink else []) + (
             ["--ros2", args.ros2] if args.ros2 else []
         )
+        argv += (["--remote", args.remote] if args.remote else []) + (["--viz"] if args.viz else [])
     argv += ["--plain", "--run-dir", str(run_dir)]
     with open(run_dir / "console.log", "w") as out:
         proc = subprocess.Popen(

@@ -24,6 +24,8 @@ PROGRESS_EVERY = 10.0  # s between the plain console's progress lines
 
 def part_state(p: Part, now: float) -> str:
     """ "ready", "starting", "restarting in 3 s", "exited (code 1)" or "stopped"."""
+    if not p.argv:  # an agent on the robot's own computer
+        return "remote, ready" if p.ready else "remote, waiting"
     if p.restart_at is not None:
         return f"restarting in {max(0.0, p.restart_at - now):.0f} s"
     if p.proc is None:
@@ -104,7 +106,7 @@ class PlainConsole:
         now_states = {}
         now = time.monotonic()
         for p in snap.parts:
-            if p.proc is not None:
+            if p.proc is not None or (not p.argv and p.started):
                 now_states[f"part {p.name}"] = part_state(p, now)
         now_states["stage"] = snap.stage
         now_states["phase"] = snap.status.phase if snap.status is not None else ""

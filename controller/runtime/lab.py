@@ -88,8 +88,12 @@ def plan_parts(
     mavlink: str | None = None,
     ros2: str | None = None,
     connect_timeout: float = 180.0,
+    remote: tuple[str, ...] = (),
+    viz: bool = False,
 ) -> list[Part]:
-    """The lab's processes in their start order (see the module doc)."""
+    """The lab's processes in their start order (see the module doc). ``remote``: robots whose
+    agents run elsewhere (on the robot's own computer): not started here, waited for all the
+    same. ``viz``: the daemon serves the live view."""
     fleet = [sys.executable, "-m", "controller.cli"]
     c = ["--config", config_path]
     parts = [Part("hub", "hub", [*fleet, "hub", *c], run_dir / "hub.log", respawn=True)]
@@ -100,8 +104,11 @@ def plan_parts(
         )
     for rid in cfg.robot_ids:
         argv = [*fleet, "driver", rid, *c, "--connect-timeout", f"{connect_timeout:g}"]
-        parts.append(Part(rid, "agent", argv, run_dir / f"{rid}.log", respawn=True))
+        if rid in remote:
+            argv = []  # started on the robot's computer: the lab only waits for its token
+        parts.append(Part(rid, "agent", argv, run_dir / f"{rid}.log", respawn=rid not in remote))
     daemon = [*fleet, "daemon", *c, "--mission", mission, "--out", str(run_dir / "daemon.mcap")]
+    daemon += ["--viz"] if viz else []
     parts.append(Part("daemon", "daemon", daemon, run_dir / "daemon.log", respawn=False))
     return parts
 
@@ -376,6 +383,9 @@ class Lab:
 
     # -- processes
     def start(self, part: Part) -> None:
+        if not part.argv:  # a remote agent: started elsewhere
+            part.started = time.monotonic()
+            return
         log_file = open(part.log_path, "a")  # noqa: SIM115 - the child keeps it
         try:
             part.proc = subprocess.Popen(
@@ -427,7 +437,7 @@ class Lab:
         if part.role == "world":
             return "main" in self.watch.alive("world")
         if part.role == "agent":
-            return part.name in self.watch.alive("robot")
+            return part.name in self.watch.alive("robot") and (part.proc is None or part.running())
         return bool(self.watch.alive("controller"))
 
     # -- the lab's life
@@ -470,7 +480,7 @@ class Lab:
                         return False
                     if p.respawn:
                         self._respawn(p, now)
-                    if not p.ready and p.running():
+                    if not p.ready and (p.running() or not p.argv):
                         p.ready = self._ready(p)
                 waiting = [p.name for p in group if not p.ready]
                 self.waiting_for = ", ".join(waiting)

@@ -7,7 +7,6 @@ wall clock did)."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import tomllib
@@ -15,12 +14,12 @@ import tomllib
 import pytest
 
 from tests.support.config import ROOT, write_toml
+from tests.support.hog import cpu_hogs
 
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 FIELDS = ("phase", "status", "arrest_time_s", "transport_time_s", "rearrangements", "relocations")
 CLOSE = ("goal_error_m", "goal_error_deg", "sim_time_s")
-HOG = "import time\nend = time.monotonic() + 600\nwhile time.monotonic() < end:\n    pass\n"
 
 
 NEAR_GOAL = [3.3, 3.2, 0.0]
@@ -47,15 +46,8 @@ def fleet_run(tmp_path, name: str) -> dict:
 
 def test_the_dry_run_of_fleet_toml_gives_the_same_outcome_idle_and_loaded(tmp_path):
     first = fleet_run(tmp_path, "idle")
-    hogs = [
-        subprocess.Popen([sys.executable, "-c", HOG]) for _ in range(max(2, os.cpu_count() or 2))
-    ]
-    try:
+    with cpu_hogs():
         second = fleet_run(tmp_path, "loaded")
-    finally:
-        for h in hogs:
-            h.kill()
-            h.wait()
     assert first["status"] == "ok" and first["transported"] is True, first["failure"]
     for k in FIELDS:
         assert first[k] == second[k], k

@@ -68,6 +68,23 @@ def test_real_robots_get_no_world_unless_rehearsed(tmp_path):
     assert world.argv[-2:] == ["--mavlink", "m1"]
 
 
+def test_remote_agents_are_waited_for_not_started_and_the_viz_reaches_the_daemon(tmp_path):
+    from controller.commands.up import remote_ids
+    from controller.runtime.console import part_state
+
+    cfg = rehearsal()
+    parts = plan_parts(cfg, "lab.toml", tmp_path, "capture", remote=("r2",), viz=True)
+    r2 = next(p for p in parts if p.name == "r2")
+    assert r2.argv == [] and not r2.respawn
+    lab = _lab(tmp_path, [r2])
+    lab.start(r2)
+    assert r2.proc is None and part_state(r2, time.monotonic()) == "remote, waiting"
+    assert "--viz" in parts[-1].argv
+    assert remote_ids(cfg, "r1, r2") == ("r1", "r2")
+    with pytest.raises(ConfigError, match="--remote 'r9'"):
+        remote_ids(cfg, "r9")
+
+
 def test_sim_robots_without_a_shared_world_are_refused_naming_the_key():
     from controller.commands.up import check_lab_config
 
@@ -163,7 +180,7 @@ def test_the_headline_and_rows_show_phase_estop_robots_and_the_way_to_go(tmp_pat
         phase="transport",
         robots=[{"id": "r1", "present": True, "link_lost": False}],
     )
-    parts = [Part("r1", "agent", [], tmp_path / "r1.log", True)]
+    parts = [Part("r1", "agent", ["fleet"], tmp_path / "r1.log", True)]
     parts[0].proc = subprocess.Popen([sys.executable, "-c", "pass"])
     parts[0].proc.wait()
     parts[0].ready = True
