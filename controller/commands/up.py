@@ -146,6 +146,7 @@ def run(args) -> int:
         return 1
     run_dir = Path(args.run_dir) if args.run_dir else new_run_dir(cfg)
     run_dir.mkdir(parents=True, exist_ok=True)
+    run_dir = run_dir.resolve()
     if args.detach:
         return _detach(args, cfg, run_dir)
     return _foreground(args, cfg, run_dir)

@@ -573,4 +573,4 @@ def new_run_dir(cfg: FleetConfig) -> Path:
         n += 1
         path = Path(cfg.log.dir) / f"{cfg.fleet.name}-lab-{stamp}-{n}"
     path.mkdir(parents=True)
-    return path
+    return path.resolve()  # the state file names it for tools started elsewhere
