@@ -20,6 +20,7 @@ EXAMPLES = """examples:
   fleet driver r1                            robot r1 of ./fleet.toml (sim: a world of its own)
   fleet driver r1 --config fleet.toml --duration 30
   fleet driver r1 --connect-timeout 120      wait longer for a slow fleet world to serve r1
+  fleet driver r1,r2,r3 --config lab.toml    three agents in one process (a thread each)
   fleet driver r1 --strict                   (MAVLink robots) refuse an unsafe vehicle timeout
 """
 
@@ -29,7 +30,11 @@ CONNECT_TIMEOUT = 60.0
 
 
 def add_arguments(parser, word: str) -> None:
-    parser.add_argument("robot_id", help="the robot's id in the config")
+    parser.add_argument(
+        "robot_id",
+        help="the robot's id in the config; several, comma-separated, run one agent each in "
+        "this one process (fleet up --agents-per-process)",
+    )
     add_config_argument(parser)
     parser.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
     parser.add_argument(
@@ -55,12 +60,44 @@ def run(args) -> int:
     from controller.runtime.agent_runner import run_agent
 
     cfg = load_config(args.config)
-    if args.robot_id not in cfg.robot_ids:
-        raise ConfigError(cfg.source, "robots", f"no robot {args.robot_id!r}; ids: {cfg.robot_ids}")
+    ids = [w.strip() for w in args.robot_id.split(",") if w.strip()]
+    for rid in ids or [args.robot_id]:
+        if rid not in cfg.robot_ids:
+            raise ConfigError(cfg.source, "robots", f"no robot {rid!r}; ids: {cfg.robot_ids}")
     stop = stop_on_signals()
-    code, message = run_agent(
-        cfg, args.robot_id, stop, args.duration, args.connect_timeout, strict=args.strict
-    )
-    if message:
-        print(f"fleet driver {args.robot_id}: {message}", file=sys.stderr)
-    return code
+    if len(ids) == 1:
+        code, message = run_agent(
+            cfg, ids[0], stop, args.duration, args.connect_timeout, strict=args.strict
+        )
+        if message:
+            print(f"fleet driver {ids[0]}: {message}", file=sys.stderr)
+        return code
+    return _group(cfg, ids, stop, args)
+
+
+def _group(cfg, ids: list[str], stop, args) -> int:
+    """Several agents in this process, a thread each (its own session, driver and loop); the
+    worst exit status of them. One that ends stops none of the others."""
+    import threading
+
+    from controller.runtime.agent_runner import run_agent
+
+    codes: dict[str, int] = {}
+
+    def one(rid: str) -> None:
+        try:
+            code, message = run_agent(
+                cfg, rid, stop, args.duration, args.connect_timeout, strict=args.strict
+            )
+        except Exception as exc:  # noqa: BLE001 - one agent's bug must not take the others
+            code, message = 1, f"agent failed: {exc!r}"
+        codes[rid] = code
+        if message:
+            print(f"fleet driver {rid}: {message}", file=sys.stderr, flush=True)
+
+    threads = [threading.Thread(target=one, args=(rid,), name=f"agent-{rid}") for rid in ids]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return max(codes.values(), default=0)

@@ -73,18 +73,21 @@ def robot_rows(snap: Snapshot, now: float) -> list[list[str]]:
         present = {r["id"]: r for r in snap.status.robots}
     rows = []
     for p in snap.parts:
-        r = present.get(p.name)
-        seen = "-" if r is None else ("present" if r.get("present") else "absent")
-        link = "-" if r is None else ("LOST" if r.get("link_lost") else "ok")
-        role = "robot" if p.role == "agent" else p.role
-        latch = snap.latches.get(f"{role}/{p.name}", "-")
-        if p.role in ("hub", "daemon"):  # one hub, one controller: their ids are their own
-            holder = "hub/" if p.role == "hub" else "controller/"
-            latch = next((v for k, v in snap.latches.items() if k.startswith(holder)), "-")
-        hz = f"{snap.cmd_hz[p.name]:.0f}" if p.name in snap.cmd_hz else "-"
-        restarts = str(p.restarts) if p.restarts else ""
-        rows.append([p.name, part_state(p, now), seen, link, latch, hz, restarts, p.last_warning])
+        for name in p.robots or (p.name,):
+            rows.append(_row(snap, p, name, present.get(name), now))
     return rows
+
+
+def _row(snap: Snapshot, p: Part, name: str, r: dict | None, now: float) -> list[str]:
+    seen = "-" if r is None else ("present" if r.get("present") else "absent")
+    link = "-" if r is None else ("LOST" if r.get("link_lost") else "ok")
+    latch = snap.latches.get(f"robot/{name}", "-")
+    if p.role in ("hub", "daemon"):  # one hub, one controller: their ids are their own
+        holder = "hub/" if p.role == "hub" else "controller/"
+        latch = next((v for k, v in snap.latches.items() if k.startswith(holder)), "-")
+    hz = f"{snap.cmd_hz[name]:.0f}" if name in snap.cmd_hz else "-"
+    restarts = str(p.restarts) if p.restarts else ""
+    return [name, part_state(p, now), seen, link, latch, hz, restarts, p.last_warning]
 
 
 COLUMNS = ["part", "process", "seen", "link", "e-stop", "cmd/s", "restarts", "last warning"]

@@ -57,7 +57,7 @@ ESTOP_AT_STOP = 3.0  # s the e-stop at the lab's end may take to be confirmed
 class Part:
     """One process of the lab."""
 
-    name: str  # "hub", "world", "daemon", or the robot's id
+    name: str  # "hub", "world", "daemon", or the robots' ids ("r1", or "r1,r2" for a group)
     role: str  # "hub", "world", "agent", "daemon"
     argv: list[str]
     log_path: Path
@@ -73,6 +73,11 @@ class Part:
 
     def running(self) -> bool:
         return self.proc is not None and self.proc.poll() is None
+
+    @property
+    def robots(self) -> tuple[str, ...]:
+        """The robots whose agents this part runs (none for hub, world and daemon)."""
+        return tuple(self.name.split(",")) if self.role == "agent" else ()
 
 
 def rehearsal_bodies(cfg: FleetConfig, mavlink: str | None, ros2: str | None) -> bool:
@@ -90,6 +95,7 @@ def plan_parts(
     connect_timeout: float = 180.0,
     remote: tuple[str, ...] = (),
     viz: bool = False,
+    agents_per_process: int = 1,
 ) -> list[Part]:
     """The lab's processes in their start order (see the module doc). ``remote``: robots whose
     agents run elsewhere (on the robot's own computer): not started here, waited for all the
@@ -102,11 +108,15 @@ def plan_parts(
         parts.append(
             Part("world", "world", [*fleet, "world", *c, *extra], run_dir / "world.log", False)
         )
-    for rid in cfg.robot_ids:
-        argv = [*fleet, "driver", rid, *c, "--connect-timeout", f"{connect_timeout:g}"]
-        if rid in remote:
-            argv = []  # started on the robot's computer: the lab only waits for its token
-        parts.append(Part(rid, "agent", argv, run_dir / f"{rid}.log", respawn=rid not in remote))
+    for rid in remote:  # started on the robot's computer: the lab only waits for its token
+        parts.append(Part(rid, "agent", [], run_dir / f"{rid}.log", respawn=False))
+    here = [rid for rid in cfg.robot_ids if rid not in remote]
+    per = max(1, agents_per_process)
+    for group in (here[i : i + per] for i in range(0, len(here), per)):
+        ids = ",".join(group)
+        argv = [*fleet, "driver", ids, *c, "--connect-timeout", f"{connect_timeout:g}"]
+        log_name = group[0] if len(group) == 1 else f"agents-{group[0]}-{group[-1]}"
+        parts.append(Part(ids, "agent", argv, run_dir / f"{log_name}.log", respawn=True))
     daemon = [*fleet, "daemon", *c, "--mission", mission, "--out", str(run_dir / "daemon.mcap")]
     daemon += ["--viz"] if viz else []
     parts.append(Part("daemon", "daemon", daemon, run_dir / "daemon.log", respawn=False))
@@ -411,6 +421,7 @@ class Lab:
         if code is None:
             return False
         part.exit_code = code
+        part.ready = False
         return True
 
     def _respawn(self, part: Part, now: float) -> None:
@@ -437,7 +448,8 @@ class Lab:
         if part.role == "world":
             return "main" in self.watch.alive("world")
         if part.role == "agent":
-            return part.name in self.watch.alive("robot") and (part.proc is None or part.running())
+            alive = set(self.watch.alive("robot"))
+            return alive.issuperset(part.robots) and (part.proc is None or part.running())
         return bool(self.watch.alive("controller"))
 
     # -- the lab's life
@@ -504,6 +516,8 @@ class Lab:
             now = time.monotonic()
             self._handle_commands()
             for p in self.parts:
+                if not p.ready and p.running():  # a restarted part: ready again when seen
+                    p.ready = self._ready(p)
                 if not self._reap(p) and p.restart_at is None:
                     continue
                 if p is daemon:
