@@ -34,6 +34,7 @@ EXAMPLES = """examples:
   fleet up --config mixed.toml --mavlink r3 --ros2 r5   # emulate r3 (MAVLink) and r5 (ROS 2)
 """
 
+AGENTS_PER_PROCESS = 1  # see bench/lab.py: the rehearsal's CPU and memory either way
 DETACH_WAIT = 600.0  # s: --detach waits at most this long for the lab to be up
 
 
@@ -67,6 +68,14 @@ def add_arguments(parser, word: str) -> None:
         metavar="IDS",
         help="robots whose agents run on their own computers (fleet driver ID there): not "
         "started here, waited for on the bus all the same (comma-separated ids)",
+    )
+    parser.add_argument(
+        "--agents-per-process",
+        type=int,
+        default=AGENTS_PER_PROCESS,
+        metavar="N",
+        help="robot agents run N to a process, a thread each (default "
+        f"{AGENTS_PER_PROCESS}: one process per robot, as on the robots' own computers)",
     )
     parser.add_argument(
         "--viz",
@@ -168,6 +177,7 @@ def _foreground(args, cfg, run_dir: Path) -> int:
         args.ready_timeout,
         remote=remote_ids(cfg, args.remote),
         viz=args.viz,
+        agents_per_process=args.agents_per_process,
     )
     tty = sys.stdout.isatty() and not args.plain and not args.json
     console = make_console(args.config, live=tty)
@@ -215,6 +225,7 @@ def _detach(args, cfg, run_dir: Path) -> int:
             ["--ros2", args.ros2] if args.ros2 else []
         )
         argv += (["--remote", args.remote] if args.remote else []) + (["--viz"] if args.viz else [])
+        argv += ["--agents-per-process", str(args.agents_per_process)]
     argv += ["--plain", "--run-dir", str(run_dir)]
     with open(run_dir / "console.log", "w") as out:
         proc = subprocess.Popen(
