@@ -337,6 +337,8 @@ class Lab:
         self.ready_s: float | None = None
         self.failure: str | None = None  # why the lab ended on its own (not the job's reason)
         self.job_ended = False  # the daemon exited by itself: the job's end
+        self.stopped_at: float | None = None  # monotonic: the lab began to stop
+        self.final_estop: dict[str, Any] | None = None  # the e-stop at the end, as confirmed
         self.commands: list[str] = []  # console keys: "resume", "estop", handled in the loop
         self._cmd_lock = threading.Lock()
         self._snap: Snapshot | None = None
@@ -553,9 +555,11 @@ class Lab:
         """The e-stop first (every robot stopped), then the daemon, the agents, the world, the
         hub: each SIGTERM, killed after STOP_WAIT s."""
         self.stage = "stopping"
+        self.stopped_at = time.monotonic()
         if self.watch.bus is not None:
             try:
                 result = self.watch.put("estop", "the lab is stopping", timeout=ESTOP_AT_STOP)
+                self.final_estop = result
                 if result and result["agents_missing"]:
                     log.warning("e-stop at the end NOT confirmed by %s", result["agents_missing"])
             except Exception as exc:  # noqa: BLE001 - stopping goes on: watchdogs stop robots

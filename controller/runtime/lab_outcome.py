@@ -47,8 +47,12 @@ def lab_outcome(lab: Lab, daemon_code: int | None, interrupted: bool) -> dict[st
         verdict = f"FAILED before the job ended: {lab.failure}"
     elif interrupted and daemon_code is None:
         status, reason = "stopped", "interrupted"
-        phase = _last_phase(job)
-        verdict = f"STOPPED by the operator in phase {phase}; every robot e-stopped"
+        verdict = f"STOPPED by the operator in phase {_last_phase(job)}"
+        if lab.resumed_at is not None and lab.stopped_at is not None:
+            verdict += f", {lab.stopped_at - lab.resumed_at:.0f} s after the resume"
+        else:
+            verdict += ", before any resume"
+        verdict += "; " + _estop_words(lab.final_estop)
     else:
         summary = dict(job or {})
         if daemon_code not in (0, None):
@@ -64,6 +68,16 @@ def lab_outcome(lab: Lab, daemon_code: int | None, interrupted: bool) -> dict[st
         "reason": reason,
         **base,
     }
+
+
+def _estop_words(result: dict[str, Any] | None) -> str:
+    """How the e-stop at the lab's end went, in a few words."""
+    if result is None:
+        return "the e-stop could not be put (no bus): the agents' watchdogs stopped the robots"
+    missing = result.get("agents_missing") or []
+    if missing:
+        return f"e-stop NOT confirmed by {', '.join(missing)} (their watchdogs stop them)"
+    return f"every robot e-stopped (confirmed by all {len(result['agents_confirmed'])} agents)"
 
 
 def _last_phase(job: dict[str, Any] | None) -> str:
