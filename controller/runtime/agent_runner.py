@@ -150,8 +150,8 @@ def _serve(
     # the latched e-stop first: a fresh agent is stopped ("fail closed") until it learns the
     # latch (an engaged answer, or the hub's or the controller's) or an operator releases it
     agent = Agent(bus, driver, params, latch_at_start=None)
-    if not agent.sync_latch(LATCH_WAIT):
-        log.warning("robot %s: nobody answered the e-stop latch query", robot.id)
+    if not agent.sync_latch(LATCH_WAIT):  # a fresh lab: nobody knows the latch yet (normal)
+        log.info("robot %s: no holder knows the e-stop yet (a fresh lab)", robot.id)
     state = agent.core.latch.state()
     log.info(
         "robot %s: agent up (%s driver%s), e-stop %s",
