@@ -374,7 +374,7 @@ class Lab:
             "run_dir": str(self.run_dir),
             "log": str(self.run_dir / "daemon.mcap"),
             "stage": self.stage,
-            "ready_s": self.ready_s,
+            "ready_s": None if self.ready_s is None else round(self.ready_s, 2),
             "parts": {
                 p.name: {
                     "pid": p.proc.pid if p.proc else None,
