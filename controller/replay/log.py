@@ -300,7 +300,7 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         out["obstacle_contacts"] = sorted(ids[have[i]] for i in hits)
         out.update(_object_figures(cfg, obj, phases))
         out.update(transport_figures(run, cfg, obj, phases))
-        from controller.runtime.dry_run import judge  # the run's own verdict code
+        from controller.verdict import judge  # the run's own verdict code
 
         out["verdict"] = judge(out)
     return out
