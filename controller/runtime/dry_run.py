@@ -194,6 +194,16 @@ class TransportScore:
         )
 
 
+def limits_of(cfg: FleetConfig) -> dict[str, float | None]:
+    """The config's limits the run's figures are read against (``Checks``' last fields)."""
+    goal = cfg.object.goal is not None
+    return {
+        "safety_margin_m": cfg.approach.safety_margin,
+        "goal_tolerance_m": cfg.transport.tolerance if goal else None,
+        "goal_tolerance_deg": cfg.transport.heading_tolerance_deg if goal else None,
+    }
+
+
 def _add(a: dict[str, int], b: dict[str, int]) -> dict[str, int]:
     return {k: a.get(k, 0) + b.get(k, 0) for k in a.keys() | b.keys()}
 
@@ -445,6 +455,7 @@ class DryRun:
             wall_time_s=round(time.monotonic() - wall0, 3),
             log=str(recorder.location),
             messages_logged=recorder.written,
+            **limits_of(self.cfg),
         )
         result = {**figures.to_json(), **checks.to_json()}
         result["verdict"] = judge(result)

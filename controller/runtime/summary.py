@@ -97,6 +97,11 @@ class Checks:
     wall_time_s: float
     log: str
     messages_logged: int
+    # the limits the figures are read against (the config's): approach.safety_margin, the
+    # goal's transport.tolerance and heading_tolerance_deg (None without object.goal)
+    safety_margin_m: float | None = None
+    goal_tolerance_m: float | None = None
+    goal_tolerance_deg: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         return _fields(self)
