@@ -333,6 +333,7 @@ def run_daemon(
                     break
                 if duration and now - t0 >= duration:
                     break
+            node.winding_down = True  # robots leaving from now on are the end, not news
             if not claim.yielded.is_set():
                 node.hold(time.time())
             latch.poll(time.monotonic())  # the last change of the latch written too

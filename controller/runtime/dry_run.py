@@ -355,6 +355,7 @@ class DryRun:
         try:
             self._loop(coord, ctl, node, hub.world, wall0)
         finally:
+            node.winding_down = True  # the agents close next: their robots leave, as expected
             ctl.stop.set()
             ctl.thread.join(timeout=10)
         for a in agents:
