@@ -431,3 +431,13 @@ def next_steps(summary: Summary, log_path: str | None) -> list[str]:
             + ": see clearance.png in the plots"
         )
     return steps
+
+
+def report(summary: Summary, log_path: str | None = None) -> str:
+    """The three together, as ``fleet run`` (text), ``fleet daemon`` and ``fleet replay`` end:
+    the verdict line, the table, ``next:`` and the steps."""
+    steps = next_steps(summary, log_path)
+    table = outcome_table(summary)
+    return "\n".join(
+        [verdict_line(summary), *([table] if table else []), "next:", *(f"  {s}" for s in steps)]
+    )

@@ -82,17 +82,7 @@ def run(args) -> int:
     if args.json:
         emit_json(figures)
     else:
-        print_outcome({**figures, "config": cfg.source})
+        from controller.outcome import report
+
+        print(report({**figures, "config": cfg.source}))
     return 0 if summary.ok else 1
-
-
-def print_outcome(figures: dict) -> None:
-    """The plain (not ``--json``) end of a run on stdout: the verdict line, the figures'
-    table, the next steps (``controller.outcome``)."""
-    from controller.outcome import next_steps, outcome_table, verdict_line
-
-    print(verdict_line(figures))
-    print(outcome_table(figures))
-    print("next:")
-    for step in next_steps(figures, figures.get("log")):
-        print(f"  {step}")

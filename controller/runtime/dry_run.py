@@ -27,7 +27,14 @@ from controller.runtime.lockstep import ControllerLockstep, LockstepCoordinator
 from controller.runtime.node import ControllerNode
 from controller.runtime.planner import PlannerWorker
 from controller.runtime.recording import open_recorder
-from controller.runtime.summary import Checks, RunFailure, RunFigures, RunSummary, TransportFigures
+from controller.runtime.summary import (
+    Checks,
+    RunFailure,
+    RunFigures,
+    RunSummary,
+    TransportFigures,
+    limits_of,
+)
 from controller.runtime.wiring import make_estimator, make_hub, make_sim_drivers
 from controller.verdict import RULES, VerdictRules, judge  # noqa: F401 (their old home)
 from drivers.agent import Agent, AgentParams
@@ -192,16 +199,6 @@ class TransportScore:
             transport_object_min_clearance_m=None if math.isinf(self.clearance) else self.clearance,
             carried=True,
         )
-
-
-def limits_of(cfg: FleetConfig) -> dict[str, float | None]:
-    """The config's limits the run's figures are read against (``Checks``' last fields)."""
-    goal = cfg.object.goal is not None
-    return {
-        "safety_margin_m": cfg.approach.safety_margin,
-        "goal_tolerance_m": cfg.transport.tolerance if goal else None,
-        "goal_tolerance_deg": cfg.transport.heading_tolerance_deg if goal else None,
-    }
 
 
 def _add(a: dict[str, int], b: dict[str, int]) -> dict[str, int]:
