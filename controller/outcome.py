@@ -190,8 +190,17 @@ def _robots(values: Any, unit: Callable[[float], str]) -> str | None:
     """A per-robot dict as ``r1 5.5 mm, r2 4.7 mm`` (None: not a dict)."""
     if not isinstance(values, Mapping) or not values:
         return None
-    parts = [f"{k} {unit(v)}" for k, v in values.items() if _num(v) is not None]
+    parts = [
+        f"{k} {unit(v)}" for k, v in sorted(values.items(), key=_natural) if _num(v) is not None
+    ]
     return ", ".join(parts) or None
+
+
+def _natural(item: tuple[Any, Any]) -> tuple[str, int]:
+    """r2 before r10."""
+    key = str(item[0])
+    digits = key.lstrip("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ_-")
+    return (key[: len(key) - len(digits)], int(digits) if digits.isdigit() else -1)
 
 
 def _flag(ok: bool, bad: str) -> str:

@@ -87,6 +87,8 @@ def test_a_delivered_run():
     # per-robot figures compact, in mm; no Python reprs, no 16-digit floats
     assert "r4 5.5 mm, r5 0.99 mm" in table
     assert "{" not in table and "'" not in table
+    gaps = outcome_table({"contact_gaps_at_arrest_m": {"r10": 0.02, "r2": 0.001, "r1": 0.0}})
+    assert "r1 0 m, r2 1 mm, r10 0.02 m" in gaps  # in the robots' order
     assert all(len(n.replace("-", "").replace(".", "").lstrip("0")) <= 4 for n in numbers(table))
     # the safety figure beside its margin, and the word when it is under it
     row = next(ln for ln in table.splitlines() if "min_clearance_m" in ln)
