@@ -40,7 +40,7 @@ from controller.outcome import report
 from controller.runtime.claim import ROLE, Claim, make_ident, wait_until_alone
 from controller.runtime.estop import LatchFile, LatchKeeper
 from controller.runtime.hub import HUB_START, start_hub_process, stop_hub_process
-from controller.runtime.lab_outcome import JobRecord
+from controller.runtime.job_record import JobRecord
 from controller.runtime.node import ControllerNode
 from controller.runtime.planner import PlannerWorker
 from controller.runtime.recording import open_recorder, record_ros2

@@ -12,7 +12,7 @@ from controller.events import ArrestEvent, DeliveredEvent, FailureEvent, Reason
 from controller.mission.types import MissionOutput, Phase
 from controller.outcome import outcome_table, verdict_line
 from controller.runtime.daemon import log_end
-from controller.runtime.lab_outcome import JobRecord
+from controller.runtime.job_record import JobRecord
 from tests.support.config import make_config
 
 T0 = 1795841900.0  # an epoch: the daemon's clock
