@@ -15,7 +15,15 @@ import numpy as np  # noqa: E402
 from controller import geometry  # noqa: E402
 from controller.events import CaptureEvent, RouteEvent, TransportEvent  # noqa: E402
 from controller.replay import metrics  # noqa: E402
-from controller.replay.log import RunLog, events_of, phases_of, track, typed_events  # noqa: E402
+from controller.replay.log import (  # noqa: E402
+    RunLog,
+    events_of,
+    log_t0,
+    phases_of,
+    shifted,
+    track,
+    typed_events,
+)
 from controller.scene.builder import PHASE_COLORS as SCENE_PHASE_COLORS  # noqa: E402
 
 PHASE_COLORS = {k: v[:3] for k, v in SCENE_PHASE_COLORS.items()}  # as in the Foxglove scene
@@ -35,8 +43,10 @@ def plot_run(run: RunLog, out_dir: str | Path, figures: dict | None = None) -> l
     - ``transport.png`` (a run that transported): the object's lateral deviation from its route
       and each pusher's contact force over time.
 
-    Time plots mark the phase boundaries. Axes are in metres and seconds. ``figures`` (the
-    replay's metrics) puts the verdict in the title."""
+    Time plots mark the phase boundaries. Axes are in metres and seconds, times from the run's
+    start (a lab log's epoch stamps less its first one). ``figures`` (the replay's metrics)
+    puts the verdict in the title."""
+    run = shifted(run, log_t0(run))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     cfg = run.config

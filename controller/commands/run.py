@@ -1,7 +1,8 @@
 """``fleet run [--config F] [--out F.mcap] [--json] [--gui] [--viz]``: the dry run of the whole job.
 
 A stand-in world (pybullet by default, ``sim.backend``), the same agents, bus and controller
-loop as the lab, in lockstep with the sim clock. Prints a summary (``--json``: one object) and
+loop as the lab, in lockstep with the sim clock. Prints the outcome on stdout (a verdict line,
+the figures with their units and limits, the next steps; ``--json``: one object instead) and
 exits 0 when the job is done with a clean verdict, 1 when it failed, 2 on bad config (and on
 ``--gui`` without a display or with a backend that has no window). ``--viz`` serves the run live
 to Foxglove (``[viz]`` port, 127.0.0.1 only).
@@ -14,33 +15,6 @@ from pathlib import Path
 
 from controller.commands import add_config_argument, config_path, require_log_target
 from controller.config import MISSION_KINDS, SIM_BACKENDS
-
-# what the plain (not --json) summary prints: the capture, the transport, the loop's health
-SUMMARY_FIELDS = (
-    "status",
-    "phase",
-    "arrested",
-    "failure",
-    "arrest_time_s",
-    "hold_displacement_m",
-    "contact_gaps_at_arrest_m",
-    "arrival_spread_s",
-    "transported",
-    "goal_error_m",
-    "goal_error_deg",
-    "transport_time_s",
-    "rearrangements",
-    "relocations",
-    "sim_time_s",
-    "wall_time_s",
-    "missed_ticks",
-    "watchdog_stops",
-    "plan_latency_s",
-    "min_clearance_m",
-    "max_object_penetration_m",
-    "obstacle_contacts",
-    "log",
-)
 
 
 EXAMPLES = """examples:
@@ -116,7 +90,7 @@ def run(args) -> int:
     if args.json:
         emit_json(figures)
     else:
-        for k in SUMMARY_FIELDS:
-            if k in figures:
-                print(f"{k:>26}: {figures[k]}")
+        from controller.outcome import report
+
+        print(report({**figures, "config": cfg.source}))
     return 0 if summary.ok else 1

@@ -275,15 +275,18 @@ class FleetEstimator:
     # ---- change logging (never per tick)
 
     def _note_gate(self, name: str, tr: TrackFilter, status: str) -> None:
+        """The gate's rejections, logged by what they mean. An isolated outlier is only
+        counted; ``REJECT_EPISODE`` in a row (a bump at contact, a robot moved) and the
+        re-acquisition that follows are normal operation: INFO. ``REJECT_WARN`` in a row that
+        never agree (no re-acquisition: noise, a second marker, a spoofer) are a problem: one
+        WARNING per episode."""
         if status == STATUS_OUT_OF_ORDER:
             return
-        # An isolated outlier is only counted; REJECT_EPISODE in a row start a logged episode.
-        rejecting = status == STATUS_REJECTED and tr.consecutive_rejected >= REJECT_EPISODE
+        n = tr.consecutive_rejected
+        rejecting = status == STATUS_REJECTED and n >= REJECT_EPISODE
         was = self._was_rejecting.get(name, False)
-        if was and status == STATUS_REJECTED:
-            return
         if tr.just_reacquired:
-            log.warning(
+            log.info(
                 "%s: re-acquired after %d consistent rejected measurements (d2=%.1f)",
                 name,
                 self.params.reacquire_after,
@@ -292,13 +295,22 @@ class FleetEstimator:
             self._was_rejecting[name] = False
             return
         if rejecting and not was:
-            log.warning(
+            log.info(
                 "%s: %d measurements in a row rejected by the gate (d2=%.1f > %.1f), %d so far",
                 name,
-                tr.consecutive_rejected,
+                n,
                 tr.last_d2,
                 tr.threshold,
                 tr.rejected,
+            )
+        elif rejecting and n == max(REJECT_WARN, self.params.reacquire_after + 1):
+            log.warning(
+                "%s: %d measurements in a row rejected by the gate and they do not agree "
+                "(d2=%.1f > %.1f): its estimate runs on the prediction alone",
+                name,
+                n,
+                tr.last_d2,
+                tr.threshold,
             )
         elif was and not rejecting:
             log.info("%s: measurements accepted again (%d rejected so far)", name, tr.rejected)
@@ -320,3 +332,7 @@ class FleetEstimator:
 
 
 REJECT_EPISODE = 3  # consecutive rejections logged as a rejection episode (isolated: counted)
+# consecutive rejections that did not re-acquire the track (they disagree): a WARNING, once per
+# episode (a third of a second of poses at 30 Hz; a consistent run re-acquires after
+# estimation.reacquire_after, 5 by default)
+REJECT_WARN = 10

@@ -10,6 +10,7 @@ replay.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import math
@@ -39,6 +40,7 @@ from controller.io.recorder import (
     segments,
 )
 from controller.replay import metrics
+from controller.runtime.summary import limits_of
 
 E = TypeVar("E", bound=Event)
 
@@ -167,6 +169,49 @@ def _sort(run: RunLog, key: wire.KeyParts, msg: Any) -> None:
             run.events.append({"t": msg.t, "kind": key.what, "phase": msg.phase, "data": msg.data})
         case "estop":
             run.estops.append({"t": msg.t, "engaged": msg.engaged, "source": msg.source})
+
+
+EPOCH_LIKE = 1e6  # s: stamps past this are epoch seconds (a lab log), not sim time from 0
+
+
+def log_t0(run: RunLog) -> float:
+    """The instant the run's times count from: 0 for a dry run (sim time, from 0), the first
+    message's stamp for a lab log (stamped in epoch seconds on the wall clock)."""
+    stamps = [t for ts in run.stamps.values() for t in ts]
+    first = min(stamps) if stamps else 0.0
+    return 0.0 if run.time_base == "sim" or first < EPOCH_LIKE else first
+
+
+def _rows_shifted(rows: list, dt: float) -> list:
+    return [(r[0] - dt, *r[1:]) for r in rows]
+
+
+def shifted(run: RunLog, dt: float) -> RunLog:
+    """A copy of ``run`` with every time ``dt`` earlier (the plots of a lab log, from its
+    start); ``run`` itself is left as read."""
+    if not dt:
+        return run
+
+    def tracks(d: dict[str, list]) -> dict[str, list]:
+        return defaultdict(list, {k: _rows_shifted(v, dt) for k, v in d.items()})
+
+    def timed(items: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        return [{**e, "t": e["t"] - dt} for e in items]
+
+    return dataclasses.replace(
+        run,
+        stamps=defaultdict(list, {k: [t - dt for t in v] for k, v in run.stamps.items()}),
+        measured=tracks(run.measured),
+        estimated=tracks(run.estimated),
+        truth=tracks(run.truth),
+        commands=tracks(run.commands),
+        object_measured=_rows_shifted(run.object_measured, dt),
+        object_estimated=_rows_shifted(run.object_estimated, dt),
+        object_truth=_rows_shifted(run.object_truth, dt),
+        events=timed(run.events),
+        robot_events=timed(run.robot_events),
+        estops=timed(run.estops),
+    )
 
 
 def phases_of(run: RunLog) -> list[dict[str, Any]]:
@@ -300,10 +345,53 @@ def metrics_of(run: RunLog) -> dict[str, Any]:
         out["obstacle_contacts"] = sorted(ids[have[i]] for i in hits)
         out.update(_object_figures(cfg, obj, phases))
         out.update(transport_figures(run, cfg, obj, phases))
-        from controller.runtime.dry_run import judge  # the run's own verdict code
+        from controller.verdict import judge  # the run's own verdict code
 
         out["verdict"] = judge(out)
+        out.update(limits_of(cfg))
+    out.update(_outcome(run, out))
     return out
+
+
+def _outcome(run: RunLog, out: dict[str, Any]) -> dict[str, Any]:
+    """The run's end as the log tells it: ``t0_s`` (what its times count from: 0 for a dry
+    run, the first message's epoch for a lab log), ``phase`` (the last; ``failed`` after a
+    failure) and ``mission_phase`` (the last before a failure), ``failure`` ({reason, t,
+    detail}: the mission's ``failure`` event, else the contract's first broken rule, else an
+    object not delivered) and ``verdict_line`` (``controller.outcome``)."""
+    from controller.outcome import verdict_line
+
+    phases = out["phases"]
+    words = [p["phase"] for p in phases]
+    result = {
+        "t0_s": log_t0(run),
+        "phase": words[-1] if words else None,
+        "mission_phase": next((w for w in reversed(words) if w != "failed"), None),
+        "failure": _failure(run, out),
+    }
+    result["verdict_line"] = verdict_line({**out, **result})
+    return result
+
+
+def _failure(run: RunLog, out: dict[str, Any]) -> dict[str, Any] | None:
+    for e in events_of(run, "failure"):
+        data = e["data"] if isinstance(e["data"], dict) else {}
+        t = data.get("t")
+        return {
+            "reason": str(data.get("reason") or "failed"),
+            "t": t if isinstance(t, int | float) else e["t"],
+            "detail": str(data.get("detail") or ""),
+        }
+    when = {"collision": "min_clearance_t", "object_collision": "object_min_clearance_t"}
+    for f in out.get("verdict") or []:
+        return {"reason": f["reason"], "t": out.get(when.get(f["reason"], "")), **f}
+    if out.get("transported") is False and out["phases"] and out["phases"][-1]["phase"] == "done":
+        detail = (
+            f"the object ended {out.get('goal_error_m', math.nan):.2f} m and "
+            f"{out.get('goal_error_deg', math.nan):.1f} deg from object.goal"
+        )
+        return {"reason": "not_delivered", "t": out["phases"][-1]["t"], "detail": detail}
+    return None
 
 
 CARRIED = ("route", "rearrange", "transport")  # the phases after which the object is carried
@@ -403,7 +491,11 @@ def _recovered(parts: list[dict[str, Any]]) -> dict[str, Any] | None:
 
 
 def print_summary(r: dict) -> None:
-    """The ``fleet replay`` summary as text on stdout."""
+    """The ``fleet replay`` summary as text on stdout: the log, each robot, the object, then
+    the outcome (``controller.outcome``: the verdict line, the figures with units and limits,
+    times from the run's start) and the plots or the next steps."""
+    from controller.outcome import metres, next_steps, outcome_table, verdict_line
+
     print(f"{r['log']}: {'complete' if r['complete'] else 'cut short (crash?)'}, {r['mode']}")
     if len(r.get("segments", [])) > 1:
         print(f"  {len(r['segments'])} segments")
@@ -424,17 +516,21 @@ def print_summary(r: dict) -> None:
             f"({m['command_rate_hz']:.1f} Hz), path {m['path_length_m']:.2f} m{e}"
         )
     o = r["object"]
-    print(f"  object: path {o['path_length_m']:.2f} m, final {o['final_pose']}")
-    for p in r["phases"]:
-        print(f"  phase {p['phase']} from t={p['t']:.2f}")
-    for k in (
-        "arrested",
-        "arrest_time_s",
-        "arrival_spread_s",
-        "min_clearance_m",
-        "max_object_penetration_m",
-        "link_lost",
-    ):
-        print(f"  {k}: {r[k]}")
-    for p in r.get("plots", []):
-        print(f"  plot: {p}")
+    final = o["final_pose"]
+    at = f", final x {final[0]:.3f} m, y {final[1]:.3f} m, θ {final[2]:.3f} rad" if final else ""
+    print(f"  object: path {metres(o['path_length_m'])}{at}")
+    if r.get("link_lost"):
+        print(f"  link lost: {', '.join(r['link_lost'])}")
+    if r.get("estops"):
+        print(f"  e-stops: {len(r['estops'])} (engaged or released on the bus)")
+    print(verdict_line(r))
+    table = outcome_table(r)
+    if table:
+        print(table)
+    if r.get("plots"):
+        for p in r["plots"]:
+            print(f"  plot: {p}")
+    else:
+        print("next:")
+        for step in next_steps(r, r["log"]):
+            print(f"  {step}")

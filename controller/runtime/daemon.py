@@ -36,9 +36,11 @@ from controller.config import FleetConfig
 from controller.io.bus import Bus, BusError
 from controller.io.ratekeeper import Ratekeeper
 from controller.mission.types import Mission
+from controller.outcome import report
 from controller.runtime.claim import ROLE, Claim, make_ident, wait_until_alone
 from controller.runtime.estop import LatchFile, LatchKeeper
 from controller.runtime.hub import HUB_START, start_hub_process, stop_hub_process
+from controller.runtime.job_record import JobRecord
 from controller.runtime.node import ControllerNode
 from controller.runtime.planner import PlannerWorker
 from controller.runtime.recording import open_recorder, record_ros2
@@ -263,6 +265,7 @@ def run_daemon(
     recorder = open_recorder(cfg, out, f"daemon/{mission_kind}", viz=viz, who="fleet daemon")
     status = 0
     health = ""
+    outcome: dict | None = None
     try:
         with bus:
             claim.watch(bus)
@@ -295,6 +298,8 @@ def run_daemon(
                 file=sys.stderr,
             )
             t0 = time.time()
+            job = JobRecord(cfg, t0)  # its outcome, printed at the end
+            stopped = "interrupted"
             budget = TickBudget(cfg.fleet.budget)
             lag_reported = 0
             last = time.monotonic()
@@ -308,6 +313,7 @@ def run_daemon(
                 last = mono
                 if claim.yielded.is_set():
                     status = 1
+                    stopped = f"controller {claim.yielded_to} took over"
                     print(
                         f"fleet daemon: controller {claim.yielded_to} took over: stopped "
                         "commanding",
@@ -317,6 +323,7 @@ def run_daemon(
                 latch.poll(mono)
                 now = time.time()  # wall clock: pose stamps come from other computers
                 result = node.tick(now)
+                job.tick(now, result)
                 budget.check(node)
                 if rk.lagged > lag_reported:
                     lag_reported = rk.lagged
@@ -325,17 +332,22 @@ def run_daemon(
                     )
                 if result.done or result.failed:
                     status = 1 if result.failed else 0
-                    log.info(
-                        "mission %s in phase %s",
-                        "failed" if result.failed else "done",
-                        result.phase,
-                    )
+                    log_end(job)
                     break
                 if duration and now - t0 >= duration:
+                    stopped = f"--duration {duration:g} s"
                     break
+            node.winding_down = True  # robots leaving from now on are the end, not news
             if not claim.yielded.is_set():
                 node.hold(time.time())
             latch.poll(time.monotonic())  # the last change of the latch written too
+            outcome = job.summary(
+                mission,
+                stopped,
+                time.time(),
+                log=str(recorder.location),
+                plan_latency_s={} if planners is None else planners.summary(),
+            )
             ticks = node.status().tick_ms
             health = (
                 f"; {node.counters.ticks} ticks, {rk.lagged} late, {budget.over} over the "
@@ -351,4 +363,22 @@ def run_daemon(
         f"fleet daemon: stopped; {recorder.written} messages in {recorder.location}{health}",
         file=sys.stderr,
     )
+    if outcome is not None:
+        print(report(outcome), flush=True)  # the verdict, the figures, the next steps
     return status
+
+
+def log_end(job: JobRecord) -> None:
+    """The mission's end in the daemon's log: done, or failed naming the phase it failed in,
+    the reason, when (s since the job's start) and the failure's detail."""
+    fail = job.failure
+    if fail is None:
+        log.info("mission done in phase %s", job.phases[-1]["phase"] if job.phases else "done")
+        return
+    log.error(
+        "mission failed in phase %s: %s at %.1f s: %s",
+        job.phase,
+        fail["reason"],
+        fail["t"] - job.t0,
+        fail["detail"] or "(no detail)",
+    )

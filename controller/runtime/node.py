@@ -119,6 +119,8 @@ class ControllerNode:
         self.link_lost = np.zeros(len(self.ids), dtype=bool)
         self._events_pending: dict[str, tuple[LinkLostEvent | LinkRestoredEvent, int]] = {}
         self.arrested = False
+        # set by the runner when the process is stopping: robots leaving then are no news
+        self.winding_down = False
         self.last_output: MissionOutput | None = None
         self.last_tick = 0.0
         self._seq = 0
@@ -151,13 +153,18 @@ class ControllerNode:
         if i is None:
             return
         if self.present[i] != alive:
-            log.log(
-                logging.INFO if alive else logging.WARNING,
-                "robot %s %s",
-                rid,
-                "present" if alive else "gone",
-            )
+            # a robot leaving during the job is news (WARNING); after it, or while the process
+            # stops (its agents close), it is the expected end (INFO)
+            quiet = alive or self.job_over
+            log.log(logging.INFO if quiet else logging.WARNING, "robot %s %s", rid,
+                    "present" if alive else "gone")  # fmt: skip
         self.present[i] = alive
+
+    @property
+    def job_over(self) -> bool:
+        """The mission ended (done or failed), or the runner is stopping (``winding_down``)."""
+        out = self.last_output
+        return self.winding_down or (out is not None and bool(out.done or out.failed))
 
     # -- the latched e-stop
     @property

@@ -12,6 +12,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+from controller.config import FleetConfig
 from controller.mission.summary import JobSummary
 
 
@@ -97,9 +98,26 @@ class Checks:
     wall_time_s: float
     log: str
     messages_logged: int
+    # the limits the figures are read against (the config's): approach.safety_margin, the
+    # goal's transport.tolerance and heading_tolerance_deg (None without object.goal)
+    safety_margin_m: float | None = None
+    goal_tolerance_m: float | None = None
+    goal_tolerance_deg: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         return _fields(self)
+
+
+def limits_of(cfg: FleetConfig) -> dict[str, float | None]:
+    """The config's limits a run's figures are read against (``Checks``' last fields; the
+    daemon's outcome has them too): the safety filter's margin, the goal's tolerances (None
+    without ``object.goal``)."""
+    goal = cfg.object.goal is not None
+    return {
+        "safety_margin_m": cfg.approach.safety_margin,
+        "goal_tolerance_m": cfg.transport.tolerance if goal else None,
+        "goal_tolerance_deg": cfg.transport.heading_tolerance_deg if goal else None,
+    }
 
 
 @dataclass(frozen=True)

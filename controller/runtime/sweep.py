@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from controller.config import FleetConfig, load_config
+from controller.outcome import verdict_line
 
 log = logging.getLogger(__name__)
 
@@ -85,11 +86,16 @@ def run_one(cfg: FleetConfig, out: Path, max_time: float | None) -> dict[str, An
         "min_clearance_m": summary.get("min_clearance_m"),
         "verdict": summary.get("verdict"),
         "log": summary.get("log", str(out)),
+        "verdict_line": verdict_line(summary),
     }
 
 
 def line(i: int, n: int, row: dict[str, Any]) -> str:
-    """The one-line summary of a finished run."""
+    """The one-line summary of a finished run: its verdict line (``controller.outcome``), or
+    for a run that could not start, the error."""
+    if row.get("verdict_line"):
+        head = f"[{i}/{n}] {row['config']}: {row['status']}"
+        return f"{head}: {row['verdict_line']}; log {row['log']}"
     what = f"{row['status']}"
     if row.get("reason"):
         what += f" ({row['reason']}: {row.get('detail') or ''})".rstrip(": )") + ")"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 from controller.cli import main
 from tests.support.config import base_config_dict, free_port, write_toml
@@ -42,6 +43,23 @@ def test_run_that_times_out_exits_1(tmp_path, capsys):
     code = main(["run", "--config", str(path), "--backend", "ideal", "--json", "--max-time", "2"])
     out = json.loads(capsys.readouterr().out)
     assert code == 1 and out["status"] == "failed" and out["arrested"] is False
+
+
+def test_run_in_text_ends_with_the_verdict_the_figures_and_the_next_steps(tmp_path, capsys):
+    """Without --json: the outcome on stdout (the progress stays on stderr), the verdict line
+    first, naming the reason and the phase; figures with units, no Python reprs."""
+    path = config(tmp_path)
+    code = main(["run", "--config", str(path), "--backend", "ideal", "--max-time", "2"])
+    out = capsys.readouterr()
+    assert code == 1
+    lines = out.out.splitlines()
+    assert re.match(r"FAILED timeout at 2\.\d s: sim time ran out .* in phase approach; ", lines[0])
+    assert "of sim time in" in lines[0]
+    assert re.search(r"^  min_clearance_m +\S+ m \(margin 0\.05 m: (ok|UNDER)\)$", out.out, re.M)
+    assert re.search(r"^  sim_time_s +2\.\d+ s$", out.out, re.M)
+    assert "{" not in out.out and "None" not in out.out
+    assert "next:" in lines and any("--plots" in ln for ln in lines)
+    assert "fleet run:" in out.err and "fleet run:" not in out.out
 
 
 def test_run_with_too_few_robots_exits_1_naming_both_numbers(tmp_path, capsys):
@@ -91,7 +109,10 @@ def test_sweep_runs_each_config_on_a_free_port(tmp_path, capsys):
     assert all(row["status"] == "failed" and row["reason"] == "timeout" for row in r["runs"])
     assert all((out_dir / f"{i:02d}-{n}.mcap").is_file() for i, n in ((1, "a"), (2, "b")))
     lines = [ln for ln in out.err.splitlines() if ln.startswith("[") and "failed" in ln]
-    assert len(lines) == 2  # one summary line per run
+    assert len(lines) == 2  # one summary line per run, its verdict: the reason, the phase
+    verdict = r"FAILED timeout at 1\.\d s: sim time ran out \([\d.]+ s\) in phase \w+"
+    assert all(re.search(verdict, ln) for ln in lines), lines
+    assert all(row["verdict_line"].startswith("FAILED timeout") for row in r["runs"])
 
 
 def test_sweep_table_and_bad_config(tmp_path, capsys):

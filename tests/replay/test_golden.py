@@ -7,6 +7,7 @@ only to channels a run writes."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -100,6 +101,31 @@ def test_the_replay_reaches_the_runs_verdict():
     assert r["object_min_clearance_m"] == pytest.approx(run["object_min_clearance_m"], abs=0.02)
     assert r["obstacle_contacts"] == run["obstacle_contacts"]
     assert [p["phase"] for p in r["phases"]] == [p["phase"] for p in run["phases"]]
+
+
+@pytest.mark.parametrize("name", ["capture", "transport"])
+def test_the_replay_text_tells_the_runs_outcome(name, capsys):
+    """The replay's verdict line is the run's (arrested without a goal, delivered with one),
+    in sim seconds from 0, with the transport figures and the limits in its table."""
+    from controller.outcome import verdict_line
+
+    run = json.loads((DATA / f"{name}.json").read_text())
+    assert main(["replay", str(DATA / f"{name}.mcap")]) == 0
+    text = capsys.readouterr().out
+    word = verdict_line(run).split()[0]
+    assert word == {"capture": "ARRESTED", "transport": "DELIVERED"}[name]
+    lines = text.splitlines()
+    verdict = next(ln for ln in lines if ln.startswith(word))
+    assert "of log" in verdict
+    assert re.search(r"min_clearance_m\s+0\.0\d+ m \(margin 0\.05 m: ok\)", text), text
+    if name == "transport":
+        assert "0.115 m" in verdict and "3.4°" in verdict
+        assert re.search(r"goal_error_m\s+0\.115 m \(tolerance 0\.2 m: ok\)", text)
+        assert re.search(r"planned_force_mean_n\s+2\.44 N", text)
+        assert re.search(r"relocations\s+5", text)
+    else:
+        assert verdict.startswith("ARRESTED at 16.0 s (no goal set)")
+    assert "fleet log layout" in text and "--plots" in text
 
 
 def layout_refs(layout: dict) -> tuple[set[str], set[str]]:

@@ -576,3 +576,32 @@ def test_ukf_object_stays_positive_definite_after_rejected_jumps() -> None:
         assert np.linalg.eigvalsh(trk.P).min() > 0
     assert statuses[-3:] == ["rejected", "rejected", "accepted"]
     assert trk.P[2, 2] < 1e-3  # the accepted heading measurement shrank the heading variance
+
+
+def test_gate_logs_warn_only_for_rejections_that_never_agree(caplog) -> None:
+    """A consistent jump (re-acquired) is normal operation: INFO only. Scattered outliers that
+    never agree: one WARNING for the episode, however long it lasts."""
+    import logging
+
+    caplog.set_level(logging.INFO, logger="controller.estimation.fleet")
+    est = FleetEstimator([("a", "diff")], params("ekf"), STALE_AFTER)
+    rng = np.random.default_rng(2)
+    t = feed_line(est, "a", 2.0, rng)
+    x0 = est.robot_estimate("a", t).x
+    for _ in range(6):  # moved 1 m: re-acquired after a consistent run
+        t += 0.03
+        est.measure_robot("a", t, x0 + 1.0, 1.0, 0.0)
+    gate = [
+        r for r in caplog.records if "gate" in r.getMessage() or "re-acquired" in r.getMessage()
+    ]
+    assert gate and all(r.levelno == logging.INFO for r in gate)
+    assert any("re-acquired" in r.getMessage() for r in gate)
+    caplog.clear()
+    for _ in range(40):  # scattered outliers, never agreeing
+        t += 0.03
+        ang = rng.uniform(-math.pi, math.pi)
+        est.measure_robot("a", t, x0 + 1.0 + 0.5 * math.cos(ang), 1.0 + 0.5 * math.sin(ang), 0)
+    warned = [
+        r for r in caplog.records if r.levelno >= logging.WARNING and "gate" in r.getMessage()
+    ]
+    assert len(warned) == 1 and "do not agree" in warned[0].getMessage()

@@ -252,3 +252,23 @@ def test_commands_are_zero_while_the_latch_is_unread_and_a_newer_latch_engages(r
     node.tick(1.2)
     assert not node.estop
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.2 for r in cfg.robots)
+
+
+def test_a_robot_gone_is_a_warning_during_the_job_and_info_once_it_is_over(rig, caplog):
+    import logging
+
+    cfg, bus, mission, node = rig
+    caplog.set_level(logging.INFO, logger="controller.runtime.node")
+    a, b, c = cfg.robot_ids[:3]
+    bus.alive_cb["robot"](a, False)  # mid-job: news
+    node.last_output = MissionOutput(np.zeros((len(cfg.robots), 3)), Phase.DONE, [], done=True)
+    bus.alive_cb["robot"](b, False)  # the job is done
+    node.last_output = None
+    node.winding_down = True
+    bus.alive_cb["robot"](c, False)  # the process is stopping
+    gone = {r.getMessage(): r.levelno for r in caplog.records if "gone" in r.getMessage()}
+    assert gone == {
+        f"robot {a} gone": logging.WARNING,
+        f"robot {b} gone": logging.INFO,
+        f"robot {c} gone": logging.INFO,
+    }

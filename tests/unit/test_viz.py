@@ -122,3 +122,26 @@ def test_a_few_robots_get_a_line_each(tmp_path, figures):
     assert labels == [f"r{k}" for k in range(1, 7)]
     colours = {to_hex(ln.get_color()) for ln in est.axes[0].get_lines() if ln.get_label() in labels}
     assert len(colours) == 6
+
+
+def test_a_lab_log_in_epoch_seconds_reads_from_its_start(tmp_path, figures):
+    """A daemon's log is stamped on the wall clock: its plots and its replay text count from
+    the run's start (the --json keeps the stamps, with t0_s beside them)."""
+    from controller.outcome import outcome_table, verdict_line
+    from controller.replay.log import log_t0, metrics_of, shifted
+
+    t0 = 1795841900.0
+    cfg = fleet(6)
+    run = shifted(synthetic_run(cfg), -t0)
+    run.stamps["fleet/x/plan/phase"] = [t0, t0 + 9.0]
+    assert log_t0(run) == t0
+    viz.plot_run(run, tmp_path, {"verdict": []})
+    traj, clear = figures[0], figures[1]
+    title = traj._suptitle.get_text()
+    assert "last phase transport at 8.0 s" in title, title
+    assert "1795" not in title
+    assert clear.axes[0].get_xlim()[1] < 20  # the time axis from the start, not epoch
+    r = metrics_of(run)
+    assert r["t0_s"] == t0 and r["arrest_time_s"] > t0  # --json keeps the stamps
+    text = verdict_line(r) + "\n" + outcome_table(r)
+    assert "1795" not in text and "arrested 6.0 s" in text, text
