@@ -16,7 +16,6 @@ from pathlib import Path
 from controller.commands import add_config_argument, config_path, require_log_target
 from controller.config import MISSION_KINDS, SIM_BACKENDS
 
-
 EXAMPLES = """examples:
   fleet run                                 the dry run of ./fleet.toml (what make run does)
   fleet run --config lab/secure.toml --json one JSON object of figures on stdout

@@ -61,6 +61,8 @@ def lab_outcome(lab: Lab, daemon_code: int | None, interrupted: bool) -> dict[st
         summary["status"] = status
         reason = (summary.get("failure") or {}).get("reason") if status != "ok" else None
         verdict = outcome.verdict_line(summary)
+        if lab.ready_s is not None:
+            verdict += f"; the lab up in {lab.ready_s:.0f} s"
     return {
         "status": status,
         "exit": 0 if status == "ok" else 1,
@@ -98,6 +100,7 @@ def print_outcome(result: dict[str, Any], as_json: bool) -> None:
     job = result.get("job")
     if job and "error" not in job:
         print(outcome.outcome_table(job))
+    print("next:")
     for step in outcome.next_steps(job or {}, result.get("log")):
-        print(f"next: {step}")
-    print(f"logs: {result['run_dir']}")
+        print(f"  {step}")
+    print(f"  every part's log: {result['run_dir']}")
