@@ -34,7 +34,23 @@ EXAMPLES = """examples:
   fleet up --config mixed.toml --mavlink r3 --ros2 r5   # emulate r3 (MAVLink) and r5 (ROS 2)
 """
 
-AGENTS_PER_PROCESS = 1  # see bench/lab.py: the rehearsal's CPU and memory either way
+# agents per process (bench/lab.py, 15 s of a held rehearsal, load 5-10): a process each cost
+# 120 MB and 4.4 % of a core per robot at 6 robots (724 MB, 26 %; one process for all six:
+# 125 MB, 18 %), at 20 robots 2.4 GB and 62 % against 136 MB and 41 %, and bring-up took 41 s
+# against 10 s. A process per robot keeps a crash to one robot (a lost robot is re-planned
+# around; a group's crash loses its robots together), as on robots with their own computers:
+# kept where it is cheap, up to ISOLATE_UP_TO robots; beyond, groups of GROUP agents.
+ISOLATE_UP_TO = 8
+GROUP = 10
+
+
+def agents_per_process(n_robots: int, given: int | None) -> int:
+    """``--agents-per-process``, or by the fleet's size (above)."""
+    if given:
+        return given
+    return 1 if n_robots <= ISOLATE_UP_TO else GROUP
+
+
 DETACH_WAIT = 600.0  # s: --detach waits at most this long for the lab to be up
 
 
@@ -72,10 +88,11 @@ def add_arguments(parser, word: str) -> None:
     parser.add_argument(
         "--agents-per-process",
         type=int,
-        default=AGENTS_PER_PROCESS,
+        default=None,
         metavar="N",
-        help="robot agents run N to a process, a thread each (default "
-        f"{AGENTS_PER_PROCESS}: one process per robot, as on the robots' own computers)",
+        help="robot agents run N to a process, a thread each (default: a process per robot up "
+        f"to {ISOLATE_UP_TO} robots, beyond that {GROUP} to a process; bench/lab.py measures "
+        "both)",
     )
     parser.add_argument(
         "--viz",
@@ -177,7 +194,7 @@ def _foreground(args, cfg, run_dir: Path) -> int:
         args.ready_timeout,
         remote=remote_ids(cfg, args.remote),
         viz=args.viz,
-        agents_per_process=args.agents_per_process,
+        agents_per_process=agents_per_process(len(cfg.robots), args.agents_per_process),
     )
     tty = sys.stdout.isatty() and not args.plain and not args.json
     console = make_console(args.config, live=tty)
@@ -225,7 +242,8 @@ def _detach(args, cfg, run_dir: Path) -> int:
             ["--ros2", args.ros2] if args.ros2 else []
         )
         argv += (["--remote", args.remote] if args.remote else []) + (["--viz"] if args.viz else [])
-        argv += ["--agents-per-process", str(args.agents_per_process)]
+        if args.agents_per_process:
+            argv += ["--agents-per-process", str(args.agents_per_process)]
     argv += ["--plain", "--run-dir", str(run_dir)]
     with open(run_dir / "console.log", "w") as out:
         proc = subprocess.Popen(

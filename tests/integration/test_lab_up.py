@@ -215,3 +215,40 @@ def _phase(cfg: Path) -> str:
 def _restarted(state_file: Path, rid: str) -> bool:
     part = ((read_state(state_file) or {}).get("parts") or {}).get(rid) or {}
     return part.get("restarts", 0) >= 1 and bool(part.get("ready"))
+
+
+def test_agents_in_groups_come_up_and_fleet_down_stops_a_lab_before_its_resume(tmp_path):
+    """Three agents to a process (a thread each), the ideal world, detached; ``fleet down``
+    before any resume: the lab stops with a verdict saying so, exit 1, nothing left running."""
+    port = free_port()
+    data = tomllib.loads((ROOT / "lab.toml").read_text())
+    data["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
+    data["log"] = {"dir": str(tmp_path / "runs")}
+    data["sim"]["backend"] = "ideal"
+    cfg = write_toml(tmp_path / "lab.toml", data)
+    c = str(cfg)
+    up = fleet("up", "--config", c, "--detach", "--agents-per-process", "3", timeout=300)
+    assert up.returncode == 0, up.stdout + up.stderr
+    assert "fleet resume --config" in up.stdout  # the next step, named
+    state = read_state(tmp_path / "runs" / "lab-lab.json")
+    agents = [k for k in state["parts"] if k.startswith("r")]
+    assert agents == ["r1,r2,r3", "r4,r5,r6"] and all(state["parts"][k]["ready"] for k in agents)
+    status = fleet("status", "--config", c, "--json")
+    robots = json.loads(status.stdout)["robots"]
+    assert [r["present"] for r in robots] == [True] * 6
+    down = fleet("down", "--config", c, "--json", timeout=300)
+    result = json.loads(down.stdout)
+    assert down.returncode == 1 and result["status"] == "stopped", result
+    assert "before any resume" in result["verdict"]
+    assert "every robot e-stopped" in result["verdict"]
+    final = read_state(tmp_path / "runs" / "lab-lab.json")
+    pids = [p["pid"] for p in final["parts"].values()] + [final["pid"]]
+    assert not [p for p in pids if p and _alive(p)]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True

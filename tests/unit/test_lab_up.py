@@ -212,3 +212,15 @@ def test_the_plain_console_prints_changes_only():
     assert out.getvalue() == first  # nothing changed: nothing printed
     console(_snap("running", "released"))
     assert "stage: running" in out.getvalue()[len(first) :]
+
+
+def test_agents_are_a_process_each_for_a_small_fleet_and_grouped_for_a_large_one(tmp_path):
+    from controller.commands.up import GROUP, ISOLATE_UP_TO, agents_per_process
+
+    assert agents_per_process(6, None) == 1
+    assert agents_per_process(ISOLATE_UP_TO + 1, None) == GROUP
+    assert agents_per_process(50, 3) == 3  # the operator's choice stands
+    parts = plan_parts(rehearsal(), "lab.toml", tmp_path, "capture", agents_per_process=4)
+    groups = [p for p in parts if p.role == "agent"]
+    assert [p.robots for p in groups] == [("r1", "r2", "r3", "r4"), ("r5", "r6")]
+    assert groups[0].argv[groups[0].argv.index("driver") + 1] == "r1,r2,r3,r4"
