@@ -76,15 +76,20 @@ def run(args) -> int:
     planners = PlannerWorker.for_config(cfg, lockstep=True)
     mission = build_mission(cfg, args.mission, planners=planners)  # MissionError: exit 1
     print(f"fleet run: {cfg.source}, backend {cfg.sim.backend}, log {out}", file=sys.stderr)
-    summary = DryRun(
-        cfg,
-        mission,
-        out,
-        gui=args.gui,
-        max_time=args.max_time,
-        viz=args.viz,
-        planners=planners,
-    ).run_summary()
+    dry = DryRun(
+        cfg, mission, out, gui=args.gui, max_time=args.max_time, viz=args.viz, planners=planners
+    )
+    bar = None
+    if sys.stderr.isatty():  # a progress bar on a terminal; the progress lines otherwise
+        from controller.runtime.console import RunProgress
+
+        bar = RunProgress(dry.max_time)
+        dry.on_progress = bar.update
+    try:
+        summary = dry.run_summary()
+    finally:
+        if bar is not None:
+            bar.close()
     figures = summary.to_json()
     if args.json:
         emit_json(figures)

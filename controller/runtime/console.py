@@ -11,6 +11,7 @@ change (a part ready, exited or restarted; the stage, phase or e-stop) and a pro
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import sys
 import threading
@@ -191,3 +192,57 @@ class Keys:
 def make_console(config: str, live: bool):
     """The live panel on a terminal (``live``), plain lines otherwise."""
     return LiveConsole(config) if live else PlainConsole(config)
+
+
+class RunProgress:
+    """``fleet run``'s progress bar on a terminal (stderr): sim time against ``sim.max_time``,
+    the phase, the object's distance to its goal, the wall time and an ETA from the pace of
+    the last stretch towards the goal."""
+
+    def __init__(self, max_time: float) -> None:
+        from rich.console import Console
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        self.progress = Progress(
+            TextColumn("[bold]{task.fields[phase]:<9}"),
+            BarColumn(),
+            TextColumn("sim {task.completed:6.1f} s of {task.total:.0f}"),
+            TextColumn("{task.fields[goal]}"),
+            TimeElapsedColumn(),
+            console=Console(stderr=True),
+            transient=True,
+        )
+        self.task = self.progress.add_task("run", total=max_time, phase="plan", goal="")
+        self.progress.start()
+        # the log above the bar, not through it (rich's stderr proxy); the INFO progress of
+        # the stages is the bar's now: warnings only, unless -v asked for debug
+        self._handlers = []
+        root = logging.getLogger()
+        for h in root.handlers:
+            if isinstance(h, logging.StreamHandler):
+                self._handlers.append((h, h.stream, h.level))
+                h.setStream(sys.stderr)
+                if root.level > logging.DEBUG:
+                    h.setLevel(logging.WARNING)
+        self._pace: list[tuple[float, float]] = []  # (sim t, m to goal)
+        self._last = -1.0
+
+    def update(self, t: float, phase: str, figures: dict) -> None:
+        if t - self._last < 0.25:  # a redraw every quarter second of sim time is plenty
+            return
+        self._last = t
+        goal = ""
+        d = figures.get("to_goal_m")
+        if isinstance(d, float):
+            self._pace = [(a, b) for a, b in self._pace if a > t - 20.0] + [(t, d)]
+            t0, d0 = self._pace[0]
+            pace = (d0 - d) / (t - t0) if t - t0 > 3.0 else 0.0
+            eta = f", ETA {d / pace:.0f} s of sim" if pace > 0.005 else ""
+            goal = f"object {d:.2f} m from its goal{eta}"
+        self.progress.update(self.task, completed=t, phase=phase, goal=goal)
+
+    def close(self) -> None:
+        self.progress.stop()
+        for h, stream, level in self._handlers:
+            h.setStream(stream)
+            h.setLevel(level)

@@ -9,7 +9,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -259,6 +259,9 @@ class DryRun:
         self.mission_failure: RunFailure | None = None
         self.run_failure: RunFailure | None = None  # the dry run itself broke (lockstep lost)
         self._next_progress = 0.0
+        # a live progress display (``fleet run`` on a terminal): called every tick with sim
+        # time, phase and the mission's progress figures, in place of the progress lines
+        self.on_progress: Callable[[float, str, dict[str, Any]], None] | None = None
 
     def run(self) -> dict[str, Any]:
         """The run; its ``fleet run --json`` object (:meth:`run_summary` for the typed one)."""
@@ -396,7 +399,11 @@ class DryRun:
                     time.sleep(lag)
 
     def _progress(self, t: float, out, world) -> None:
-        """A progress line every few sim seconds: phase, distances, object speed."""
+        """A progress line every few sim seconds: phase, distances, object speed (or the live
+        display's update every tick)."""
+        if out is not None and self.on_progress is not None:
+            self.on_progress(t, str(out.phase), out.progress)
+            return
         if t < self._next_progress or out is None:
             return
         self._next_progress = t + self.progress_every

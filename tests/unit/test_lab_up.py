@@ -224,3 +224,23 @@ def test_agents_are_a_process_each_for_a_small_fleet_and_grouped_for_a_large_one
     groups = [p for p in parts if p.role == "agent"]
     assert [p.robots for p in groups] == [("r1", "r2", "r3", "r4"), ("r5", "r6")]
     assert groups[0].argv[groups[0].argv.index("driver") + 1] == "r1,r2,r3,r4"
+
+
+def test_the_run_progress_bar_shows_phase_sim_time_and_the_way_to_the_goal():
+    import logging
+
+    from controller.runtime.console import RunProgress
+
+    root = logging.getLogger()
+    levels = [h.level for h in root.handlers]
+    bar = RunProgress(100.0)
+    try:
+        bar.update(4.0, "transport", {"to_goal_m": 2.0})
+        bar.update(9.0, "transport", {"to_goal_m": 1.5})  # 0.1 m/s: 15 s of sim to go
+        task = bar.progress.tasks[0]
+        assert task.completed == 9.0 and task.total == 100.0
+        assert task.fields["phase"] == "transport"
+        assert task.fields["goal"] == "object 1.50 m from its goal, ETA 15 s of sim"
+    finally:
+        bar.close()
+    assert [h.level for h in root.handlers] == levels  # the log as it was
