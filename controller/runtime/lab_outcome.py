@@ -47,7 +47,8 @@ def lab_outcome(lab: Lab, daemon_code: int | None, interrupted: bool) -> dict[st
         verdict = f"FAILED before the job ended: {lab.failure}"
     elif interrupted and daemon_code is None:
         status, reason = "stopped", "interrupted"
-        verdict = f"STOPPED by the operator in phase {_last_phase(job)}"
+        phase = _last_phase(job)
+        verdict = "STOPPED by the operator" + (f" in phase {phase}" if phase else "")
         if lab.resumed_at is not None and lab.stopped_at is not None:
             verdict += f", {lab.stopped_at - lab.resumed_at:.0f} s after the resume"
         else:
@@ -83,10 +84,11 @@ def _estop_words(result: dict[str, Any] | None) -> str:
 
 
 def _last_phase(job: dict[str, Any] | None) -> str:
+    """The job's last phase in the log ("" when it logged none)."""
     phases = (job or {}).get("phases") or []
     if phases and isinstance(phases[-1], dict):
-        return str(phases[-1].get("phase", "?"))
-    return "?"
+        return str(phases[-1].get("phase", ""))
+    return ""
 
 
 def print_outcome(result: dict[str, Any], as_json: bool) -> None:
