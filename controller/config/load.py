@@ -292,7 +292,7 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     not TOML or nests too deep for the parser)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a byte-order mark (Windows editors) is fine
     except OSError as exc:
         raise ConfigError(str(p), "", f"cannot read: {exc.strerror or exc}") from exc
     except UnicodeDecodeError as exc:

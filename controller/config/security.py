@@ -161,6 +161,25 @@ def _check_identity(src: str, path: str, user: str, password: str, password_file
         raise ConfigError(src, pw, f"{u} = {user!r} needs a password or a password_file")
     if ":" in user:
         raise ConfigError(src, u, f"a zenoh user name cannot contain ':', got {user!r}")
+    plain_name(src, u, user)
+
+
+USER_NAME = re.compile(r"^[A-Za-z0-9_.@+\-]+$")
+
+
+def plain_name(src: str, path: str, name: str) -> None:
+    """An identity's name in plain ASCII: a look-alike (Cyrillic 'а' for 'a', a zero-width
+    space, a full-width letter) would be another identity to the hub's ACL while it reads the
+    same to a person."""
+    if name and not USER_NAME.match(name):
+        odd = sorted({f"U+{ord(c):04X}" for c in name if not USER_NAME.match(c)})
+        raise ConfigError(
+            src,
+            path,
+            f"{name!r} has characters an identity may not ({', '.join(odd)}): ASCII letters, "
+            "digits and _ . @ + - only (a look-alike or invisible character would make another "
+            "identity that reads the same)",
+        )
 
 
 def _check_identities(cfg: FleetConfig, src: str) -> None:
@@ -174,6 +193,7 @@ def _check_identities(cfg: FleetConfig, src: str) -> None:
     if z.user:
         users[z.user] = "zenoh.user (the controller)"
     for j, op in enumerate(z.operators):
+        plain_name(src, f"zenoh.operators[{j}]", op)
         if op in users:
             raise ConfigError(
                 src, f"zenoh.operators[{j}]", f"{op!r} is already {users[op]}: one identity each"

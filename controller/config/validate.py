@@ -47,7 +47,19 @@ from controller.config.security import _check_zenoh, _validate_zenoh
 # --------------------------------------------------------------------------- cross-field rules
 
 
+MAX_POLYGON_VERTICES = 1000  # the checks below are quadratic in the vertices (20 000: 6.9 GB)
+
+
+def _polygon_size(poly: Any, path: str, src: str) -> None:
+    """Refuse a polygon too large to check (before anything allocates for it)."""
+    if len(poly) > MAX_POLYGON_VERTICES:
+        raise ConfigError(
+            src, path, f"{len(poly)} vertices: at most {MAX_POLYGON_VERTICES} (simplify it)"
+        )
+
+
 def _polygon(poly: Polygon, path: str, src: str) -> Polygon:
+    _polygon_size(poly, path, src)
     p = np.asarray(poly, dtype=float)
     if len(p) < 3:
         raise ConfigError(src, path, f"expected a polygon of at least 3 vertices, got {len(p)}")
@@ -204,6 +216,7 @@ def merge_vertices(poly: Any, tol: float = 1e-9) -> tuple[np.ndarray, int, int]:
 def _object(cfg: FleetConfig, src: str) -> tuple[ObjectSection, tuple[str, ...]]:
     """The object section with its polygon merged (duplicate and collinear vertices, noted),
     validated and within the capture planner's node budget."""
+    _polygon_size(cfg.object.polygon, "object.polygon", src)
     merged, dup, col = merge_vertices(cfg.object.polygon)
     notes = cfg.notes
     if dup or col:

@@ -397,3 +397,38 @@ def test_bad_toml_is_one_error(tmp_path, capsys):
     lines, out = _check_lines(path, capsys)
     assert len(out["errors"]) == 1 and "not valid TOML" in out["error"]
     assert lines[-1] == f"fleet check: 1 error in {path}"
+
+
+def test_a_huge_polygon_is_refused_before_anything_allocates_for_it(tmp_path, capsys):
+    import math
+
+    ring = [
+        [5 + math.cos(a), 5 + math.sin(a)] for a in (2 * math.pi * k / 20000 for k in range(20000))
+    ]
+    path = _write(tmp_path, lambda d: d["object"].__setitem__("polygon", ring))
+    _check_fails(path, "object.polygon", "20000 vertices: at most 1000", capsys)
+    path = _write(tmp_path, lambda d: d["obstacles"][0].__setitem__("polygon", ring))
+    _check_fails(path, "obstacles[0].polygon", "at most 1000", capsys)
+
+
+@pytest.mark.parametrize(
+    "user, char",
+    [("op\u200balice", "U+200B"), ("\u0430lice", "U+0430"), ("ａlice", "U+FF41")],
+)
+def test_look_alike_identities_are_refused(tmp_path, capsys, user, char):
+    def mutate(d):
+        d["zenoh"]["operators"] = [user]
+
+    _check_fails(_write(tmp_path, mutate), "zenoh.operators[0]", char, capsys)
+
+    def robot(d):
+        d["robots"][0].update(zenoh_user=user, zenoh_password="secret")
+
+    _check_fails(_write(tmp_path, robot), "robots[0].zenoh_user", char, capsys)
+
+
+def test_a_byte_order_mark_is_read_as_nothing(tmp_path):
+    good = _write(tmp_path, lambda d: None)
+    bom = tmp_path / "bom.toml"
+    bom.write_bytes(b"\xef\xbb\xbf" + good.read_bytes())
+    assert load_config(str(bom)).robot_ids == load_config(str(good)).robot_ids
