@@ -19,9 +19,10 @@ talk to that version at all.)
 - attachment (zenoh-ext serialization): int64 sequence number (from 1), int64 source timestamp
   (ns since the epoch, the publisher's clock), the 16-byte GID as a sequence (LEB128 length 16
   then the bytes): 33 bytes, little endian;
-- GID: rmw_zenoh hashes the entity's liveliness key with XXH3-128; we hash it with SHA-256
-  (first 16 bytes): unique per entity the same way, and no ROS 2 node checks one against the
-  other (it only compares GIDs with each other).
+- GID: XXH3-128 of the entity's liveliness key expression, its ``low64`` then its ``high64``
+  word, each in the host's (little-endian) byte order, as ``Entity::Entity`` memcpy's them
+  (``liveliness_utils.cpp``): what ``ros2 topic info -v`` lists and what a receiver's
+  ``publisher_gid`` (``rmw_message_info_t``) carries.
 
 Frames (REP 103, REP 105): a ROS body frame is x forward, y left, z up, like our command's
 body frame, so a twist maps one to one; a pose arrives in the robot's ``odom`` (or a mocap
@@ -30,10 +31,11 @@ body frame, so a twist maps one to one; a pose arrives in the robot's ``odom`` (
 
 from __future__ import annotations
 
-import hashlib
 import math
 import re
 import struct
+
+import xxhash
 
 from drivers.ros2.msgs import dds_type_name, type_hash
 
@@ -137,8 +139,11 @@ def parse_token(token: str) -> dict[str, str] | None:
 
 
 def gid(token: str) -> bytes:
-    """The entity's 16-byte GID, derived from its liveliness token."""
-    return hashlib.sha256(token.encode()).digest()[:GID_SIZE]
+    """The entity's 16-byte GID as rmw_zenoh computes it from its liveliness token: XXH3-128
+    of the token's text, ``low64`` then ``high64``, little endian. (xxhash's ``digest()`` is
+    the canonical big-endian ``high64 || low64``: the same bytes in the other order.)"""
+    h = xxhash.xxh3_128_intdigest(token.encode())
+    return struct.pack("<QQ", h & 0xFFFF_FFFF_FFFF_FFFF, h >> 64)
 
 
 def attachment(seq: int, source_timestamp_ns: int, source_gid: bytes) -> bytes:

@@ -109,6 +109,25 @@ def test_the_robot_discovers_our_node_by_its_liveliness_tokens(link):
     assert robot == {("NN", None), ("MS", "/tb1/cmd_vel"), ("MP", "/tb1/odom")}
 
 
+def test_the_attachment_gid_is_rmw_zenohs_hash_of_our_publishers_token(link):
+    """What a ROS 2 receiver gets as ``publisher_gid`` (and ``ros2 topic info -v`` lists) is
+    XXH3-128 of the publisher's liveliness key expression, low64 then high64, little endian:
+    computed here from the MP token the robot discovers on the wire, not from our own key."""
+    import xxhash
+
+    link.driver.send(Twist2D(t=0.0, vx=0.1))
+    link.advance(0.05)
+    _, _, gid = keys.parse_attachment(link.robot.raw_commands[-1][1])
+    replies = link.session.liveliness().get("@ros2_lv/0/*/*/*/MP/**", timeout=5.0)
+    (token,) = [
+        str(r.ok.key_expr) for r in replies if r.ok is not None and "fleet_driver_r1" in
+        str(r.ok.key_expr)
+    ]  # fmt: skip
+    h = xxhash.xxh3_128_intdigest(token.encode())
+    low, high = h % 2**64, h >> 64
+    assert gid == low.to_bytes(8, "little") + high.to_bytes(8, "little")
+
+
 @pytest.mark.parametrize(
     "link",
     [
