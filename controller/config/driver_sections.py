@@ -77,9 +77,10 @@ class Ros2Section:
     # the zenoh router of the robot's ROS graph (rmw_zenohd) and how we join it
     connect: tuple[str, ...] = _rule((ROS2_ROUTER,))
     mode: str = _rule("client", choices=("client", "peer"))
-    # s without a fresh pose before the link is lost and the agent gives the robot up (a pose
-    # older than fleet.stale_after is dropped at once: the robot is stale, commanded zero, and
-    # its agent's watchdog stops it); as the MAVLink link_timeout: a Wi-Fi hiccup is not a loss
+    # s without a fresh pose before the link is lost (a pose older than fleet.stale_after is
+    # dropped at once: the robot is stale, commanded zero, and its agent's watchdog stops it); as
+    # the MAVLink link_timeout: a Wi-Fi hiccup is not a loss. A lost link is held: the agent
+    # keeps the robot stopped and stays up, link_restored when fresh poses return
     link_timeout: float = _rule(2.5, gt=0, max=60)
 
 

@@ -14,7 +14,9 @@ Our side is a ROS 2 node (``node_name`` in the robot's ``namespace`` on ``domain
 - a pose whose stamp is older than ``stale_after`` (``fleet.stale_after``) on our clock is
   stale: counted and dropped, it does not keep the link alive; the link is lost when no fresh
   pose came for ``link_timeout`` seconds (``[robots.ros2] link_timeout``; until then the robot
-  is only stale for the controller, which stops commanding it);
+  is only stale for the controller, which stops commanding it); the node, its subscription and
+  the session stay, so the link is up again with the next fresh pose (``fleet driver`` holds
+  the robot stopped meanwhile and reports ``link_restored`` then);
 - ``connect`` waits for the first fresh pose and for the robot's ``cmd_vel`` subscription to
   match our publisher (``ConnectTimeout`` naming the key).
 
