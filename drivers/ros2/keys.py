@@ -15,7 +15,12 @@ talk to that version at all.)
 - liveliness token: ``@ros2_lv/<domain>/<zid>/<node id>/<entity id>/<NN|MP|MS>/<enclave>/
   <namespace>/<node>[/<topic>/<dds type>/<type hash>/<qos>]`` with every ``/`` inside a part
   mangled to ``%`` (the root namespace and enclave are ``%``); ``<qos>`` lists only what
-  differs from the default profile (``::,:,:,:,,`` is all defaults);
+  differs from rmw_zenoh's default profile (``::,:,:,:,,`` is all defaults: reliability,
+  durability, history,depth, deadline s,ns, lifespan s,ns, liveliness,lease s,ns). Our
+  entities are RELIABLE, VOLATILE, KEEP_LAST 10: rmw_zenoh's defaults since jazzy 0.2.3 /
+  rolling 0.5.0, when the durability default became VOLATILE (TRANSIENT_LOCAL before, so an
+  empty durability there would claim a late-joiner cache we do not keep). Those older robots
+  are below the supported releases anyway (``SUPPORTED_RMW_ZENOH``: the attachment);
 - attachment (zenoh-ext serialization): int64 sequence number (from 1), int64 source timestamp
   (ns since the epoch, the publisher's clock), the 16-byte GID as a sequence (LEB128 length 16
   then the bytes): 33 bytes, little endian;
@@ -44,6 +49,10 @@ NODE, PUBLISHER, SUBSCRIPTION = "NN", "MP", "MS"
 DEFAULT_QOS = "::,:,:,:,,"
 GID_SIZE = 16
 _ATTACHMENT = struct.Struct("<qqB16s")  # seq, source timestamp, LEB128(16), gid
+ATTACHMENT_SIZE = _ATTACHMENT.size  # 33
+#: the rmw_zenoh releases of this attachment (and of zenoh 1.x); older robots read ours as
+#: malformed (the config's ``ros2.rmw_zenoh`` refuses them: RMW_ZENOH_MIN there)
+SUPPORTED_RMW_ZENOH = "jazzy 0.2.4, rolling 0.6.0, humble 0.1.2"
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 

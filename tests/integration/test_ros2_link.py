@@ -200,6 +200,24 @@ def test_a_bad_payload_is_counted_not_raised(link):
     assert len(d.poll()) == 1 and d.bad == 1 and d.health().ok
 
 
+def test_a_pose_with_another_attachment_is_used_and_counted(link, caplog):
+    """A robot on an rmw_zenoh older than the supported releases sends another attachment: its
+    pose still counts, and the driver says once, as an error, what the robot runs."""
+    d = link.driver
+    d.poll()
+    assert d.foreign_attachments == 0  # the stand-in's poses carry rmw_zenoh's 33 bytes
+    payload = msgs.encode(
+        "nav_msgs/msg/Odometry", msgs.pose_message("odometry", link.robot.t, 0.0, 0.0, 0.0)
+    )
+    for _ in range(2):
+        link.robot.pub._pub.put(payload, attachment=b"\x00" * 40)  # not rmw_zenoh 0.2.4's
+        link.robot.published += 1
+    wait_for(lambda: d.samples_seen() >= link.robot.published, 5, "the poses")
+    assert len(d.poll()) == 2 and d.foreign_attachments == 2
+    said = [r for r in caplog.records if "40-byte attachment" in r.getMessage()]
+    assert len(said) == 1 and "jazzy 0.2.4" in said[0].getMessage()
+
+
 def test_a_pose_from_rosbags_with_covariance_gives_sigma(link):
     d = link.driver
     d.poll()
