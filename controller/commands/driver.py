@@ -4,7 +4,9 @@ Binds the robot's driver (``robots[].driver``) to the bus: commands in, poses ou
 watchdog, e-stop. Runs on the robot's computer or beside the daemon, on the wall clock at
 ``fleet.rate_hz`` (at least 20 Hz). A ``mavlink`` robot is the real vehicle at its url; a ``sim``
 robot runs alone in a real-time stand-in world of its own (bench-top bring-up without hardware).
-Exit 1 when the robot does not answer or its link is lost, 2 on bad config. ``--strict``: also
+Exit 1 when the robot does not answer at start or (MAVLink) its link is lost, 2 on bad config; a
+ROS 2 robot (or a sim robot of ``fleet world``) whose link is lost is held stopped, its agent
+staying up (``link_lost``, then ``link_restored`` when it answers again). ``--strict``: also
 refuse (exit 1) a MAVLink vehicle whose own setpoint timeout (PX4 ``COM_OF_LOSS_T``; ArduRover
 its GUIDED timeout and GCS failsafe) is longer than the robot's ``max_vehicle_timeout``, cannot
 be read, or is unsafe (drivers/mavlink/failsafe.py; otherwise a warning).

@@ -52,6 +52,36 @@ class MavlinkSection:
 ROS2_CMD_TYPES = ("twist", "twist_stamped")
 ROS2_POSE_TYPES = ("odometry", "pose_stamped")
 ROS2_ROUTER = "tcp/127.0.0.1:7447"  # rmw_zenohd's default endpoint on the robot's host
+#: the oldest rmw_zenoh release of each distro we speak to: the 33-byte sample attachment
+#: (sequence, source time, 16-byte GID; rmw_zenoh #605) and zenoh 1.x; older robots read our
+#: commands' attachment as malformed. drivers/ros2/keys.py has the wire format.
+RMW_ZENOH_MIN = {"humble": (0, 1, 2), "jazzy": (0, 2, 4), "rolling": (0, 6, 0)}
+_RMW_ZENOH = re.compile(r"^\s*([a-z]+)\s+(\d+)\.(\d+)\.(\d+)\s*$")
+
+
+def rmw_zenoh_supported() -> str:
+    """The supported rmw_zenoh releases, for messages and docs."""
+    return ", ".join(f"{d} >= {'.'.join(map(str, v))}" for d, v in RMW_ZENOH_MIN.items())
+
+
+def rmw_zenoh_problem(value: str) -> str | None:
+    """Why a ``ros2.rmw_zenoh`` value (``"<distro> <x.y.z>"``, ``""``: not stated) is refused,
+    or None."""
+    if not value.strip():
+        return None
+    m = _RMW_ZENOH.match(value)
+    if m is None:
+        return f"expected '<distro> <x.y.z>' (e.g. 'jazzy 0.2.5'), got {value!r}"
+    distro, version = m.group(1), tuple(int(g) for g in m.groups()[1:])
+    least = RMW_ZENOH_MIN.get(distro)
+    if least is None:
+        return f"unknown ROS 2 distro {distro!r} (supported: {rmw_zenoh_supported()})"
+    if version < least:
+        return (
+            f"rmw_zenoh {distro} {'.'.join(map(str, version))} is not supported: older releases "
+            f"use another sample attachment (and older zenoh); supported: {rmw_zenoh_supported()}"
+        )
+    return None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -77,10 +107,15 @@ class Ros2Section:
     # the zenoh router of the robot's ROS graph (rmw_zenohd) and how we join it
     connect: tuple[str, ...] = _rule((ROS2_ROUTER,))
     mode: str = _rule("client", choices=("client", "peer"))
-    # s without a fresh pose before the link is lost and the agent gives the robot up (a pose
-    # older than fleet.stale_after is dropped at once: the robot is stale, commanded zero, and
-    # its agent's watchdog stops it); as the MAVLink link_timeout: a Wi-Fi hiccup is not a loss
+    # s without a fresh pose before the link is lost (a pose older than fleet.stale_after is
+    # dropped at once: the robot is stale, commanded zero, and its agent's watchdog stops it); as
+    # the MAVLink link_timeout: a Wi-Fi hiccup is not a loss. A lost link is held: the agent
+    # keeps the robot stopped and stays up, link_restored when fresh poses return
     link_timeout: float = _rule(2.5, gt=0, max=60)
+    # the robot's rmw_zenoh release, "<distro> <x.y.z>" (`apt show ros-<distro>-rmw-zenoh-cpp`),
+    # checked against RMW_ZENOH_MIN; "": not stated (assumed supported; the driver logs an
+    # error when the robot's samples carry another attachment than the supported releases')
+    rmw_zenoh: str = _rule("")
 
 
 #: an ArduRover's FS_TIMEOUT must span this many of our heartbeat periods (one lost or late
@@ -249,6 +284,9 @@ def _validate_ros2(cfg: FleetConfig, i: int, src: str) -> None:
                 src, f"{path}.connect[{k}]", f"expected a zenoh endpoint like {ROS2_ROUTER!r}, "
                 f"got {ep!r}",
             )  # fmt: skip
+    problem = rmw_zenoh_problem(s.rmw_zenoh)
+    if problem is not None:
+        raise ConfigError(src, f"{path}.rmw_zenoh", problem)
     if _ros2_topic(s.namespace, s.cmd_topic) == _ros2_topic(s.namespace, s.pose_topic):
         raise ConfigError(src, f"{path}.pose_topic", "the same topic as cmd_topic")
     mine = (s.domain_id, _ros2_topic(s.namespace, s.cmd_topic))

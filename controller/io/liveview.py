@@ -4,7 +4,12 @@
 message and every scene message the recorder writes is offered here too, so the Foxglove app
 (Open connection → Foxglove WebSocket → ``ws://127.0.0.1:<port>``) shows a running fleet with the
 same layout as a recorded one. ``offer`` never blocks: it puts into a bounded queue and counts
-what a full queue drops; one thread of its own hands the messages to the foxglove-sdk server.
+what a full queue drops; one thread of its own hands the messages to the foxglove-sdk server
+and to the legacy clients' side of the endpoint.
+
+The endpoint on ``viz.port`` is :mod:`controller.io.wsfront`'s: it accepts the current
+``foxglove.sdk.v1`` (relayed to foxglove-sdk's server on a loopback port of its own) and the
+legacy ``foxglove.websocket.v1`` (Lichtblick, older Foxglove Studio), served from the same feed.
 """
 
 from __future__ import annotations
@@ -16,6 +21,8 @@ from typing import Any
 
 import foxglove
 
+from controller.io.wsfront import Front
+
 log = logging.getLogger(__name__)
 
 HOST = "127.0.0.1"  # loopback only (a lab machine's other interfaces are not ours to serve)
@@ -26,7 +33,13 @@ class LiveView:
 
     def __init__(self, port: int = 8765, queue_size: int = 4096, name: str = "fleet") -> None:
         self._ctx = foxglove.Context()
-        self._server = foxglove.start_server(name=name, host=HOST, port=port, context=self._ctx)
+        # foxglove-sdk's own server on a free loopback port: the front on ``port`` relays to it
+        self._server = foxglove.start_server(name=name, host=HOST, port=0, context=self._ctx)
+        try:
+            self._front = Front(HOST, port, int(self._server.port), name)
+        except BaseException:
+            self._server.stop()
+            raise
         self._q: queue.Queue[tuple[str, str, bytes, bytes, int] | None] = queue.Queue(queue_size)
         self._channels: dict[str, Any] = {}
         self.sent = 0
@@ -37,7 +50,7 @@ class LiveView:
 
     @property
     def port(self) -> int:
-        return int(self._server.port)
+        return self._front.port
 
     @property
     def url(self) -> str:
@@ -53,7 +66,7 @@ class LiveView:
             self.dropped += 1
 
     def drops(self) -> dict[str, int]:
-        return {"viz_dropped": self.dropped}
+        return {"viz_dropped": self.dropped + self._front.dropped}
 
     def _channel(self, topic: str, schema: str, schema_data: bytes) -> Any:
         ch = self._channels.get(topic)
@@ -73,6 +86,7 @@ class LiveView:
             topic, schema, schema_data, payload, log_ns = item
             try:
                 self._channel(topic, schema, schema_data).log(payload, log_time=log_ns)
+                self._front.publish(topic, schema, schema_data, payload, log_ns)
                 self.sent += 1
             except Exception:  # noqa: BLE001 - a viewer problem never stops the recorder
                 self.dropped += 1
@@ -85,4 +99,5 @@ class LiveView:
         self._closed = True
         self._q.put(None)  # blocks only while the queue is full: the thread is draining it
         self._thread.join(timeout=10)
+        self._front.close()
         self._server.stop()

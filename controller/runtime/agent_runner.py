@@ -69,10 +69,11 @@ def run_agent(
     A ``mavlink`` robot connects to its vehicle at its url; a ``sim`` robot runs alone in a
     real-time stand-in world of its own, or, with ``sim.world = "process"``, is the robot of
     that id in the shared ``fleet world`` process (reached over the bus). Exit 1 when the robot
-    does not answer or its link is lost (the robot is stopped first; a robot of the world process
-    instead waits, stopped, for the world to come back). ``strict``: a MAVLink
-    vehicle whose own setpoint timeout is longer than ``max_vehicle_timeout`` (or unreadable)
-    is refused (exit 1).
+    does not answer at start or (a MAVLink robot) its link is lost (the robot is stopped first);
+    a robot of the world process or a ROS 2 robot (``DriverClass.holds_on_loss``) instead
+    waits, stopped, for its link to come back (``link_lost``, then ``link_restored``).
+    ``strict``: a MAVLink vehicle whose own setpoint timeout is longer than
+    ``max_vehicle_timeout`` (or unreadable) is refused (exit 1).
     """
     from drivers.base import DriverError
 
@@ -92,7 +93,10 @@ def run_agent(
         if bus is None:
             return 0, ""
         with bus:
-            return _serve(cfg, robot, bus, driver, stop, duration, wall0, hub)
+            hold = driver_class(robot).holds_on_loss
+            return _serve(
+                cfg, robot, bus, driver, stop, duration, wall0, hub, exit_on_loss=not hold
+            )
     finally:
         driver.close()
         if hub is not None:

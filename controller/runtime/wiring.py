@@ -71,7 +71,10 @@ class DriverClass:
     ``keepalive``: a dry run services it while others connect. ``local(cfg, robot, wall0,
     strict)``: ``fleet driver``'s driver when it needs no bus to connect, and the real-time
     world of its own or None; ``over_bus(cfg)``: whether ``fleet driver`` builds it on the bus
-    instead, with ``remote(bus, cfg, robot)`` (e.g. a sim robot of the ``fleet world`` process)."""
+    instead, with ``remote(bus, cfg, robot)`` (e.g. a sim robot of the ``fleet world`` process).
+    ``holds_on_loss``: a lost link does not end ``fleet driver``: its agent holds the robot
+    stopped, keeps its driver (and the link's session) and reports ``link_restored`` when the
+    robot answers again (a robot of the world process always does, over the bus)."""
 
     name: str
     dry_run: Callable[[DryRunLinks, FleetConfig, RobotConfig], Any]
@@ -79,6 +82,7 @@ class DriverClass:
     keepalive: bool = False
     over_bus: Callable[[FleetConfig], bool] = lambda cfg: False
     remote: Callable[[Any, FleetConfig, RobotConfig], Any] | None = None
+    holds_on_loss: bool = False
 
 
 DRIVER_CLASSES: dict[str, DriverClass] = {}
@@ -176,7 +180,9 @@ def _ros2_local(cfg: FleetConfig, r: RobotConfig, wall0: float, strict: bool):
     return driver, None
 
 
-register_driver_class(DriverClass("ros2", _ros2_dry_run, _ros2_local))
+# a ROS 2 robot's odometry falling silent (Wi-Fi, its router restarted) is not the end of its
+# agent: it holds the robot stopped and rejoins when the odometry returns
+register_driver_class(DriverClass("ros2", _ros2_dry_run, _ros2_local, holds_on_loss=True))
 
 
 def make_sim_drivers(cfg: FleetConfig, hub: SimHub, connect_timeout: float = 5.0):

@@ -14,7 +14,9 @@ Our side is a ROS 2 node (``node_name`` in the robot's ``namespace`` on ``domain
 - a pose whose stamp is older than ``stale_after`` (``fleet.stale_after``) on our clock is
   stale: counted and dropped, it does not keep the link alive; the link is lost when no fresh
   pose came for ``link_timeout`` seconds (``[robots.ros2] link_timeout``; until then the robot
-  is only stale for the controller, which stops commanding it);
+  is only stale for the controller, which stops commanding it); the node, its subscription and
+  the session stay, so the link is up again with the next fresh pose (``fleet driver`` holds
+  the robot stopped meanwhile and reports ``link_restored`` then);
 - ``connect`` waits for the first fresh pose and for the robot's ``cmd_vel`` subscription to
   match our publisher (``ConnectTimeout`` naming the key).
 
@@ -62,6 +64,7 @@ class Ros2Settings:
     connect: tuple[str, ...] = (ROUTER,)
     mode: str = "client"
     link_timeout: float = 2.5  # s without a fresh pose: the link is lost
+    rmw_zenoh: str = ""  # the robot's rmw_zenoh release as configured ("": not stated)
 
     def cmd_key(self) -> str:
         ros_type = msgs.CMD_TYPES[self.cmd_type]
@@ -119,6 +122,7 @@ class Ros2Driver:
         self.received = 0  # pose samples taken off the bus
         self.bad = 0  # pose payloads that did not decode
         self.stale = 0  # poses older than stale_after on arrival
+        self.foreign_attachments = 0  # pose samples whose attachment is not rmw_zenoh's 33 bytes
         self._seq = 0
 
     # -- link
@@ -144,6 +148,16 @@ class Ros2Driver:
     def _on_pose(self, payload: bytes, attachment: bytes | None) -> None:
         # zenoh's thread: enqueue only (the stamp of receipt on our clock)
         self._inbox.append((payload, self._clock()))
+        if attachment is None or len(attachment) != keys.ATTACHMENT_SIZE:
+            self.foreign_attachments += 1
+            if self.foreign_attachments == 1:
+                log.error(
+                    "robot %s: its %s carries a %s attachment, not rmw_zenoh's %d bytes: an "
+                    "rmw_zenoh older than %s, which drops our commands (upgrade the robot's "
+                    "rmw_zenoh)", self.robot_id, self.pose_key,
+                    "missing" if attachment is None else f"{len(attachment)}-byte",
+                    keys.ATTACHMENT_SIZE, keys.SUPPORTED_RMW_ZENOH,
+                )  # fmt: skip
         self._arrived.set()
 
     def connect(self, timeout: float) -> None:

@@ -15,13 +15,19 @@ talk to that version at all.)
 - liveliness token: ``@ros2_lv/<domain>/<zid>/<node id>/<entity id>/<NN|MP|MS>/<enclave>/
   <namespace>/<node>[/<topic>/<dds type>/<type hash>/<qos>]`` with every ``/`` inside a part
   mangled to ``%`` (the root namespace and enclave are ``%``); ``<qos>`` lists only what
-  differs from the default profile (``::,:,:,:,,`` is all defaults);
+  differs from rmw_zenoh's default profile (``::,:,:,:,,`` is all defaults: reliability,
+  durability, history,depth, deadline s,ns, lifespan s,ns, liveliness,lease s,ns). Our
+  entities are RELIABLE, VOLATILE, KEEP_LAST 10: rmw_zenoh's defaults since jazzy 0.2.3 /
+  rolling 0.5.0, when the durability default became VOLATILE (TRANSIENT_LOCAL before, so an
+  empty durability there would claim a late-joiner cache we do not keep). Those older robots
+  are below the supported releases anyway (``SUPPORTED_RMW_ZENOH``: the attachment);
 - attachment (zenoh-ext serialization): int64 sequence number (from 1), int64 source timestamp
   (ns since the epoch, the publisher's clock), the 16-byte GID as a sequence (LEB128 length 16
   then the bytes): 33 bytes, little endian;
-- GID: rmw_zenoh hashes the entity's liveliness key with XXH3-128; we hash it with SHA-256
-  (first 16 bytes): unique per entity the same way, and no ROS 2 node checks one against the
-  other (it only compares GIDs with each other).
+- GID: XXH3-128 of the entity's liveliness key expression, its ``low64`` then its ``high64``
+  word, each in the host's (little-endian) byte order, as ``Entity::Entity`` memcpy's them
+  (``liveliness_utils.cpp``): what ``ros2 topic info -v`` lists and what a receiver's
+  ``publisher_gid`` (``rmw_message_info_t``) carries.
 
 Frames (REP 103, REP 105): a ROS body frame is x forward, y left, z up, like our command's
 body frame, so a twist maps one to one; a pose arrives in the robot's ``odom`` (or a mocap
@@ -30,10 +36,11 @@ body frame, so a twist maps one to one; a pose arrives in the robot's ``odom`` (
 
 from __future__ import annotations
 
-import hashlib
 import math
 import re
 import struct
+
+import xxhash
 
 from drivers.ros2.msgs import dds_type_name, type_hash
 
@@ -42,6 +49,10 @@ NODE, PUBLISHER, SUBSCRIPTION = "NN", "MP", "MS"
 DEFAULT_QOS = "::,:,:,:,,"
 GID_SIZE = 16
 _ATTACHMENT = struct.Struct("<qqB16s")  # seq, source timestamp, LEB128(16), gid
+ATTACHMENT_SIZE = _ATTACHMENT.size  # 33
+#: the rmw_zenoh releases of this attachment (and of zenoh 1.x); older robots read ours as
+#: malformed (the config's ``ros2.rmw_zenoh`` refuses them: RMW_ZENOH_MIN there)
+SUPPORTED_RMW_ZENOH = "jazzy 0.2.4, rolling 0.6.0, humble 0.1.2"
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
@@ -137,8 +148,11 @@ def parse_token(token: str) -> dict[str, str] | None:
 
 
 def gid(token: str) -> bytes:
-    """The entity's 16-byte GID, derived from its liveliness token."""
-    return hashlib.sha256(token.encode()).digest()[:GID_SIZE]
+    """The entity's 16-byte GID as rmw_zenoh computes it from its liveliness token: XXH3-128
+    of the token's text, ``low64`` then ``high64``, little endian. (xxhash's ``digest()`` is
+    the canonical big-endian ``high64 || low64``: the same bytes in the other order.)"""
+    h = xxhash.xxh3_128_intdigest(token.encode())
+    return struct.pack("<QQ", h & 0xFFFF_FFFF_FFFF_FFFF, h >> 64)
 
 
 def attachment(seq: int, source_timestamp_ns: int, source_gid: bytes) -> bytes:

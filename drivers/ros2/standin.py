@@ -181,12 +181,20 @@ class StandInRobot(RobotBase):
         """Publish the current pose (odom frame) stamped ``t`` (default: its own time)."""
         self.publish_pose(self.t if t is None else t, *self.pose, self._cmd)
 
-    def run(self, rate_hz: float, stop: threading.Event, clock=time.time) -> None:
-        """Real time: step and publish at ``rate_hz`` until ``stop`` is set."""
+    def run(
+        self,
+        rate_hz: float,
+        stop: threading.Event,
+        clock=time.time,
+        mute: threading.Event | None = None,
+    ) -> None:
+        """Real time: step and publish at ``rate_hz`` until ``stop`` is set; while ``mute`` is
+        set it still moves and takes commands but publishes no pose (its odometry withheld)."""
         period = 1.0 / rate_hz
         next_t = time.monotonic()
         while not stop.is_set():
             self.step(period)
-            self.publish(clock())
+            if mute is None or not mute.is_set():
+                self.publish(clock())
             next_t += period
             stop.wait(max(0.0, next_t - time.monotonic()))

@@ -109,6 +109,25 @@ def test_the_robot_discovers_our_node_by_its_liveliness_tokens(link):
     assert robot == {("NN", None), ("MS", "/tb1/cmd_vel"), ("MP", "/tb1/odom")}
 
 
+def test_the_attachment_gid_is_rmw_zenohs_hash_of_our_publishers_token(link):
+    """What a ROS 2 receiver gets as ``publisher_gid`` (and ``ros2 topic info -v`` lists) is
+    XXH3-128 of the publisher's liveliness key expression, low64 then high64, little endian:
+    computed here from the MP token the robot discovers on the wire, not from our own key."""
+    import xxhash
+
+    link.driver.send(Twist2D(t=0.0, vx=0.1))
+    link.advance(0.05)
+    _, _, gid = keys.parse_attachment(link.robot.raw_commands[-1][1])
+    replies = link.session.liveliness().get("@ros2_lv/0/*/*/*/MP/**", timeout=5.0)
+    (token,) = [
+        str(r.ok.key_expr) for r in replies if r.ok is not None and "fleet_driver_r1" in
+        str(r.ok.key_expr)
+    ]  # fmt: skip
+    h = xxhash.xxh3_128_intdigest(token.encode())
+    low, high = h % 2**64, h >> 64
+    assert gid == low.to_bytes(8, "little") + high.to_bytes(8, "little")
+
+
 @pytest.mark.parametrize(
     "link",
     [
@@ -179,6 +198,24 @@ def test_a_bad_payload_is_counted_not_raised(link):
     link.robot.published += 1
     link.advance(0.1)
     assert len(d.poll()) == 1 and d.bad == 1 and d.health().ok
+
+
+def test_a_pose_with_another_attachment_is_used_and_counted(link, caplog):
+    """A robot on an rmw_zenoh older than the supported releases sends another attachment: its
+    pose still counts, and the driver says once, as an error, what the robot runs."""
+    d = link.driver
+    d.poll()
+    assert d.foreign_attachments == 0  # the stand-in's poses carry rmw_zenoh's 33 bytes
+    payload = msgs.encode(
+        "nav_msgs/msg/Odometry", msgs.pose_message("odometry", link.robot.t, 0.0, 0.0, 0.0)
+    )
+    for _ in range(2):
+        link.robot.pub._pub.put(payload, attachment=b"\x00" * 40)  # not rmw_zenoh 0.2.4's
+        link.robot.published += 1
+    wait_for(lambda: d.samples_seen() >= link.robot.published, 5, "the poses")
+    assert len(d.poll()) == 2 and d.foreign_attachments == 2
+    said = [r for r in caplog.records if "40-byte attachment" in r.getMessage()]
+    assert len(said) == 1 and "jazzy 0.2.4" in said[0].getMessage()
 
 
 def test_a_pose_from_rosbags_with_covariance_gives_sigma(link):

@@ -100,6 +100,28 @@ def test_gid_is_16_bytes_and_differs_per_entity():
     assert keys.gid(JAZZY_SUB) != keys.gid(JAZZY_NODE)
 
 
+# XXH3_128bits("") (seed 0) in xxHash's own sanity table (tests/sanity_test_vectors.h):
+# { low64 0x6001C324468D497F, high64 0x99AA06D3014798D8 }. rmw_zenoh memcpy's low64 then
+# high64 into the GID on a little-endian host: each word's bytes reversed, low word first.
+EMPTY_GID = bytes.fromhex("7f498d4624c30160d8984701d306aa99")  # low64 LE, high64 LE
+
+
+def test_gid_is_rmw_zenohs_xxh3_128_low_then_high_little_endian():
+    """The GID of rmw_zenoh's ``Entity``: XXH3-128 of the liveliness key expression, low64 then
+    high64, little endian. Checked against xxHash's published vector for the empty input
+    (byte order worked out by hand above) and, for a real token, against xxhash's canonical
+    digest (big-endian high64 || low64) split and reordered here, independently of keys.gid."""
+    import xxhash
+
+    assert keys.gid("") == EMPTY_GID
+    canonical = xxhash.xxh3_128(JAZZY_SUB.encode()).hexdigest()  # high64 then low64, hex
+    high, low = bytes.fromhex(canonical[:16]), bytes.fromhex(canonical[16:])
+    assert keys.gid(JAZZY_SUB) == low[::-1] + high[::-1]
+    import hashlib
+
+    assert keys.gid(JAZZY_SUB) != hashlib.sha256(JAZZY_SUB.encode()).digest()[:16]
+
+
 # --------------------------------------------------------------------------- CDR
 
 

@@ -80,7 +80,20 @@ BAD = {
     "unknown_key": ({"cmd_topik": "x"}, "robots[0].ros2.cmd_topik", "did you mean 'cmd_topic'"),
     "time_source": ({"time_source": "gps"}, "robots[0].ros2.time_source", "'receipt'"),
     "link_timeout": ({"link_timeout": 0}, "robots[0].ros2.link_timeout", "> 0"),
+    # the 33-byte attachment: jazzy >= 0.2.4, rolling >= 0.6.0, humble >= 0.1.2
+    "old_jazzy": ({"rmw_zenoh": "jazzy 0.2.3"}, "robots[0].ros2.rmw_zenoh", "jazzy >= 0.2.4"),
+    "old_rolling": ({"rmw_zenoh": "rolling 0.5.9"}, "robots[0].ros2.rmw_zenoh", "not supported"),
+    "old_humble": ({"rmw_zenoh": "humble 0.1.1"}, "robots[0].ros2.rmw_zenoh", "humble >= 0.1.2"),
+    "unknown_distro": ({"rmw_zenoh": "iron 1.0.0"}, "robots[0].ros2.rmw_zenoh", "unknown"),
+    "version_form": ({"rmw_zenoh": "0.2.5"}, "robots[0].ros2.rmw_zenoh", "'jazzy 0.2.5'"),
 }
+
+
+@pytest.mark.parametrize("value", ["", "jazzy 0.2.4", "jazzy 0.2.10", "rolling 0.6.0",
+                                   "humble 0.1.2", "humble 1.0.0"])  # fmt: skip
+def test_supported_rmw_zenoh_releases_load(tmp_path, value):
+    cfg = load_config(_config(tmp_path, {"rmw_zenoh": value}))
+    assert ros2_settings(cfg.robots[0]).rmw_zenoh == value
 
 
 @pytest.mark.parametrize("name", sorted(BAD))
