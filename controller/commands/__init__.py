@@ -29,6 +29,25 @@ def config_path(args) -> str:
     return args.config
 
 
+def add_emulation_arguments(parser) -> None:
+    """``--mavlink [IDS]`` and ``--ros2 [IDS]``: robots emulated as bodies of the stand-in world
+    (``fleet world``, and ``fleet up`` when rehearsing)."""
+    for flag, what in (
+        ("--mavlink", "MAVLink robots as emulated vehicles of the stand-in world, answering "
+         "their url on loopback"),
+        ("--ros2", "ROS 2 robots as bodies of the stand-in world, on their rmw_zenoh keys at "
+         "their ros2.connect endpoints on loopback"),
+    ):  # fmt: skip
+        parser.add_argument(
+            flag,
+            nargs="?",
+            const="all",
+            default=None,
+            metavar="IDS",
+            help=f"{what} (all of them, or the ids given, comma-separated)",
+        )
+
+
 def require_log_target(cfg, out, explicit: bool) -> None:
     """Fail early (exit 2) when the run's log cannot be written: ``log.dir`` (ConfigError naming
     the key) or the ``--out`` given (InputError)."""

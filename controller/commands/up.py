@@ -22,7 +22,12 @@ import sys
 import time
 from pathlib import Path
 
-from controller.commands import add_config_argument, config_path, stop_on_signals
+from controller.commands import (
+    add_config_argument,
+    add_emulation_arguments,
+    config_path,
+    stop_on_signals,
+)
 from controller.config import MISSION_KINDS
 
 EXAMPLES = """examples:
@@ -62,22 +67,7 @@ def add_arguments(parser, word: str) -> None:
         default="capture",
         help="the daemon's mission (capture: the whole job; hold: every robot still)",
     )
-    parser.add_argument(
-        "--mavlink",
-        nargs="?",
-        const="all",
-        default=None,
-        metavar="IDS",
-        help="rehearse MAVLink robots as emulated vehicles of the stand-in world (all, or ids)",
-    )
-    parser.add_argument(
-        "--ros2",
-        nargs="?",
-        const="all",
-        default=None,
-        metavar="IDS",
-        help="rehearse ROS 2 robots as bodies of the stand-in world (all, or ids)",
-    )
+    add_emulation_arguments(parser)
     parser.add_argument(
         "--remote",
         default="",

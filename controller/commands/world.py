@@ -17,7 +17,7 @@ that is not a ROS 2 robot with loopback endpoints), 1 when its session cannot op
 
 from __future__ import annotations
 
-from controller.commands import add_config_argument, serve_until_signalled
+from controller.commands import add_config_argument, add_emulation_arguments, serve_until_signalled
 
 EXAMPLES = """examples:
   fleet world --config fleet.toml        the shared world (with sim.world = "process"), then
@@ -29,24 +29,7 @@ EXAMPLES = """examples:
 def add_arguments(parser, word: str) -> None:
     add_config_argument(parser)
     parser.add_argument("--duration", type=float, default=0.0, help="stop after S seconds")
-    parser.add_argument(
-        "--mavlink",
-        nargs="?",
-        const="all",
-        default=None,
-        metavar="IDS",
-        help="emulate MAVLink robots as bodies of this world, answering their url on loopback "
-        "(all of them, or the ids given, comma-separated)",
-    )
-    parser.add_argument(
-        "--ros2",
-        nargs="?",
-        const="all",
-        default=None,
-        metavar="IDS",
-        help="make ROS 2 robots bodies of this world, on their rmw_zenoh keys at their "
-        "ros2.connect endpoints on loopback (all of them, or the ids given, comma-separated)",
-    )
+    add_emulation_arguments(parser)
 
 
 def run(args) -> int:
