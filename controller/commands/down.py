@@ -68,6 +68,13 @@ def run(args) -> int:
     if pid and _signal(pid):
         _wait_exit(pid, 120.0)
     state = read_state(path) or state
+    orphans = _stop_orphans(state)
+    if orphans:
+        print(
+            f"fleet down: the lab's supervisor was gone; stopped its {len(orphans)} processes "
+            f"({', '.join(orphans)}): their agents' watchdogs stop the robots",
+            file=sys.stderr,
+        )
     result = state.get("outcome") or {
         "status": "stopped",
         "exit": 1,
@@ -82,10 +89,42 @@ def run(args) -> int:
     return int(result.get("exit", 1))
 
 
-def _signal(pid: int) -> bool:
-    """SIGINT to the lab's supervisor (it stops robots first); False when it had ended."""
+def _stop_orphans(state: dict) -> list[str]:
+    """The parts of a lab whose supervisor died (SIGKILL, a crash) still running: SIGTERM in
+    the lab's stop order (daemon, agents, world, hub), each waited for. Returns their names."""
+    from controller.runtime.lab import pid_alive
+
+    parts = state.get("parts") or {}
+    order = sorted(
+        parts.items(),
+        key=lambda kv: ["daemon", "agent", "world", "hub"].index(_role(kv[0])),
+    )
+    stopped = []
+    for name, part in order:
+        pid = part.get("pid")
+        if pid and pid_alive(pid) and _ours(pid) and _signal(pid, signal.SIGTERM):
+            _wait_exit(pid, 30.0)
+            stopped.append(name)
+    return stopped
+
+
+def _ours(pid: int) -> bool:
+    """Whether ``pid`` is still a ``fleet`` process (not a recycled pid)."""
     try:
-        os.kill(pid, signal.SIGINT)
+        return b"controller.cli" in open(f"/proc/{pid}/cmdline", "rb").read()
+    except OSError:
+        return False
+
+
+def _role(name: str) -> str:
+    return name if name in ("daemon", "world", "hub") else "agent"
+
+
+def _signal(pid: int, sig: int = signal.SIGINT) -> bool:
+    """``sig`` to ``pid`` (SIGINT to the lab's supervisor: it stops robots first); False when
+    it had ended."""
+    try:
+        os.kill(pid, sig)
     except ProcessLookupError:
         return False
     return True

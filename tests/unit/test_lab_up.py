@@ -244,3 +244,40 @@ def test_the_run_progress_bar_shows_phase_sim_time_and_the_way_to_the_goal():
     finally:
         bar.close()
     assert [h.level for h in root.handlers] == levels  # the log as it was
+
+
+def test_fleet_down_stops_the_parts_of_a_lab_whose_supervisor_died(tmp_path, capsys):
+    """A supervisor killed with SIGKILL leaves its parts running in their own sessions:
+    ``fleet down`` stops them (only processes that are still ``fleet`` processes)."""
+    from controller.cli import main
+    from controller.runtime.lab import state_path
+
+    cfg = make_config({"log": {"dir": str(tmp_path / "runs")}})
+    (tmp_path / "runs").mkdir()
+    part = subprocess.Popen(
+        [sys.executable, "-c", "import controller.cli, time; time.sleep(60)"], cwd=tmp_path
+    )
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        dead = subprocess.Popen([sys.executable, "-c", "pass"])
+        dead.wait()
+        write_state(
+            state_path(cfg),
+            {"pid": dead.pid, "stage": "running", "run_dir": str(tmp_path),
+             "parts": {"r1": {"pid": part.pid}, "hub": {"pid": other.pid}}},
+        )  # fmt: skip
+        config = tmp_path / "lab.toml"
+        from tests.support.config import base_config_dict, write_toml
+
+        data = base_config_dict()
+        data["log"] = {"dir": str(tmp_path / "runs")}
+        write_toml(config, data)
+        # the part's command line names controller.cli only through its -c text: good enough
+        assert main(["down", "--config", str(config)]) == 1  # no verdict: stopped
+        assert part.wait(timeout=30) != 0  # terminated
+        assert other.poll() is None  # not a fleet process: left alone
+        assert "stopped its 1 processes (r1)" in capsys.readouterr().err
+    finally:
+        for p in (part, other):
+            p.kill()
+            p.wait()
