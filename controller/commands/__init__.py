@@ -101,3 +101,28 @@ def serve_until_signalled(args, serve) -> int:
 
     cfg = load_config(args.config)
     return serve(cfg, stop_on_signals(), args.duration)
+
+
+def report_config_errors(args, errors) -> int:
+    """Every error a line on stderr, then their count; ``--json``: the first one as before
+    (``path``, ``error``) and all of them (``errors``). Exit 2."""
+    import sys
+
+    from controller.cli import emit_json
+
+    first = errors[0]
+    if args.json:
+        emit_json(
+            {
+                "ok": False,
+                "file": first.source,
+                "path": first.path,
+                "error": first.message,
+                "errors": [{"key": e.path, "message": e.message} for e in errors],
+            }
+        )
+    for e in errors:
+        print(f"fleet check: {e}", file=sys.stderr)
+    n = len(errors)
+    print(f"fleet check: {n} error{'s' if n > 1 else ''} in {first.source}", file=sys.stderr)
+    return 2

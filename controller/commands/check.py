@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import sys
 
-from controller.commands import add_config_argument, config_path
+from controller.commands import add_config_argument, config_path, report_config_errors
 from controller.config import (
     ConfigError,
     InputError,
@@ -52,7 +52,7 @@ def run(args) -> int:
     try:
         cfg = load_config(path, all_errors=True)
     except ConfigError as exc:
-        return _failed(args, getattr(exc, "errors", [exc]))
+        return report_config_errors(args, getattr(exc, "errors", [exc]))
     errors = []
     problem = log_dir_problem(cfg.log.dir)  # what `fleet run` would fail on at its start
     if problem:
@@ -61,7 +61,7 @@ def run(args) -> int:
     if shared:
         errors.append(ConfigError(cfg.source, *shared))
     if errors:
-        return _failed(args, errors)
+        return report_config_errors(args, errors)
     summary = {
         "ok": True,
         "file": cfg.source,
@@ -76,26 +76,3 @@ def run(args) -> int:
         print(f"{cfg.source}: ok ({len(cfg.robots)} robots, {len(cfg.obstacles)} obstacles)")
         print("".join(f"note: {n}\n" for n in cfg.notes), end="")
     return 0
-
-
-def _failed(args, errors: list[ConfigError]) -> int:
-    """Every error a line on stderr, then their count; ``--json``: the first one as before
-    (``path``, ``error``) and all of them (``errors``). Exit 2."""
-    from controller.cli import emit_json
-
-    first = errors[0]
-    if args.json:
-        emit_json(
-            {
-                "ok": False,
-                "file": first.source,
-                "path": first.path,
-                "error": first.message,
-                "errors": [{"key": e.path, "message": e.message} for e in errors],
-            }
-        )
-    for e in errors:
-        print(f"fleet check: {e}", file=sys.stderr)
-    n = len(errors)
-    print(f"fleet check: {n} error{'s' if n > 1 else ''} in {first.source}", file=sys.stderr)
-    return 2

@@ -59,7 +59,7 @@ def add_arguments(parser, word: str) -> None:
 
 def run(args) -> int:
     from controller.config import ConfigError, load_config
-    from controller.runtime.agent_runner import run_agent
+    from controller.runtime.agent_runner import run_agent, run_agents
 
     cfg = load_config(args.config)
     ids = [w.strip() for w in args.robot_id.split(",") if w.strip()]
@@ -74,32 +74,4 @@ def run(args) -> int:
         if message:
             print(f"fleet driver {ids[0]}: {message}", file=sys.stderr)
         return code
-    return _group(cfg, ids, stop, args)
-
-
-def _group(cfg, ids: list[str], stop, args) -> int:
-    """Several agents in this process, a thread each (its own session, driver and loop); the
-    worst exit status of them. One that ends stops none of the others."""
-    import threading
-
-    from controller.runtime.agent_runner import run_agent
-
-    codes: dict[str, int] = {}
-
-    def one(rid: str) -> None:
-        try:
-            code, message = run_agent(
-                cfg, rid, stop, args.duration, args.connect_timeout, strict=args.strict
-            )
-        except Exception as exc:  # noqa: BLE001 - one agent's bug must not take the others
-            code, message = 1, f"agent failed: {exc!r}"
-        codes[rid] = code
-        if message:
-            print(f"fleet driver {rid}: {message}", file=sys.stderr, flush=True)
-
-    threads = [threading.Thread(target=one, args=(rid,), name=f"agent-{rid}") for rid in ids]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    return max(codes.values(), default=0)
+    return run_agents(cfg, ids, stop, args.duration, args.connect_timeout, strict=args.strict)

@@ -12,10 +12,9 @@ run next.
 
 from __future__ import annotations
 
-import shlex
 from pathlib import Path
 
-from controller.examples import CATALOG, DEFAULT_KIND, KINDS, example, example_text
+from controller.examples import CATALOG, DEFAULT_KIND, KINDS, example, example_text, next_lines
 
 EXAMPLES = """\
   fleet init                          # fleet.toml: the dry run; then fleet run --config fleet.toml
@@ -63,7 +62,7 @@ def run(args) -> int:
     except FileExistsError:
         if out.read_bytes() == text.encode("utf-8"):  # the example already: nothing to do
             print(f"fleet init: {out} is the {ex.kind} example already")
-            _next(ex, out)
+            print("\n".join(next_lines(ex, str(out))))
             return 0
         raise InputError(
             f"{out} exists: not overwritten (fleet init {ex.kind} --force replaces it, "
@@ -72,12 +71,5 @@ def run(args) -> int:
     except OSError as exc:
         raise InputError(f"cannot write {out}: {exc.strerror or exc}") from exc
     print(f"fleet init: wrote {out}, the {ex.kind} example")
-    _next(ex, out)
+    print("\n".join(next_lines(ex, str(out))))
     return 0
-
-
-def _next(ex, out: Path) -> None:
-    """The commands to run next with the config written."""
-    config = shlex.quote(str(out))
-    for i, cmd in enumerate(ex.next):
-        print(f"{'next' if i == 0 else 'then'}: {cmd.format(config=config)}")

@@ -18,17 +18,13 @@ what the config asks, 1 when it failed or was stopped, 2 on a bad config.
 from __future__ import annotations
 
 import argparse
-import sys
-import time
-from pathlib import Path
 
 from controller.commands import (
     add_config_argument,
     add_emulation_arguments,
-    config_path,
-    stop_on_signals,
 )
 from controller.config import MISSION_KINDS
+from controller.runtime.lab_launch import GROUP, ISOLATE_UP_TO
 
 EXAMPLES = """examples:
   fleet init rehearsal --out lab.toml          # a rehearsal config: six sim robots, one world
@@ -38,25 +34,6 @@ EXAMPLES = """examples:
   fleet down --config lab.toml --wait           #   the job's verdict, then everything stops
   fleet up --config mixed.toml --mavlink r3 --ros2 r5   # emulate r3 (MAVLink) and r5 (ROS 2)
 """
-
-# agents per process (bench/lab.py, 15 s of a held rehearsal, load 5-10): a process each cost
-# 120 MB and 4.4 % of a core per robot at 6 robots (724 MB, 26 %; one process for all six:
-# 125 MB, 18 %), at 20 robots 2.4 GB and 62 % against 136 MB and 41 %, and bring-up took 41 s
-# against 10 s. A process per robot keeps a crash to one robot (a lost robot is re-planned
-# around; a group's crash loses its robots together), as on robots with their own computers:
-# kept where it is cheap, up to ISOLATE_UP_TO robots; beyond, groups of GROUP agents.
-ISOLATE_UP_TO = 8
-GROUP = 10
-
-
-def agents_per_process(n_robots: int, given: int | None) -> int:
-    """``--agents-per-process``, or by the fleet's size (above)."""
-    if given:
-        return given
-    return 1 if n_robots <= ISOLATE_UP_TO else GROUP
-
-
-DETACH_WAIT = 600.0  # s: --detach waits at most this long for the lab to be up
 
 
 def add_arguments(parser, word: str) -> None:
@@ -107,160 +84,7 @@ def add_arguments(parser, word: str) -> None:
     parser.add_argument("--run-dir", help=argparse.SUPPRESS, default=None)  # --detach's child
 
 
-def check_lab_config(cfg, mavlink: str | None, ros2: str | None) -> None:
-    """Refuse (ConfigError, exit 2) what the lab cannot run: ``sim`` robots without a shared
-    world; the ids of ``--mavlink``/``--ros2`` are checked as ``fleet world`` checks them."""
-    from controller.config import ConfigError
-    from controller.runtime.world import emulated_vehicles, ros2_bodies
-
-    if any(r.spec.world_body for r in cfg.robots) and cfg.sim.world != "process":
-        raise ConfigError(
-            cfg.source,
-            "sim.world",
-            f"{cfg.sim.world!r}: fleet up runs one stand-in world shared by the sim robots; set "
-            'sim.world = "process" (fleet init rehearsal writes such a config)',
-        )
-    emulated_vehicles(cfg, mavlink)
-    ros2_bodies(cfg, ros2)
-
-
-def remote_ids(cfg, text: str) -> tuple[str, ...]:
-    """The ids of ``--remote`` (ConfigError naming one that is not a robot of the config)."""
-    from controller.config import ConfigError
-
-    ids = tuple(w.strip() for w in text.split(",") if w.strip())
-    for rid in ids:
-        if rid not in cfg.robot_ids:
-            raise ConfigError(cfg.source, "robots", f"--remote {rid!r}: ids: {cfg.robot_ids}")
-    return ids
-
-
-def running_lab(cfg) -> dict | None:
-    """The state of a lab of this fleet whose supervisor still runs, else None."""
-    from controller.runtime.lab import pid_alive, read_state, state_path
-
-    state = read_state(state_path(cfg))
-    if state and state.get("stage") != "ended" and pid_alive(int(state.get("pid", 0))):
-        return state
-    return None
-
-
 def run(args) -> int:
-    from controller.config import load_config
-    from controller.runtime.lab import new_run_dir
+    from controller.runtime.lab_launch import up
 
-    cfg = load_config(config_path(args))
-    check_lab_config(cfg, args.mavlink, args.ros2)
-    remote_ids(cfg, args.remote)
-    other = running_lab(cfg)
-    if other is not None:
-        print(
-            f"fleet up: a lab of fleet {cfg.fleet.name!r} runs already (pid {other['pid']}, "
-            f"{other['run_dir']}): fleet down --config {args.config}",
-            file=sys.stderr,
-        )
-        return 1
-    run_dir = Path(args.run_dir) if args.run_dir else new_run_dir(cfg)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    run_dir = run_dir.resolve()
-    if args.detach:
-        return _detach(args, cfg, run_dir)
-    return _foreground(args, cfg, run_dir)
-
-
-def _foreground(args, cfg, run_dir: Path) -> int:
-    from controller.runtime.console import Keys, make_console
-    from controller.runtime.lab import Lab, plan_parts, state_path
-    from controller.runtime.lab_outcome import lab_outcome, print_outcome
-
-    stop = stop_on_signals()
-    parts = plan_parts(
-        cfg,
-        args.config,
-        run_dir,
-        args.mission,
-        args.mavlink,
-        args.ros2,
-        args.ready_timeout,
-        remote=remote_ids(cfg, args.remote),
-        viz=args.viz,
-        agents_per_process=agents_per_process(len(cfg.robots), args.agents_per_process),
-    )
-    tty = sys.stdout.isatty() and not args.plain and not args.json
-    console = make_console(args.config, live=tty)
-    lab = Lab(cfg, parts, run_dir, stop, console, args.ready_timeout, state_file=state_path(cfg))
-    keys = None
-    if tty and sys.stdin.isatty():
-
-        def on_key(ch: str) -> None:
-            if ch == "r":
-                lab.command("resume")
-            elif ch == "e":
-                lab.command("estop")
-            elif ch == "q":
-                stop.set()
-
-        keys = Keys(on_key)
-    print(
-        f"fleet up: fleet {cfg.fleet.name!r}, {len(parts)} processes; logs in {run_dir}",
-        flush=True,
-    )
-    try:
-        code = lab.run()
-    finally:
-        if keys is not None:
-            keys.close()
-        console.close()
-    outcome = lab_outcome(lab, code, interrupted=stop.is_set())
-    lab.save(verdict=outcome["verdict"], exit=outcome["exit"], outcome=outcome)
-    print_outcome(outcome, as_json=args.json)
-    return outcome["exit"]
-
-
-def _detach(args, cfg, run_dir: Path) -> int:
-    """Start the lab as a process of its own (its console in ``run_dir/console.log``) and
-    return once it is up (its state file says so), or when it failed to come up."""
-    import subprocess
-
-    from controller.runtime.lab import read_state, state_path
-
-    argv = [a for a in sys.argv[1:] if a != "--detach"]
-    if not argv or argv[0] != "up":  # called in-process (tests): rebuild the command line
-        argv = ["up", "--config", args.config, "--mission", args.mission]
-        argv += ["--ready-timeout", f"{args.ready_timeout:g}"]
-        argv += (["--mavlink", args.mavlink] if args.mavlink else []) + (
-            ["--ros2", args.ros2] if args.ros2 else []
-        )
-        argv += (["--remote", args.remote] if args.remote else []) + (["--viz"] if args.viz else [])
-        if args.agents_per_process:
-            argv += ["--agents-per-process", str(args.agents_per_process)]
-    argv += ["--plain", "--run-dir", str(run_dir)]
-    with open(run_dir / "console.log", "w") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "controller.cli", *argv],
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL,
-            start_new_session=True,
-        )
-    path = state_path(cfg)
-    deadline = time.monotonic() + DETACH_WAIT
-    while time.monotonic() < deadline:
-        state = read_state(path) or {}
-        mine = state.get("pid") == proc.pid
-        if proc.poll() is not None or (mine and state.get("stage") in ("waiting", "running")):
-            break
-        time.sleep(0.2)  # polling the lab's own state file for its stage (a handshake)
-    state = read_state(path) or {}
-    if proc.poll() is not None or state.get("pid") != proc.pid:
-        tail = (run_dir / "console.log").read_text(errors="replace")[-1500:]
-        print(f"fleet up: the lab did not come up:\n{tail}", file=sys.stderr)
-        return 1
-    print(
-        f"fleet up: lab of fleet {cfg.fleet.name!r} up in {state.get('ready_s') or 0:.0f} s "
-        f"(pid {proc.pid}; logs in {run_dir}).\n"
-        f"  It is stopped until an operator's resume: fleet resume --config {args.config}\n"
-        f"  Watch it: fleet status --config {args.config}  (or {run_dir / 'console.log'})\n"
-        f"  Stop it:  fleet down --config {args.config}  (--wait: after the job's end)"
-    )
-    return 0
+    return up(args)

@@ -82,3 +82,14 @@ def example(kind: str) -> Example:
 def example_text(kind: str) -> str:
     """The example file of ``kind``, as shipped (read through importlib.resources)."""
     return resources.files(__name__).joinpath(example(kind).file).read_text(encoding="utf-8")
+
+
+def next_lines(ex: Example, out: str) -> list[str]:
+    """The commands to run next with the config ``out`` written (quoted for a shell)."""
+    import shlex
+
+    config = shlex.quote(str(out))
+    return [
+        f"{'next' if i == 0 else 'then'}: {cmd.format(config=config)}"
+        for i, cmd in enumerate(ex.next)
+    ]

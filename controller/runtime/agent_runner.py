@@ -183,3 +183,37 @@ def _serve(
         if duration and now - wall0 >= duration:
             break
     return 0, ""
+
+
+def run_agents(
+    cfg: FleetConfig,
+    ids: list[str],
+    stop: threading.Event,
+    duration: float = 0.0,
+    connect_timeout: float = 60.0,
+    *,
+    strict: bool = False,
+) -> int:
+    """``fleet driver r1,r2,...``: several agents in this process, a thread each (its own
+    session, driver and loop, as :func:`run_agent`); the worst exit status of them. One that
+    ends stops none of the others; ``stop`` ends them all."""
+    import sys
+
+    codes: dict[str, int] = {}
+
+    def one(rid: str) -> None:
+        try:
+            code, message = run_agent(cfg, rid, stop, duration, connect_timeout, strict=strict)
+        except Exception as exc:  # noqa: BLE001 - one agent's bug must not take the others
+            log.exception("robot %s: agent failed", rid)
+            code, message = 1, f"agent failed: {exc!r}"
+        codes[rid] = code
+        if message:
+            print(f"fleet driver {rid}: {message}", file=sys.stderr, flush=True)
+
+    threads = [threading.Thread(target=one, args=(rid,), name=f"agent-{rid}") for rid in ids]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return max(codes.values(), default=0)

@@ -69,7 +69,7 @@ def test_real_robots_get_no_world_unless_rehearsed(tmp_path):
 
 
 def test_remote_agents_are_waited_for_not_started_and_the_viz_reaches_the_daemon(tmp_path):
-    from controller.commands.up import remote_ids
+    from controller.runtime.lab_launch import remote_ids
     from controller.runtime.console import part_state
 
     cfg = rehearsal()
@@ -86,7 +86,7 @@ def test_remote_agents_are_waited_for_not_started_and_the_viz_reaches_the_daemon
 
 
 def test_sim_robots_without_a_shared_world_are_refused_naming_the_key():
-    from controller.commands.up import check_lab_config
+    from controller.runtime.lab_launch import check_lab_config
 
     with pytest.raises(ConfigError) as err:
         check_lab_config(make_config({"sim": {"world": "solo"}}), None, None)
@@ -215,7 +215,7 @@ def test_the_plain_console_prints_changes_only():
 
 
 def test_agents_are_a_process_each_for_a_small_fleet_and_grouped_for_a_large_one(tmp_path):
-    from controller.commands.up import GROUP, ISOLATE_UP_TO, agents_per_process
+    from controller.runtime.lab_launch import GROUP, ISOLATE_UP_TO, agents_per_process
 
     assert agents_per_process(6, None) == 1
     assert agents_per_process(ISOLATE_UP_TO + 1, None) == GROUP
