@@ -28,6 +28,11 @@ run the whole MAVLink path in the dry run:
   robot). DO_SET_MODE OFFBOARD is refused unless setpoints have streamed above 2 Hz for at least
   1 s; in OFFBOARD, ``offboard_loss_timeout`` s without a setpoint switches to HOLD (AUTO.LOITER).
 - Not armed, or in any other mode: zero command.
+- Like ArduPilot's firmware (SITL, NOTES.md): ``max_rate_hz`` refuses a faster telemetry
+  interval (DENIED, with its STATUSTEXT "Requested rate ... too fast"); ``estimate_after`` (s
+  after boot) sends no LOCAL_POSITION_NED before, and refuses GUIDED/OFFBOARD ("Flight mode change
+  failed") and arming ("Arm: Need Position Estimate") before (FAILED, with the STATUSTEXT);
+  ``arm_refusals``: the first N arming requests fail ("PreArm: Hardware safety switch").
 
 Time: ``pump(now)`` does one non-blocking round (read inbound, apply failsafes and the command to
 the world, send due telemetry) at time ``now`` (s) on the caller's clock; a lockstep dry run calls
@@ -144,6 +149,9 @@ class VehicleEmulator:
         fs_gcs_enable: bool = True,
         fs_action: int = mc.ROVER_FS_ACTION_HOLD,
         unanswered: Iterable[str] = (),
+        max_rate_hz: float = math.inf,
+        estimate_after: float = 0.0,
+        arm_refusals: int = 0,
     ):
         """``bind``: a pymavlink url for the vehicle side, or ``HOST:PORT`` of the driver's
         listening port (-> ``udpout``); default derived from ``robot_cfg.url``."""
@@ -173,6 +181,9 @@ class VehicleEmulator:
         self.fs_action = fs_action
         self.unanswered = frozenset(unanswered)
         self.heartbeat_rate_fixed = heartbeat_rate_fixed
+        self.max_rate_hz = max_rate_hz
+        self.estimate_after = estimate_after
+        self.arm_refusals = arm_refusals  # the first N arming requests fail (a pre-arm check)
         self.listener = listener
         self._world_lock = world_lock or threading.Lock()
         self._lock = threading.Lock()
@@ -373,16 +384,35 @@ class VehicleEmulator:
                 heading += self._yaw_ned()
             self._target = ("heading", speed, wrap_angle(heading), now)
 
+    def has_estimate(self, now: float) -> bool:
+        """Whether the vehicle has its position estimate at ``now`` (``estimate_after``)."""
+        return now - self.t_boot >= self.estimate_after
+
+    def _statustext(self, severity: int, text: str) -> None:
+        self._send(self.conn.mav.statustext_encode(severity, text.encode()[:50]))
+
     def _on_command(self, m: Any, now: float) -> int:
         cmd = m.command
         if cmd == mc.CMD_SET_MESSAGE_INTERVAL:
             return self._set_interval(m)
         if cmd == mc.CMD_COMPONENT_ARM_DISARM:
+            if m.param1 > 0.5 and not self.armed and not self.has_estimate(now):
+                self._statustext(3, "Arm: Need Position Estimate")
+                return mc.RESULT_FAILED
+            if m.param1 > 0.5 and not self.armed and self.arm_refusals > 0:
+                self.arm_refusals -= 1
+                self._statustext(3, "PreArm: Hardware safety switch")
+                return mc.RESULT_FAILED
             self.armed = m.param1 > 0.5
             return mc.RESULT_ACCEPTED
         if cmd == mc.CMD_DO_SET_MODE:
             if not int(m.param1) & mc.MODE_FLAG_CUSTOM:
                 return mc.RESULT_UNSUPPORTED
+            wants = (int(m.param2) == mc.ROVER_GUIDED if self.profile == "ardurover"
+                     else int(m.param2) == mc.PX4_MAIN_OFFBOARD)  # fmt: skip
+            if wants and not self.has_estimate(now):
+                self._statustext(4, "Flight mode change failed")
+                return mc.RESULT_FAILED
             if self.profile == "ardurover":
                 return self._set_rover_mode(int(m.param2))
             return self._set_px4_mode(int(m.param2), int(m.param3), now)
@@ -421,6 +451,9 @@ class VehicleEmulator:
             return mc.RESULT_UNSUPPORTED
         if msg_id == mc.MSG_HEARTBEAT and self.heartbeat_rate_fixed:
             return mc.RESULT_UNSUPPORTED
+        if 0 < m.param2 < 1e6 / self.max_rate_hz - 1e-6:
+            self._statustext(6, f"Requested rate for message ID {msg_id} too fast.")
+            return mc.RESULT_DENIED
         if m.param2 < 0:
             self.intervals[msg_id] = None
         elif m.param2 == 0:
@@ -552,7 +585,7 @@ class VehicleEmulator:
                 sent_pose = True
             if msg_id == mc.MSG_ATTITUDE:
                 self._send(self.conn.mav.attitude_encode(ms, 0.0, 0.0, yaw, 0.0, 0.0, yaw_rate))
-            else:
+            elif self.has_estimate(now):
                 self._send(self.conn.mav.local_position_ned_encode(ms, n, e, 0.0, vn, ve, 0.0))
 
     def _send_heartbeat(self) -> None:

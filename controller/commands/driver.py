@@ -44,7 +44,9 @@ def add_arguments(parser, word: str) -> None:
         type=float,
         default=CONNECT_TIMEOUT,
         metavar="S",
-        help=f"seconds to wait for the robot's first answer: its vehicle, or with sim.world = "
+        help=f"seconds to wait for the robot's first answer: its vehicle (a MAVLink vehicle's "
+        "handshake, each step, including its position estimate: about 42 s after a fresh "
+        "ArduPilot's first connection), or with sim.world = "
         f'"process" the fleet world serving it (default: {CONNECT_TIMEOUT:g}; a world on a '
         "loaded machine has taken over a minute to start)",
     )

@@ -41,7 +41,20 @@ class MavlinkSection:
     # COM_OF_LOSS_T, read on connect: a warning above it, `fleet driver --strict` refuses)
     max_vehicle_timeout: float = _rule(1.0, gt=0, max=60)
     gcs_system_id: int = _rule(255, min=1, max=255)  # our MAVLink system id (the GCS failsafe's)
-    telemetry_hz: float = _rule(50.0, min=30, max=1000)  # LOCAL_POSITION_NED/ATTITUDE rate asked
+    # Hz: the LOCAL_POSITION_NED/ATTITUDE rate asked; a vehicle that refuses it (ArduPilot DENIES
+    # 50 Hz at its default SCHED_LOOP_RATE) is asked step by step for less, down to
+    # telemetry_min_hz; the rate granted is logged
+    telemetry_hz: float = _rule(50.0, min=1, max=1000)
+    telemetry_min_hz: float = _rule(5.0, min=1, max=1000)
+    # an e-stop or watchdog stop sends the zero setpoint at once and switches the vehicle to
+    # its hold mode (ArduPilot HOLD, PX4 AUTO.LOITER): "at_rest" once it reports it stopped (the
+    # speed controller brakes in GUIDED; ArduRover's HOLD only cuts the throttle, so an
+    # ackermann or omni rover coasts in it), "now" at once, "off" never; the next command
+    # switches it back to GUIDED / OFFBOARD
+    stop_hold: str = _rule("at_rest", choices=("at_rest", "now", "off"))
+    # an e-stop or watchdog stop also disarms the vehicle (re-armed on the next command when
+    # ``arm`` is set)
+    disarm_on_stop: bool = _rule(False)
     # Hz: our GCS HEARTBEAT to the vehicle (what its GCS failsafe counts)
     heartbeat_hz: float = _rule(1.0, min=0.2, max=50)
     # s: the vehicle's GCS failsafe timeout as set on it (ArduRover FS_TIMEOUT), for fleet check

@@ -33,10 +33,27 @@ false, ``send`` raises ``LinkLost`` and the keepalive sends no setpoint. The lin
 sends (a vehicle that refuses a faster HEARTBEAT rate keeps 1 Hz: a 1 s timeout would flap), with
 a warning when it widens (``link_timeout`` attribute).
 
+Connect: the vehicle's HEARTBEAT; LOCAL_POSITION_NED and ATTITUDE at ``telemetry_hz``, stepped
+down (``next_rate_down``) while the vehicle refuses (ArduPilot DENIES 50 Hz at its default
+SCHED_LOOP_RATE, "Requested rate ... too fast") to ``telemetry_min_hz`` at worst, the rate
+granted logged (``telemetry_hz`` attribute); its parameters (below); then its position estimate:
+the first LOCAL_POSITION_NED (a fresh ArduPilot streams it ~42 s after its first connection and
+refuses GUIDED and arming before), the wait logged every 5 s; then GUIDED / OFFBOARD and arming,
+each asked again every REFUSED_RETRY s while refused, the vehicle's STATUSTEXT reason logged.
+Each step is bounded by ``timeout`` (``fleet driver --connect-timeout``).
+
 Stopping: ``stop()`` and ``close()`` read the link first and always send the zero setpoint, lost
 or not (a vehicle that went quiet may still hear us, and a caller idle for longer than the link
 timeout must not leave the vehicle on its last setpoint); ``close()`` then switches the vehicle
-to HOLD when ``hold_on_close`` is set (fire and forget: close never waits).
+to HOLD when ``hold_on_close`` is set (fire and forget: close never waits). ``stop()`` (the
+agent's e-stop, watchdog and lost-link stop) also switches the vehicle to its hold mode
+(ArduPilot HOLD, PX4 AUTO.LOITER) as ``stop_hold`` says: "at_rest" (default) once the vehicle
+reports it stopped, since its speed controller brakes in GUIDED while ArduRover's HOLD only cuts
+the throttle (measured on ArduRover SITL from 0.4 m/s: ackermann 1.5-1.7 s braking in GUIDED,
+3.5-3.7 s coasting in HOLD; skid 0.7 s either way); "now"; "off". ``disarm_on_stop`` disarms as
+well. The next ``send`` asks for GUIDED / OFFBOARD (and arming) again. These mode changes are
+fire and forget, re-asked by the keepalive until the HEARTBEAT shows them; ``health`` allows
+MODE_SWITCH_GRACE s for them, and never asks a vehicle back from a mode its own failsafe chose.
 
 The vehicle's own timeout: on connect the driver reads how long the vehicle keeps the last
 setpoint once our stream stops, i.e. how far a rover drives on after this process dies
@@ -87,6 +104,24 @@ PAIR_WINDOW = 0.1  # s: LOCAL_POSITION_NED and ATTITUDE closer than this make on
 HEARTBEAT_PERIODS = 2.5  # the link timeout is at least this many vehicle heartbeat periods
 DEFAULT_VEHICLE_HEARTBEAT = 1.0  # s, MAVLink's heartbeat period when the rate is not ours to set
 PARAM_READ_TIMEOUT = 2.0  # s at most for reading one vehicle parameter on connect
+REFUSED_RETRY = 1.0  # s before a refused mode change or arming is asked again during connect
+ESTIMATE_LOG_EVERY = 5.0  # s between "waiting for the vehicle's position estimate" log lines
+MODE_SWITCH_GRACE = 3.0  # s a mode / arming change we asked for may take before health fails
+AT_REST = 0.05  # m/s: a stopped vehicle at or under this speed is at rest (stop_hold "at_rest")
+HOLD_AFTER = 3.0  # s after a stop when "at_rest" asks for HOLD anyway (no telemetry, still rolling)
+# Hz: the telemetry rates tried, fastest first, when the vehicle refuses the configured one
+TELEMETRY_LADDER = (400.0, 200.0, 100.0, 50.0, 40.0, 30.0, 25.0, 20.0, 15.0, 10.0, 5.0, 2.0, 1.0)
+STATUSTEXT_KEEP = 32  # the vehicle's last STATUSTEXT lines kept (its reasons for a refusal)
+STATUSTEXT_CHUNK = 50  # chars of one STATUSTEXT; a longer text comes in chunks of one id
+
+
+def next_rate_down(hz: float) -> float:
+    """The next telemetry rate to try after ``hz`` Hz was refused: the next lower rung of
+    ``TELEMETRY_LADDER`` (half of ``hz`` below the ladder)."""
+    for rung in TELEMETRY_LADDER:
+        if rung < hz - 1e-9:
+            return rung
+    return hz / 2.0
 
 
 DEFAULT_POOL = LinkPool()
@@ -177,6 +212,19 @@ class MavlinkDriver:
         self.vehicle_params: dict[str, float] = {}  # the ArduRover failsafe parameters read
         self.counters = {"setpoints": 0, "poses": 0, "unrouted": 0}
         self._keepalive = keepalive_thread
+        # the LOCAL_POSITION_NED / ATTITUDE rate the vehicle granted (Hz), set on connect
+        self.telemetry_hz: float | None = None
+        self.statustext: deque[tuple[float, int, str]] = deque(maxlen=STATUSTEXT_KEEP)
+        self._st_chunks: dict[int, list[str]] = {}
+        self._estimate = False  # a LOCAL_POSITION_NED arrived: the vehicle has a position
+        # e-stop / watchdog: the vehicle asked into its braking mode (and disarmed if configured)
+        self.braking = False
+        self._hold = False  # while braking: the hold mode is wanted now (stop_hold)
+        self._braked_at = -math.inf  # when the stop came (driver clock)
+        self._speed: tuple[float, float] | None = None  # (clock s, m/s) of the last position
+        self._state_asked_at = -math.inf  # when the mode / arming now wanted was first asked
+        self._mode_sent = -math.inf
+        self._arm_sent = -math.inf
         self._ka_stop = threading.Event()
         self._ka_thread: threading.Thread | None = None
 
@@ -194,13 +242,15 @@ class MavlinkDriver:
         if self._connected:
             return
         self._last_heard = self._mode = self._autopilot = None
-        self._armed = self._streaming = False
+        self._armed = self._streaming = self._estimate = self.braking = self._hold = False
+        self._speed = None
+        self._state_asked_at = -math.inf
         self._acks.clear()
         self._params.clear()
         self._hb_gaps.clear()
         self._hb_assumed = None
         # a frozen injected clock must not hang us: a generous wall-clock bound as well
-        self._wall_deadline = time.monotonic() + 4.0 * timeout + PX4_STREAM_BEFORE_OFFBOARD + 5.0
+        self._wall_deadline = time.monotonic() + 6.0 * timeout + PX4_STREAM_BEFORE_OFFBOARD + 5.0
         link = self._pool.acquire(self.cfg.url, self.gcs_id)
         link.register(self.system_id, self._tick)
         self._link = link
@@ -244,6 +294,16 @@ class MavlinkDriver:
             raise LinkLost(self._lost_detail(now))
         vx, vy, yaw_rate = mc.flu_to_frd(cmd.vx, cmd.vy, cmd.wz)  # vy: 0 for diff (agent gate)
         self._setpoint = _Setpoint(vx, vy, yaw_rate, now + cmd.ttl)
+        if self.braking:  # a command after an e-stop / watchdog stop: back to GUIDED / OFFBOARD
+            self.braking = self._hold = False
+            self._state_asked_at = now
+            log.info(
+                "%s: resuming: asking system %d for %s",
+                self.robot_id,
+                self.system_id,
+                mc.mode_name(self.profile, self._wanted_mode()),
+            )
+            self._ensure_state(now, force=True)
         self._send_setpoint(now)
 
     @_locked
@@ -258,11 +318,20 @@ class MavlinkDriver:
 
     @_locked
     def stop(self) -> None:
-        """Zero setpoint now (and for the keepalive). Never raises, never blocks.
+        """Zero setpoint now (and for the keepalive), then the vehicle's hold mode (ArduPilot
+        HOLD, PX4 AUTO.LOITER) as ``stop_hold`` says: "at_rest" once its telemetry says it
+        stopped (the speed controller brakes harder than HOLD, which only cuts the throttle on
+        an ArduRover) or HOLD_AFTER s, "now" at once, "off" never; with ``disarm_on_stop``
+        disarmed too. Mode and arming are re-asked by the keepalive until the vehicle reports
+        them; the next ``send`` asks for GUIDED / OFFBOARD (and arming) again. Never raises,
+        never blocks.
 
         The link is read first (the caller may have been idle for longer than the link
         timeout while the vehicle kept talking), and the zero goes out even when the link looks
         lost: a vehicle that went quiet may still hear us."""
+        self._stop(brake=True)
+
+    def _stop(self, brake: bool) -> None:
         self._setpoint = _Setpoint()
         if self._link is None or not self._connected:
             return
@@ -270,6 +339,20 @@ class MavlinkDriver:
             now = self._service()
             self._lost(now)  # log the link's state; the zero goes out either way
             self._send_setpoint(now)
+            m = self.cfg.mavlink
+            if brake and (m.stop_hold != "off" or m.disarm_on_stop) and not self.braking:
+                self.braking = True
+                self._hold = m.stop_hold == "now"
+                self._braked_at = self._state_asked_at = now
+                hold = mc.mode_name(self.profile, self._hold_mode())
+                log.info(
+                    "%s: stop: zero setpoint%s%s",
+                    self.robot_id,
+                    {"now": f", {hold}", "at_rest": f", {hold} once at rest"}.get(m.stop_hold, ""),
+                    ", disarm" if m.disarm_on_stop else "",
+                )
+            if self.braking:
+                self._ensure_state(now, force=True)
         except Exception:  # noqa: BLE001 - stop must never raise
             log.exception("%s: stop failed", self.robot_id)
 
@@ -285,14 +368,20 @@ class MavlinkDriver:
         if self._lost(now):
             return LinkHealth(False, self._lost_detail(now), self._last_heard)
         want = self._wanted_mode()
+        switching = now - self._state_asked_at < MODE_SWITCH_GRACE  # our own change under way
         if self._mode != want:
             got = mc.mode_name(self.profile, self._mode or 0)
+            if switching:
+                return LinkHealth(True, f"switching {got} to {mc.mode_name(self.profile, want)}",
+                                  self._last_heard)  # fmt: skip
             return LinkHealth(
                 False,
                 f"vehicle in {got}, expected {mc.mode_name(self.profile, want)}",
                 self._last_heard,
             )
-        if self.cfg.arm and not self._armed:
+        if self._want_armed() and not self._armed:
+            if switching:
+                return LinkHealth(True, "arming", self._last_heard)
             return LinkHealth(False, "vehicle disarmed", self._last_heard)
         return LinkHealth(True, "", self._last_heard)
 
@@ -302,7 +391,7 @@ class MavlinkDriver:
         if self._closed:
             return
         self._stop_keepalive()
-        self.stop()
+        self._stop(brake=False)  # the mode on close: hold_on_close's
         if self.cfg.hold_on_close and self._link is not None and self._connected:
             try:
                 self._send_hold()
@@ -332,7 +421,72 @@ class MavlinkDriver:
         return self._link
 
     def _wanted_mode(self) -> int:
+        """The mode the vehicle should be in: its hold mode while braking once ``stop_hold``
+        wants it, else GUIDED (ArduRover) / OFFBOARD (PX4)."""
+        if self.braking and self._hold:
+            return self._hold_mode()
         return mc.ROVER_GUIDED if self.profile == "ardurover" else mc.PX4_OFFBOARD
+
+    def _hold_mode(self) -> int:
+        return mc.ROVER_HOLD if self.profile == "ardurover" else mc.PX4_HOLD
+
+    def _at_rest(self, now: float) -> bool:
+        """stop_hold "at_rest": whether the vehicle, stopped at ``_braked_at``, reported a
+        speed of at most AT_REST since, or HOLD_AFTER s have passed."""
+        if now - self._braked_at >= HOLD_AFTER:
+            return True
+        sp = self._speed
+        return sp is not None and sp[0] > self._braked_at and sp[1] <= AT_REST
+
+    def _want_armed(self) -> bool:
+        """Whether the vehicle should be armed (``arm``, unless disarmed by a stop)."""
+        return self.cfg.arm and not (self.braking and self.cfg.mavlink.disarm_on_stop)
+
+    def _mode_params(self, mode: int) -> tuple[float, ...]:
+        """DO_SET_MODE's params for a HEARTBEAT custom_mode of this profile."""
+        if self.profile == "ardurover":
+            return (mc.MODE_FLAG_CUSTOM, mode)
+        return (mc.MODE_FLAG_CUSTOM, (mode >> 16) & 0xFF, (mode >> 24) & 0xFF)
+
+    def _ensure_state(self, now: float, force: bool = False) -> None:
+        """Once connected: ask (fire and forget, again every COMMAND_RETRY s) for the mode and
+        arming state wanted until the vehicle's HEARTBEAT reports them. Disarming comes after
+        the braking mode; arming after GUIDED / OFFBOARD."""
+        if not (force or self.braking or now - self._state_asked_at < MODE_SWITCH_GRACE):
+            return  # a resume the vehicle did not take (or its own failsafe): health reports it
+        if self.braking and not self._hold and self.cfg.mavlink.stop_hold == "at_rest":
+            # at rest, or out of GUIDED / OFFBOARD already (a failsafe): never asked back
+            if self._at_rest(now) or self._mode != self._wanted_mode():
+                self._hold = True
+                self._state_asked_at = now
+                force = True
+                hold = mc.mode_name(self.profile, self._hold_mode())
+                log.info(
+                    "%s: %.2f s after the stop: %s", self.robot_id, now - self._braked_at, hold
+                )
+        want = self._wanted_mode()
+        if self._mode != want:
+            if force or now - self._mode_sent >= COMMAND_RETRY:
+                self._mode_sent = now
+                self._send_command(mc.CMD_DO_SET_MODE, self._mode_params(want))
+            if not (self.braking and self.cfg.mavlink.disarm_on_stop):
+                return
+        armed = self._want_armed()
+        if self.braking and self.cfg.mavlink.disarm_on_stop and self._armed:
+            if force or now - self._arm_sent >= COMMAND_RETRY:
+                self._arm_sent = now
+                self._send_command(mc.CMD_COMPONENT_ARM_DISARM, (0.0,))
+        elif armed and not self._armed and self._mode == want:
+            if force or now - self._arm_sent >= COMMAND_RETRY:
+                self._arm_sent = now
+                self._send_command(mc.CMD_COMPONENT_ARM_DISARM, (1.0,))
+
+    def _send_command(self, command: int, params: tuple[float, ...]) -> None:
+        """One COMMAND_LONG, no ACK awaited."""
+        p = list(params) + [0.0] * (7 - len(params))
+        self._send(
+            lambda mav: mav.command_long_encode(self.system_id, AUTOPILOT_COMPONENT, command, 0, *p)
+        )
 
     @property
     def link_timeout(self) -> float:
@@ -411,6 +565,8 @@ class MavlinkDriver:
             if self._streaming and now - self._last_sp_sent >= 1.0 / SETPOINT_HZ:
                 if not self._lost(now):
                     self._send_setpoint(now)
+            if self._connected and not self._closed and not self._lost(now):
+                self._ensure_state(now)
         finally:
             self._lock.release()
 
@@ -435,8 +591,31 @@ class MavlinkDriver:
             self._att = m
             self._try_pose(now)
         elif kind == "LOCAL_POSITION_NED":
+            self._estimate = True
+            self._speed = (now, math.hypot(m.vx, m.vy))
             self._lpn = m
             self._try_pose(now)
+        elif kind == "STATUSTEXT":
+            self._on_statustext(m, now)
+
+    def _on_statustext(self, m: Any, now: float) -> None:
+        """Keep the vehicle's text (chunks of one id joined); log warnings and worse."""
+        text = m.text.decode(errors="replace") if isinstance(m.text, bytes) else str(m.text)
+        text = text.rstrip("\x00")
+        sid = getattr(m, "id", 0)
+        if sid:
+            parts = self._st_chunks.setdefault(sid, [])
+            parts.append(text)
+            if len(text) >= STATUSTEXT_CHUNK and len(parts) < 8:
+                return  # more chunks to come
+            text = "".join(self._st_chunks.pop(sid))
+        self.statustext.append((now, m.severity, text))
+        level = logging.WARNING if m.severity <= 4 else logging.DEBUG
+        log.log(level, "%s: system %d says: %s", self.robot_id, self.system_id, text)
+
+    def _texts_since(self, t: float) -> str:
+        """The vehicle's STATUSTEXT lines since ``t`` (driver clock), joined."""
+        return "; ".join(text for at, _, text in self.statustext if at >= t)
 
     def _try_pose(self, now: float) -> None:
         lpn, att = self._lpn, self._att
@@ -588,7 +767,8 @@ class MavlinkDriver:
         """Send a COMMAND_LONG until its COMMAND_ACK arrives; raise if refused or unanswered."""
         p = list(params) + [0.0] * (7 - len(params))
         self._acks.pop(command, None)
-        deadline = self._clock() + timeout
+        started = self._clock()
+        deadline = started + timeout
         confirmation = 0
         while True:
             now = self._clock()
@@ -604,9 +784,12 @@ class MavlinkDriver:
                     result = self._acks.pop(command)
                     if result != mc.RESULT_ACCEPTED:
                         name = mc.RESULT_NAMES.get(result, str(result))
+                        self._wait_until(lambda: False, self._clock() + 0.1)  # its reason
+                        why = self._texts_since(started)
                         raise DriverError(
                             f"robot {self.robot_id!r}: system {self.system_id} on "
                             f"{self.cfg.url} refused {what}: {name}"
+                            + (f" (vehicle: {why})" if why else "")
                         )
                     return
                 if now >= deadline or time.monotonic() > self._wall_deadline:
@@ -618,6 +801,87 @@ class MavlinkDriver:
                     break
                 self._wait(min(0.02, deadline - now, retry_at - now))
             confirmation = min(confirmation + 1, 255)
+
+    def _command_retrying(
+        self, command: int, params: tuple[float, ...], timeout: float, what: str
+    ) -> None:
+        """``_command``, asked again every REFUSED_RETRY s while the vehicle refuses it (each
+        refusal logged with the vehicle's STATUSTEXT reason) until ``timeout`` s."""
+        deadline = self._clock() + timeout
+        while True:
+            try:
+                self._command(command, params, max(0.0, deadline - self._clock()), what)
+                return
+            except ConnectTimeout:
+                raise
+            except DriverError as exc:
+                now = self._clock()
+                if now + REFUSED_RETRY >= deadline or time.monotonic() > self._wall_deadline:
+                    raise
+                log.warning("%s; asking again in %g s", exc, REFUSED_RETRY)
+                self._wait_until(lambda: False, now + REFUSED_RETRY)
+
+    def _negotiate_telemetry(self, timeout: float) -> float:
+        """Ask LOCAL_POSITION_NED and ATTITUDE at ``telemetry_hz``; while the vehicle refuses,
+        at the next lower rate (``next_rate_down``) down to ``telemetry_min_hz``. Returns the
+        rate granted (Hz, logged); raises DriverError when even the floor is refused."""
+        asked = float(self.cfg.telemetry_hz)
+        floor = min(float(self.cfg.mavlink.telemetry_min_hz), asked)
+        hz = asked
+        while True:
+            try:
+                for msg_id, name in ((mc.MSG_LOCAL_POSITION_NED, "LOCAL_POSITION_NED"),
+                                     (mc.MSG_ATTITUDE, "ATTITUDE")):  # fmt: skip
+                    self._command(
+                        mc.CMD_SET_MESSAGE_INTERVAL,
+                        (msg_id, 1e6 / hz),
+                        timeout,
+                        f"SET_MESSAGE_INTERVAL {name} at {hz:g} Hz",
+                    )
+                break
+            except ConnectTimeout:
+                raise
+            except DriverError as exc:
+                lower = next_rate_down(hz)
+                if lower < floor - 1e-9:
+                    raise DriverError(
+                        f"{exc}; refused every telemetry rate from {asked:g} Hz down to "
+                        f"telemetry_min_hz {floor:g} Hz"
+                    ) from exc
+                log.info("%s: %s; asking %g Hz", self.robot_id, exc, lower)
+                hz = lower
+        level = logging.WARNING if hz < asked else logging.INFO
+        log.log(level, "%s: system %d grants telemetry at %g Hz (asked %g Hz)",
+                self.robot_id, self.system_id, hz, asked)  # fmt: skip
+        return hz
+
+    def _wait_estimate(self, timeout: float) -> None:
+        """Wait up to ``timeout`` s for the vehicle's position estimate: its first
+        LOCAL_POSITION_NED (an ArduPilot streams it only once its EKF has an origin, ~40 s after
+        a fresh start; GUIDED and arming are refused before), logging the wait every
+        ESTIMATE_LOG_EVERY s."""
+        start = self._clock()
+        deadline = start + timeout
+        next_log = start + ESTIMATE_LOG_EVERY
+        while not self._estimate:
+            now = self._service()
+            if self._estimate:
+                break
+            if now >= next_log:
+                log.info("%s: waiting for the vehicle's position estimate: %.0f s",
+                         self.robot_id, now - start)  # fmt: skip
+                next_log += ESTIMATE_LOG_EVERY
+            if now >= deadline or time.monotonic() > self._wall_deadline:
+                why = self._texts_since(start)
+                raise ConnectTimeout(
+                    f"robot {self.robot_id!r}: no position estimate (LOCAL_POSITION_NED) from "
+                    f"system {self.system_id} on {self.cfg.url} within {timeout} s"
+                    + (f" (vehicle: {why})" if why else "")
+                )
+            self._wait(min(0.05, max(0.0, deadline - now)))
+        if self._clock() - start > 1.0:
+            log.info("%s: the vehicle's position estimate after %.1f s",
+                     self.robot_id, self._clock() - start)  # fmt: skip
 
     def _wait_until(self, pred: Callable[[], bool], deadline: float) -> bool:
         while True:
@@ -644,15 +908,7 @@ class MavlinkDriver:
                 f"autopilot {self._autopilot}, profile {self.profile!r} expects {want_ap}"
             )
         self._send_heartbeat(self._clock())  # the vehicle's address is known now
-        interval_us = 1e6 / self.cfg.telemetry_hz
-        for msg_id, name in ((mc.MSG_LOCAL_POSITION_NED, "LOCAL_POSITION_NED"),
-                             (mc.MSG_ATTITUDE, "ATTITUDE")):  # fmt: skip
-            self._command(
-                mc.CMD_SET_MESSAGE_INTERVAL,
-                (msg_id, interval_us),
-                timeout,
-                f"SET_MESSAGE_INTERVAL {name}",
-            )
+        self.telemetry_hz = self._negotiate_telemetry(timeout)
         hb = min(DEFAULT_VEHICLE_HEARTBEAT, self.cfg.link_timeout / 4.0)
         try:  # heartbeats often enough that link_timeout never flaps (vehicles default to 1 Hz)
             self._command(
@@ -668,8 +924,9 @@ class MavlinkDriver:
         self._hb_gaps.clear()  # gaps seen before the rate was set say nothing
         _ = self.link_timeout  # warns now if the vehicle's heartbeats widen it
         self._check_vehicle_timeout(timeout)
+        self._wait_estimate(timeout)
         if self.profile == "ardurover":
-            self._command(
+            self._command_retrying(
                 mc.CMD_DO_SET_MODE, (mc.MODE_FLAG_CUSTOM, mc.ROVER_GUIDED), timeout, "GUIDED"
             )
         else:
@@ -677,14 +934,14 @@ class MavlinkDriver:
             start = self._clock()
             self._send_setpoint(start)  # the keepalive in _service streams from here on
             self._wait_until(lambda: False, start + PX4_STREAM_BEFORE_OFFBOARD)
-            self._command(
+            self._command_retrying(
                 mc.CMD_DO_SET_MODE,
                 (mc.MODE_FLAG_CUSTOM, mc.PX4_MAIN_OFFBOARD, 0),
                 timeout,
                 "OFFBOARD",
             )
         if self.cfg.arm:
-            self._command(mc.CMD_COMPONENT_ARM_DISARM, (1.0,), timeout, "arming")
+            self._command_retrying(mc.CMD_COMPONENT_ARM_DISARM, (1.0,), timeout, "arming")
         want = self._wanted_mode()
         if not self._wait_until(
             lambda: self._mode == want and (self._armed or not self.cfg.arm),

@@ -7,8 +7,10 @@ port are addressed by target system and their messages are filed by source syste
 
 from __future__ import annotations
 
+import logging
 import os
 import select
+import socket
 import threading
 import time
 from collections import deque
@@ -24,6 +26,9 @@ from drivers.base import DriverError  # noqa: E402
 AUTOPILOT_COMPONENT = 1  # MAV_COMP_ID_AUTOPILOT1
 GCS_COMPONENT = 190  # MAV_COMP_ID_MISSIONPLANNER
 MAX_DATAGRAMS_PER_PUMP = 4096
+TCP_RECONNECT_EVERY = 1.0  # s between attempts to reopen a ``tcp:`` link the vehicle closed
+
+log = logging.getLogger(__name__)
 
 
 def mavutil_v2() -> Any:
@@ -68,6 +73,13 @@ class MavLink:
         self._ticks: dict[int, Callable[[bool], None]] = {}
         self.unknown_sources = 0  # messages from systems nobody registered (dropped)
         self.refs = 0
+        # ``tcp:``: when the vehicle closed the connection (monotonic s; None: open). pymavlink
+        # would print on every read of the closed socket, which select reports readable forever
+        self.closed_at: float | None = None
+        self._next_reconnect = 0.0
+        if url.startswith("tcp:"):
+            self.conn.handle_eof = self._on_closed
+            self.conn.handle_disconnect = self._on_closed
 
     def register(self, system_id: int, tick: Callable[[bool], None]) -> None:
         """File messages from ``system_id``; ``tick(blocking)`` is called on every ``service``."""
@@ -97,9 +109,40 @@ class MavLink:
     def fileno(self) -> int:
         return self.conn.fd if self.conn.fd is not None else self.conn.port.fileno()
 
+    def _on_closed(self) -> None:
+        if self.closed_at is None:
+            self.closed_at = time.monotonic()
+            self._next_reconnect = self.closed_at + TCP_RECONNECT_EVERY
+            log.warning("%s: the vehicle closed the connection; reconnecting every %g s",
+                        self.url, TCP_RECONNECT_EVERY)  # fmt: skip
+
+    def _reconnect(self) -> None:
+        """One attempt to reopen a closed ``tcp:`` link (a restarted vehicle listens again)."""
+        now = time.monotonic()
+        if now < self._next_reconnect:
+            return
+        self._next_reconnect = now + TCP_RECONNECT_EVERY
+        try:
+            sock = socket.create_connection(self.conn.destination_addr, timeout=0.2)
+        except OSError:
+            return
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        old, self.conn.port = self.conn.port, sock
+        self.conn.fd = sock.fileno()
+        try:
+            old.close()
+        except (OSError, AttributeError):
+            pass
+        self.closed_at = None
+        log.info("%s: reconnected", self.url)
+
     def wait(self, seconds: float) -> None:
         """Block until data arrives or ``seconds`` (real time) pass."""
         if seconds <= 0:
+            return
+        if self.closed_at is not None:
+            time.sleep(seconds)  # a closed socket is readable forever
             return
         try:
             select.select([self.fileno()], [], [], seconds)
@@ -122,12 +165,16 @@ class MavLink:
                     for m in msgs:
                         self._file(m, addr)
             else:
+                if self.closed_at is not None:
+                    self._reconnect()
+                    if self.closed_at is not None:
+                        return
                 for _ in range(MAX_DATAGRAMS_PER_PUMP):
                     try:
                         m = self.conn.recv_msg()
                     except OSError:
                         break
-                    if m is None:
+                    if m is None or self.closed_at is not None:
                         break
                     self._file(m, None)
 
