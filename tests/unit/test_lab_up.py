@@ -69,8 +69,8 @@ def test_real_robots_get_no_world_unless_rehearsed(tmp_path):
 
 
 def test_remote_agents_are_waited_for_not_started_and_the_viz_reaches_the_daemon(tmp_path):
-    from controller.runtime.lab_launch import remote_ids
     from controller.runtime.console import part_state
+    from controller.runtime.lab_launch import remote_ids
 
     cfg = rehearsal()
     parts = plan_parts(cfg, "lab.toml", tmp_path, "capture", remote=("r2",), viz=True)
