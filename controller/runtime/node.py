@@ -194,8 +194,13 @@ class ControllerNode:
     def release_latch(self) -> None:
         """Nobody answered the latch query (no hub, no agent): go on with what this node holds
         (an unknown latch stays stopped until an operator's release)."""
-        if self.latch_pending:
-            log.warning("no holder answered the e-stop latch query; e-stop %s", self.estop)
+        if self.latch_pending:  # a fresh lab: nobody knows the latch yet (fail closed)
+            state = (
+                "unknown: stopped until an operator's resume"
+                if not self.latch.known
+                else ("engaged" if self.estop else "released")
+            )
+            log.info("no holder answered the e-stop latch query; the e-stop is %s", state)
         self.latch_pending = False
 
     def _sample_estop(self) -> None:
