@@ -21,6 +21,7 @@ import contextlib
 import dataclasses
 import json
 import os
+import re
 import sys
 import typing
 from collections.abc import Callable, Iterator
@@ -42,15 +43,27 @@ def _header(src: str) -> str:
     return HEADER.format(cmd=REGENERATE, src=src)
 
 
+_CODE_SPAN = re.compile(r"(`[^`]*`)")
+
+
 def cell(text: Any) -> str:
-    """Text safe in a Markdown table cell (one line, no pipes, no HTML, no emphasis)."""
-    s = " ".join(str(text).split())
-    return s.replace("|", "\\|").replace("<", "&lt;").replace(">", "&gt;").replace("*", "\\*")
+    """Text safe in a Markdown table cell: one line; outside code spans no pipes, HTML or
+    emphasis (inside them Python-Markdown keeps every character, pipes included)."""
+    parts = _CODE_SPAN.split(" ".join(str(text).split()))
+    for i in range(0, len(parts), 2):  # the text between code spans
+        p = parts[i].replace("|", "\\|").replace("<", "&lt;").replace(">", "&gt;")
+        parts[i] = p.replace("*", "\\*")
+    return "".join(parts)
+
+
+def code(text: Any) -> str:
+    """A code span in a Markdown table cell."""
+    return "`" + " ".join(str(text).split()) + "`"
 
 
 def prose(text: str) -> str:
-    """A docstring as a Markdown paragraph (reST double backquotes to code spans)."""
-    return cell(text.replace("``", "`")).replace("\\|", "|")
+    """A docstring or a comment as Markdown (reST double backquotes to code spans)."""
+    return cell(text.replace("``", "`"))
 
 
 # --------------------------------------------------------------------------- the CLI
@@ -87,8 +100,8 @@ def _option_rows(parser: argparse.ArgumentParser) -> list[str]:
         name = formatter._format_action_invocation(a)
         default = ""
         if a.default not in (None, False, "", argparse.SUPPRESS) and a.nargs != 0:
-            default = f"`{a.default}`"
-        rows.append(f"| `{cell(name)}` | {default} | {cell(a.help or '')} |")
+            default = code(a.default)
+        rows.append(f"| {code(name)} | {default} | {cell(a.help or '')} |")
     return rows
 
 
@@ -144,7 +157,7 @@ def config_page() -> str:
             out.append(prose(s.doc) + "\n\n")
         out.append("| key | type | default | rules | description |\n|---|---|---|---|---|\n")
         for k in s.keys:
-            default = "*required*" if k.required else (f"`{cell(k.default)}`" if k.default else "")
+            default = "*required*" if k.required else (code(k.default) if k.default else "")
             out.append(
                 f"| `{k.path}` | {cell(k.type)} | {default} | {cell(k.rules)} | {prose(k.doc)} |\n"
             )
@@ -180,15 +193,15 @@ def _dataclass_rows(cls: type, skip: tuple[str, ...] = ()) -> list[str]:
         if f.name in skip:
             continue
         if f.default is not dataclasses.MISSING:
-            default = f"`{cell(json.dumps(f.default))}`"
+            default = code(json.dumps(f.default))
         elif f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
-            default = f"`{cell(json.dumps(f.default_factory()))}`"  # type: ignore[misc]
+            default = code(json.dumps(f.default_factory()))  # type: ignore[misc]
         else:
             default = "*required*"
         limits = ", ".join(f"{k} {v:g}" for k, v in f.metadata.items() if k in ("limit", "min"))
         note = "; ".join(x for x in (limits, comments.get(f.name, "")) if x)
         rows.append(
-            f"| `{f.name}` | `{cell(_type_text(hints[f.name]))}` | {default} | {prose(note)} |"
+            f"| `{f.name}` | {code(_type_text(hints[f.name]))} | {default} | {prose(note)} |"
         )
     return rows
 
@@ -351,7 +364,7 @@ def run_json_page() -> str:
 def _json_row(key: str, where: dict[str, tuple[type, Any, str]], run: type) -> str:
     if key in where:
         cls, tp, note = where[key]
-        return f"| `{key}` | `{cell(_type_text(tp))}` | `{cls.__name__}` | {prose(note)} |\n"
+        return f"| `{key}` | {code(_type_text(tp))} | `{cls.__name__}` | {prose(note)} |\n"
     prop = getattr(run, key, None)
     doc = (getattr(prop, "__doc__", "") or "") if isinstance(prop, property) else ""
     return f"| `{key}` | | `{run.__name__}` | {prose(doc)} |\n"

@@ -205,7 +205,7 @@ def rules_text(meta: typing.Mapping[str, Any]) -> str:
     if "max" in meta:
         out.append(f"≤ {meta['max']:g}")
     if "pattern" in meta:
-        out.append(f"matches {meta['pattern']}")
+        out.append(f"matches `{meta['pattern']}`")
     return ", ".join(out)
 
 
