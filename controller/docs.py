@@ -36,7 +36,7 @@ HEADER = (
     "code (tests/unit/test_docs.py fails while this page is stale). -->\n\n"
 )
 SCHEMA_COPIES = ("fleet.schema.json", "controller/examples/fleet.schema.json")
-USAGE_WIDTH = "100"  # columns argparse wraps the usage lines at (the terminal's otherwise)
+USAGE_WIDTH = "90"  # columns argparse wraps the usage lines at (the terminal's otherwise)
 
 
 def _header(src: str) -> str:
@@ -144,12 +144,13 @@ def config_page() -> str:
     out = [
         _header("the config sections' dataclasses (controller/config/)"),
         "# Configuration reference: fleet.toml\n\n",
-        "Every key, its TOML type, default and rules, and the comment written beside it in the "
-        "code. A key marked *required* has no default. Unknown keys, wrong types and values "
-        "outside the rules are refused at load (`fleet check`, exit 2, naming the key path); "
-        "the rules between keys (a robot inside the room, endpoints, identities) are "
-        "`fleet check`'s alone. The same source gives the JSON Schema "
-        "(`fleet schema`, `fleet.schema.json`) that TOML editors validate with.\n\n",
+        "Every key, its TOML type, default and rules, and the comment written beside it in "
+        "the code, table by table (`[fleet]` `rate_hz` is `fleet.rate_hz`; `[[robots]]` is "
+        "an array of tables, one per robot). A key marked *required* has no default. Unknown "
+        "keys, wrong types and values outside the rules are refused at load (`fleet check`, "
+        "exit 2, naming the key path); the rules between keys (a robot inside the room, "
+        "endpoints, identities) are `fleet check`'s alone. The same source gives the JSON "
+        "Schema (`fleet schema`, `fleet.schema.json`) that TOML editors validate with.\n\n",
     ]
     for s in config_sections():
         out.append(f"## `{s.header}`\n\n")
@@ -158,8 +159,9 @@ def config_page() -> str:
         out.append("| key | type | default | rules | description |\n|---|---|---|---|---|\n")
         for k in s.keys:
             default = "*required*" if k.required else (code(k.default) if k.default else "")
+            key = k.path.rsplit(".", 1)[-1]  # the section's heading names the rest
             out.append(
-                f"| `{k.path}` | {cell(k.type)} | {default} | {cell(k.rules)} | {prose(k.doc)} |\n"
+                f"| `{key}` | {cell(k.type)} | {default} | {cell(k.rules)} | {prose(k.doc)} |\n"
             )
         out.append("\n")
     return "".join(out).rstrip() + "\n"
