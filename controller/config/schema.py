@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import functools
 import inspect
 import io
 import textwrap
@@ -32,6 +33,7 @@ _TOOL_COMMENTS = ("fmt:", "noqa", "type:", "pragma")
 # --------------------------------------------------------------------------- source comments
 
 
+@functools.cache
 def _class_source(cls: type) -> tuple[ast.ClassDef, dict[int, tuple[str, bool]]] | None:
     """The class's syntax tree and its comments by line: (text, on a line of its own)."""
     try:

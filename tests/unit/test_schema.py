@@ -5,6 +5,7 @@ out of range, a name not in the registry)."""
 
 from __future__ import annotations
 
+import functools
 import json
 import tomllib
 from pathlib import Path
@@ -24,6 +25,10 @@ SHIPPED = sorted(
 )
 
 
+SCHEMA_TEXT = schema_text()
+
+
+@functools.cache
 def _validator() -> jsonschema.Draft7Validator:
     schema = json_schema()
     jsonschema.Draft7Validator.check_schema(schema)
@@ -40,7 +45,7 @@ def test_every_shipped_config_names_the_schema_and_passes_it(path: Path):
     assert first.startswith("#:schema "), f"{path}: first line {first!r}"
     target = (path.parent / first.removeprefix("#:schema ").strip()).resolve()
     assert target.is_file(), f"{path} names {target}, which is missing"
-    assert target.read_text(encoding="utf-8") == schema_text(), "python -m controller.docs"
+    assert target.read_text(encoding="utf-8") == SCHEMA_TEXT, "run python -m controller.docs"
     assert _errors(tomllib.loads(path.read_text(encoding="utf-8"))) == []
 
 
@@ -81,7 +86,7 @@ def test_flat_mavlink_keys_are_accepted_as_the_loader_accepts_them():
 
 def test_fleet_schema_prints_and_writes_the_committed_schema(tmp_path, capsys):
     assert main(["schema"]) == 0
-    assert capsys.readouterr().out == schema_text()
+    assert capsys.readouterr().out == SCHEMA_TEXT
     out = tmp_path / "sub" / "fleet.schema.json"
     assert main(["schema", "--out", str(out)]) == 0
     assert out.read_text(encoding="utf-8") == (ROOT / "fleet.schema.json").read_text()
