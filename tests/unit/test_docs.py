@@ -1,7 +1,8 @@
 """The docs can't drift from the code: the generated reference pages and the config schema equal
 a fresh generation (``python -m controller.docs``), every relative link of README.md resolves,
-the troubleshooting page explains every failure ``Reason``, and the code's citations of the
-architecture page name sections it has."""
+the lab page's copy of the README's lab block is the block, the troubleshooting page explains
+every failure ``Reason``, and the code's citations of the architecture page name sections it
+has."""
 
 from __future__ import annotations
 
@@ -42,6 +43,19 @@ def test_every_relative_link_resolves(name):
         assert len(links) >= 10 and any(t.startswith("docs/") for t in links)
     missing = [t for t in links if not (path.parent / t.split("#", 1)[0]).exists()]
     assert not missing, f"{name} links to missing files: {missing}"
+
+
+def _fenced_after(text: str, mark: str) -> str:
+    after = text[text.index(mark) :]
+    return after.split("```", 2)[1]
+
+
+def test_the_lab_page_shows_the_readme_lab_block_as_it_is():
+    """The README's block is the one tests/integration/test_lab_up.py runs; the lab page's copy
+    must not drift from it."""
+    readme = _fenced_after((ROOT / "README.md").read_text(encoding="utf-8"), "<!-- lab-quickstart")
+    page = (ROOT / "docs" / "lab" / "index.md").read_text(encoding="utf-8")
+    assert _fenced_after(page, "lab quick start, copied") == readme
 
 
 def test_the_troubleshooting_page_explains_every_failure_reason():
