@@ -24,7 +24,7 @@ from typing import Any
 
 #: the JSON Schema draft written (the one Taplo and Even Better TOML read)
 DRAFT = "http://json-schema.org/draft-07/schema#"
-#: the first line of a shipped config: the Taplo / Even Better TOML schema directive
+#: the schema file beside a config, which its first line names (``#:schema ./fleet.schema.json``)
 SCHEMA_FILE = "fleet.schema.json"
 _NOT_KEYS = ("source", "notes")  # FleetConfig fields the loader fills, never TOML keys
 _TOOL_COMMENTS = ("fmt:", "noqa", "type:", "pragma")

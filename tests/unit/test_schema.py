@@ -91,3 +91,15 @@ def test_fleet_schema_prints_and_writes_the_committed_schema(tmp_path, capsys):
     assert main(["schema", "--out", str(out)]) == 0
     assert out.read_text(encoding="utf-8") == (ROOT / "fleet.schema.json").read_text()
     assert json.loads(out.read_text())["properties"]["robots"]["type"] == "array"
+
+
+def test_fleet_init_writes_the_schema_its_example_names_beside_it(tmp_path, capsys):
+    out = tmp_path / "cfg" / "lab.toml"
+    assert main(["init", "mavlink", "--out", str(out)]) == 0
+    first = out.read_text(encoding="utf-8").splitlines()[0]
+    named = out.parent / first.removeprefix("#:schema ").strip()
+    assert named.read_text(encoding="utf-8") == SCHEMA_TEXT
+    assert f"wrote {named}" in capsys.readouterr().out
+    named.write_text("{}", encoding="utf-8")  # one of the user's own is left alone
+    assert main(["init", "rehearsal", "--out", str(out.parent / "rehearsal.toml")]) == 0
+    assert named.read_text(encoding="utf-8") == "{}"
