@@ -1,13 +1,14 @@
 # Two commands on a fresh machine (only Python 3.11 and pip needed):
 #   make run    set up .venv and run the pybullet dry run of fleet.toml
-#   make test   set up .venv, lint, and run the whole test suite
+#   make test   set up .venv, lint, build the docs, and run the whole test suite
+#   make docs   the docs site, built strictly into site/ (a broken link or a missing page fails)
 #   make test-fast   lint and the fast tier (no e2e: dry runs, processes, pybullet), ~1 min
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup run test test-fast lint bench clean
+.PHONY: setup run test test-fast lint docs bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -28,9 +29,16 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
+# the docs site (mkdocs.yml, docs/): strict, so a broken link, anchor or a page left out of the
+# nav fails; the reference pages it holds are generated (python -m controller.docs) and checked
+# current by tests/unit/test_docs.py
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
+
 # the lockstep tiers (units, dry runs, replays) on both cores, then the real-time processes alone
 # (3 workers were no faster than 2 on the whole lockstep pass: 667 s vs 655 s)
 test: lint
+	$(MAKE) --no-print-directory docs
 	$(BIN)/python -m pytest -q -n 2 --dist worksteal -m "not serial" --durations=15
 	$(BIN)/python -m pytest -q -m serial --durations=15
 
@@ -41,4 +49,4 @@ bench: $(STAMP)
 	for b in bench/*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
 clean:
-	rm -rf $(VENV) .pytest_cache runs
+	rm -rf $(VENV) .pytest_cache runs site

@@ -27,7 +27,7 @@ again with the same file skips the runs already there (a killed bench resumes). 
 lockstep missed a tick is not the seed's reproducible run: it is marked ``valid: false``, left
 out of the statistics and listed in ``invalid_runs`` (``--retry-invalid`` runs it once more).
 ``--merge A.json B.json ...`` pools outputs (a later file's run replaces an earlier one's),
-``--table OUT.json`` prints the README's table.
+``--table OUT.json`` prints the table of docs/results/transport.md.
 """
 
 from __future__ import annotations
@@ -328,7 +328,7 @@ def _ci(x: dict, key: str, unit: str = "") -> str:
 
 
 def table(out: dict) -> str:
-    """The README's comparison table (markdown) from this script's JSON."""
+    """The results page's comparison table (markdown) from this script's JSON."""
     lines = []
     for sec, label in (("closed_loop", "suite"), ("robustness", "robustness")):
         if sec not in out:
@@ -395,7 +395,7 @@ def merge(paths: list[str], strategies, rng: np.random.Generator) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--table", nargs="+", metavar="JSON", help="print the README table")
+    ap.add_argument("--table", nargs="+", metavar="JSON", help="print the results page's table")
     ap.add_argument("--seeds", type=int, default=5, help="closed-loop seeds per scenario")
     ap.add_argument(
         "--seed-from", type=int, default=0, help="first seed index (to run the seeds in chunks)"

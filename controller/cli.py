@@ -44,6 +44,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("log", "layout"), "log_layout", "the shipped Foxglove layout: its path, or a copy"),
     (("sweep",), "sweep", "dry runs of several configs: a line each, a table at the end"),
     (("check",), "check", "validate a config"),
+    (("schema",), "schema", "the JSON Schema of fleet.toml, for TOML editors"),
     (("init",), "init", "write an example config (fleet.toml, lab.toml) to start from"),
 )
 GROUPS = {

@@ -6,14 +6,17 @@ run``), ``rehearsal`` (the lab rehearsed on one machine), ``mavlink`` (MAVLink r
 ``ros2`` (ROS 2 robots over rmw_zenoh), ``mixed`` (sim, PX4, ArduRover and ROS 2 robots); the
 lab kinds write ``lab.toml`` by default. Each file is commented for a lab user: what each
 section is, the units, what to change for real robots, the commands to run. An existing file
-is never overwritten without ``--force`` (exit 2). Prints the file written and the command to
-run next.
+is never overwritten without ``--force`` (exit 2). Beside it, unless one is there already, the
+JSON Schema its first line names (``#:schema ./fleet.schema.json``: TOML editors validate and
+complete the file with it; ``fleet schema`` writes the same). Prints the files written and the
+command to run next.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from controller.config.schema import SCHEMA_FILE
 from controller.examples import CATALOG, DEFAULT_KIND, KINDS, example, example_text, next_lines
 
 EXAMPLES = """\
@@ -71,5 +74,14 @@ def run(args) -> int:
     except OSError as exc:
         raise InputError(f"cannot write {out}: {exc.strerror or exc}") from exc
     print(f"fleet init: wrote {out}, the {ex.kind} example")
+    schema = out.parent / SCHEMA_FILE  # what the example's first line names
+    if not schema.exists():
+        from controller.docs import schema_text
+
+        try:
+            schema.write_text(schema_text(), encoding="utf-8")
+            print(f"fleet init: wrote {schema}, the schema TOML editors check {out.name} with")
+        except OSError as exc:  # the config is what counts: say so and go on
+            print(f"fleet init: {schema} not written ({exc.strerror or exc})")
     print("\n".join(next_lines(ex, str(out))))
     return 0

@@ -240,7 +240,7 @@ def _validate_mavlink(cfg: FleetConfig, i: int, src: str) -> None:
 
 
 def _mavlink_notes(cfg: FleetConfig, i: int) -> tuple[str, ...]:
-    """The GCS failsafe an ArduRover needs (README "In the lab") when its FS_TIMEOUT is not
+    """The GCS failsafe an ArduRover needs (docs/lab/mavlink.md) when its FS_TIMEOUT is not
     given (``mavlink.fs_timeout``): at least FS_TIMEOUT_PERIODS of our heartbeat periods."""
     r = cfg.robots[i]
     if r.profile != "ardurover" or r.mavlink.fs_timeout:

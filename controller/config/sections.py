@@ -143,7 +143,7 @@ class ZenohSection:
     connect: tuple[str, ...] = _rule(())
     multicast_scouting: bool = _rule(False)
     gossip_scouting: bool = _rule(False)
-    # Security (README "In the lab: secure profile"). Files are checked when a session that
+    # Security (docs/lab/secure.md). Files are checked when a session that
     # needs them is built (a robot's computer holds only its own), relative to the config file.
     config_file: str = _rule("")  # a zenoh JSON5 config, our settings applied over it
     user: str = _rule("")  # this process's identity (controller, recorder, CLI by default)

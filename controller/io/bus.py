@@ -89,7 +89,7 @@ def _is_loopback(endpoint: str) -> bool:
 def _apply_security(
     conf: zenoh.Config, section: ZenohSection, ident: ZenohIdentity, listening: bool
 ) -> None:
-    """Authentication, TLS and access control (README "In the lab: secure profile")."""
+    """Authentication, TLS and access control (docs/lab/secure.md)."""
     prefix = "zenoh_" if ident.path != "zenoh" else ""
     if ident.user:
         _insert(conf, "transport/auth/usrpwd/user", ident.user, f"{ident.path}.{prefix}user")
@@ -175,7 +175,7 @@ def zenoh_config(
         log.warning(
             "INSECURE: zenoh listens on %s without authentication: anyone who reaches it can "
             "command every robot and release the e-stop (set zenoh.auth_dictionary and "
-            "zenoh.acl, README 'In the lab: secure profile')",
+            "zenoh.acl: docs/lab/secure.md)",
             ", ".join(exposed),
         )
     return conf

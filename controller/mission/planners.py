@@ -1,5 +1,5 @@
 """Planning off the control tick: the port through which a mission asks for a plan and picks
-it up on a later tick (ARCHITECTURE "Time": the control tick never waits on a planner).
+it up on a later tick (docs/architecture.md, "Time": the control tick never waits on a planner).
 
 A mission never calls a slow planner itself. It ``submit``s a job (a pure function and its
 arguments) and ``poll``s for the result on the ticks that follow; meanwhile it executes the

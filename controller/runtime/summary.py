@@ -2,8 +2,9 @@
 hardware contract's figures (:class:`Checks`), the verdict and the outcome (:class:`RunSummary`).
 
 ``RunSummary.to_json()`` is the ``fleet run --json`` object (a contract: tools outside the repo
-and ``tests/contract`` read it; the README lists its fields): the same keys in the same order as
-the dict it replaced. Extend, never rename: a new figure is a new field, written by ``to_json``.
+and ``tests/contract`` read it; docs/reference/run-json.md lists its fields): the same keys in
+the same order as the dict it replaced. Extend, never rename: a new figure is a new field,
+written by ``to_json``.
 """
 
 from __future__ import annotations

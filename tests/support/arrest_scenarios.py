@@ -5,7 +5,7 @@ corners, fast and evasive objects, concave shapes. Shared by the arrest suite
 Each scenario says what its seeded run reports, one verdict each (measured, and asserted by the
 suite): ``arrest`` (arrested, the object held within ``RULES.max_hold_displacement_m`` by ground
 truth) or, at a wall or in a corner, the failure ``pinned`` (no set of points a robot can stand
-at holds the object there: the README says why that is an answer, not a defect). Of the six
+at holds the object there: docs/concepts.md says why that is an answer, not a defect). Of the six
 wall and corner runs, three arrest and three are ``pinned``; a change that turns an arrest into
 ``pinned`` (or back) fails the suite and must say why. A timeout is never an answer.
 None of these layouts or speeds is one the capture or approach code was tuned on (the capture

@@ -1,4 +1,4 @@
-"""Layering, checked by folder (ARCHITECTURE.md, "Packages and their seams").
+"""Layering, checked by folder (docs/architecture.md, "Packages and their seams").
 
 - ``controller/planning``, ``controller/estimation``, ``controller/mission`` are pure: besides the
   standard library (no clock, threads, sockets, processes or global randomness) they import only

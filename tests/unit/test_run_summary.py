@@ -1,6 +1,7 @@
 """The typed run summary (issue 21 item 6): ``RunSummary.to_json()`` is the ``fleet run --json``
-object, every field the README lists, in the order the dict always had; the mission summaries
-merge flat as ``summary()`` dicts did; the outcome (status, reason, phase) follows the failure."""
+object, every field the docs list (docs/getting-started.md), in the order the dict always had;
+the mission summaries merge flat as ``summary()`` dicts did; the outcome (status, reason,
+phase) follows the failure."""
 
 from __future__ import annotations
 
@@ -46,8 +47,9 @@ CHECKS = Checks(0.05, 0.0, [], None, 0, 0, 0, 0, 12.5, "run.mcap", 9000)
 
 
 def readme_run_fields() -> list[str]:
-    """The ``fleet run --json`` fields the README lists (not the mission's stage timings)."""
-    text = (ROOT / "README.md").read_text()
+    """The ``fleet run --json`` fields the docs list in prose (docs/getting-started.md, "Reading
+    the outcome"; not the mission's stage timings; the generated reference lists them all)."""
+    text = (ROOT / "docs" / "getting-started.md").read_text()
     para = text[text.index("`fleet run --json` fields:") : text.index("`fleet replay --json` rep")]
     para = re.sub(r"`mission` \(.*?\);", "`mission`;", para, flags=re.S)
     return [w for w in re.findall(r"`([a-z_]+)`", para) if w != "ok"]

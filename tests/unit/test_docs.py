@@ -1,0 +1,83 @@
+"""The docs can't drift from the code: the generated reference pages and the config schema equal
+a fresh generation (``python -m controller.docs``), every relative link of README.md resolves,
+the lab page's copy of the README's lab block is the block, the troubleshooting page explains
+every failure ``Reason``, and the code's citations of the architecture page name sections it
+has."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from controller.docs import GENERATED, REGENERATE, stale
+from controller.events import Reason
+from tests.support.config import ROOT
+
+LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
+
+
+def test_the_generated_pages_and_schema_are_current():
+    old = stale(ROOT)
+    assert not old, f"stale: {', '.join(old)}: run `{REGENERATE}` and commit the result"
+
+
+def test_every_generated_file_is_in_the_repository():
+    for path in GENERATED:
+        assert (ROOT / path).is_file(), f"{path} missing: run `{REGENERATE}`"
+
+
+def _relative_links(path) -> list[str]:
+    text = path.read_text(encoding="utf-8")
+    text = re.sub(r"```.*?```", "", text, flags=re.S)  # code blocks hold no links
+    return [
+        t for t in LINK.findall(text) if not re.match(r"^[a-z][a-z0-9+.-]*:", t) and t[0] != "#"
+    ]
+
+
+@pytest.mark.parametrize("name", ["README.md", "CONTRIBUTING.md", "CHANGELOG.md"])
+def test_every_relative_link_resolves(name):
+    path = ROOT / name
+    links = _relative_links(path)
+    if name == "README.md":
+        assert len(links) >= 10 and any(t.startswith("docs/") for t in links)
+    missing = [t for t in links if not (path.parent / t.split("#", 1)[0]).exists()]
+    assert not missing, f"{name} links to missing files: {missing}"
+
+
+def _fenced_after(text: str, mark: str) -> str:
+    after = text[text.index(mark) :]
+    return after.split("```", 2)[1]
+
+
+def test_the_lab_page_shows_the_readme_lab_block_as_it_is():
+    """The README's block is the one tests/integration/test_lab_up.py runs; the lab page's copy
+    must not drift from it."""
+    readme = _fenced_after((ROOT / "README.md").read_text(encoding="utf-8"), "<!-- lab-quickstart")
+    page = (ROOT / "docs" / "lab" / "index.md").read_text(encoding="utf-8")
+    assert _fenced_after(page, "lab quick start, copied") == readme
+
+
+def test_the_troubleshooting_page_explains_every_failure_reason():
+    text = (ROOT / "docs" / "lab" / "troubleshooting.md").read_text(encoding="utf-8")
+    headings = set(re.findall(r"^#+ `([a-z_]+)`", text, flags=re.M))
+    missing = [r.value for r in Reason if r.value not in headings]
+    assert not missing, f"docs/lab/troubleshooting.md: no section for {missing}"
+
+
+def test_the_codes_architecture_citations_name_sections_of_the_page():
+    page = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    sections = set(re.findall(r"^#+ (.+)$", page, flags=re.M))
+    cited = []
+    for folder in ("controller", "drivers", "sim_backend", "tests"):
+        for path in (ROOT / folder).rglob("*.py"):
+            text = path.read_text(encoding="utf-8")
+            if path.name == "test_docs.py":
+                continue
+            for m in re.finditer(r"docs/architecture\.md, \"([^\"\n]+)\"", text):
+                cited.append((path.relative_to(ROOT), m.group(1)))
+            old = re.search(r"ARCHITECTURE(\.md)?,? \"", text)  # the design document's name
+            assert not old, f"{path}: cite docs/architecture.md instead"
+    assert cited
+    for where, section in cited:
+        assert section in sections, f"{where} cites {section!r}, not a section of the page"
