@@ -80,12 +80,10 @@ def test_the_readme_lab_block_delivers_the_crate_with_the_resume_a_minute_late(t
     assert [ln.split()[1] for ln in lines] == ["init", "up", "status", "resume", "down"], lines
     assert _port_free(7447), "the shipped lab.toml listens on 127.0.0.1:7447: something is there"
     outputs = {}
-    t_up = None
     try:
         for line in lines:
             word = line.split()[1]
-            if word == "resume":
-                assert time.monotonic() - t_up < 5.0  # the lab was up; now a minute goes by
+            if word == "resume":  # the lab was up (and fleet status answered): a minute goes by
                 time.sleep(RESUME_DELAY)  # the scenario: an operator a minute late, not a wait
             proc = subprocess.run(
                 line, shell=True, cwd=tmp_path, env=_env(), capture_output=True, text=True,
@@ -93,8 +91,6 @@ def test_the_readme_lab_block_delivers_the_crate_with_the_resume_a_minute_late(t
             )  # fmt: skip
             outputs[word] = proc
             assert proc.returncode == 0, (line, proc.stdout[-3000:], proc.stderr[-3000:])
-            if word == "up":
-                t_up = time.monotonic()
     finally:
         state = read_state(tmp_path / "runs" / "lab-lab.json") or {}
         if state.get("stage") not in (None, "ended"):  # never leave a lab behind
