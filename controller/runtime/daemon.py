@@ -288,7 +288,7 @@ def run_daemon(
                 clock=time.monotonic,
                 planners=planners,
                 ident=claim.ident,
-                latch_at_start=file.load(),
+                latch_at_start=file.load_kept("controller/main"),
             )
             latch = LatchWatch(node, LatchKeeper(node.latch, file))
             latch.start(time.monotonic(), LATCH_WAIT_AT_START)
