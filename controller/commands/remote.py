@@ -89,13 +89,13 @@ def run(args) -> int:
         return 1
     with bus:
         if word in ("estop", "resume"):
-            from controller.runtime.estop import exit_status, put_estop
+            from controller.runtime.estop import describe_put, exit_status, put_estop
 
             result = put_estop(bus, cfg, word, source, getattr(args, "reason", ""), args.timeout)
             if args.json:
                 emit_json(result)
             else:
-                _print_put(word, result)
+                print(describe_put(word, result))
             return exit_status(result)
         replies = bus.query("status", wire.FleetStatus, timeout=args.timeout)
         if not replies:
@@ -141,31 +141,3 @@ def run(args) -> int:
                     f"{', LINK LOST' if r.get('link_lost') else ''}"
                 )
         return 0
-
-
-def _print_put(word: str, result: dict) -> None:
-    """``fleet estop|resume``'s text: confirmed or not, and whether every holder keeps it."""
-    missing = result["agents_missing"]
-    if result.get("refused"):
-        print(
-            f"fleet {word}: REFUSED, nothing sent: {', '.join(result['not_durable'])} cannot keep "
-            "the e-stop latch (durable: false); free its state folder first"
-        )
-        return
-    if missing:
-        print(
-            f"fleet {word}: sent; NOT confirmed by {', '.join(missing)} (confirmed by "
-            f"{', '.join(result['agents_confirmed']) or 'no agent'})"
-        )
-    else:
-        print(
-            f"fleet {word}: confirmed by every agent "
-            f"({', '.join(result['agents_confirmed'])}) in "
-            f"{result['elapsed_s'] * 1e3:.0f} ms; daemon "
-            f"{'too' if result['daemon_confirmed'] else 'not seen'}"
-        )
-    if not result.get("durable", True):
-        print(
-            f"  NOT DURABLE: {', '.join(result['not_durable'])} cannot keep the e-stop latch "
-            "in its state folder: after a power cut it may come back released"
-        )

@@ -111,6 +111,34 @@ def put_estop(
     }
 
 
+def describe_put(word: str, result: dict[str, Any]) -> str:
+    """``fleet estop|resume``'s text: confirmed or not, and whether every holder keeps it."""
+    missing = result["agents_missing"]
+    if result.get("refused"):
+        return (
+            f"fleet {word}: REFUSED, nothing sent: {', '.join(result['not_durable'])} cannot "
+            "keep the e-stop latch (durable: false); free its state folder first"
+        )
+    if missing:
+        text = (
+            f"fleet {word}: sent; NOT confirmed by {', '.join(missing)} (confirmed by "
+            f"{', '.join(result['agents_confirmed']) or 'no agent'})"
+        )
+    else:
+        text = (
+            f"fleet {word}: confirmed by every agent "
+            f"({', '.join(result['agents_confirmed'])}) in "
+            f"{result['elapsed_s'] * 1e3:.0f} ms; daemon "
+            f"{'too' if result['daemon_confirmed'] else 'not seen'}"
+        )
+    if not result.get("durable", True):
+        text += (
+            f"\n  NOT DURABLE: {', '.join(result['not_durable'])} cannot keep the e-stop latch "
+            "in its state folder (its file holds an older state)"
+        )
+    return text
+
+
 def exit_status(result: dict[str, Any]) -> int:
     """``fleet estop|resume``'s exit status for its result (``EXIT``)."""
     if result.get("refused"):
