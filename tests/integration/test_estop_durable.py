@@ -18,6 +18,7 @@ folder, and nothing else of the process is touched.
 
 from __future__ import annotations
 
+import json
 import threading
 
 import pytest
@@ -50,7 +51,9 @@ def _start(tmp_path, c: str, n: int) -> list:
     return procs
 
 
-def _put(cfg, word: str, timeout: float = 5.0) -> tuple[int, dict]:
+def _put(cfg, word: str, timeout: float = 10.0) -> tuple[int, dict]:
+    """``fleet estop|resume --json``; (exit status, its JSON). A put that a holder cannot keep
+    waits its whole timeout for it to become durable: 10 s also covers a loaded machine."""
     return fleet_json(word, "--config", str(cfg), "--timeout", str(timeout))
 
 
@@ -98,7 +101,7 @@ def test_an_estop_that_cannot_be_kept_says_so_and_survives_a_full_restart(tmp_pa
 
             _break(folder)
             code, out = _put(cfg, "estop")
-            assert code == NOT_DURABLE, out
+            assert code == NOT_DURABLE, json.dumps(out)
             assert out["confirmed"] is True and out["agents_confirmed"] == list(ROBOTS), out
             assert out["durable"] is False and out["not_durable"] == list(HOLDERS), out
             kept = {h["holder"]: h for h in out["holders"]}
