@@ -18,7 +18,22 @@ stopped ("fail closed") and answers no latch query. The rules:
   an engaged answer at the latch's epoch or above engages it. A released answer never releases
   a latch. The one exception is a fresh holder: an *unknown* latch adopts the newest answer of
   a ``hub`` or ``controller`` holder (under the lab ACL only the controller's identity may
-  answer on those keys), never a robot's: a robot may stop the fleet, never release it.
+  answer on those keys), never a robot's: a robot may stop the fleet, never release it;
+- a **robot's** engaged answer (any role but ``hub``/``controller``) is believed only at an epoch
+  no greater than ``operator_epoch + 1``: the greatest epoch this holder has seen an operator
+  set (an operator's message, a trusted holder's *release* - only operators release -, its own
+  file). One robot's credentials answering "engaged at 2^63-1" would otherwise lift every latch
+  to an epoch no release can exceed (the fleet stopped for good); it is refused and counted
+  (``implausible_epochs``). An engaged robot answer never raises an engaged latch's epoch past
+  that bound, so a robot cannot ratchet it either;
+- a fresh (unknown) latch takes the **most restrictive** state it sees: engaged if any usable
+  answer is engaged at or above the newest trusted release's epoch (a robot's epoch clamped to
+  the trusted holders' greatest + 1, or without them to the least robot epoch + 1), else the
+  newest trusted release;
+- a holder that keeps its latch in a file (``keeps``) answers ``durable: false`` while the held
+  state is not in its file (``saved``: a write failed or is still to come) and **refuses an
+  operator's release while a write has failed** (``not_durable``): robots stay held until the
+  state can be kept again.
 
 Thread-safe: zenoh's callbacks and query responders call it from their own threads.
 """
@@ -46,6 +61,8 @@ class LatchCounters:
     replays_refused: int = 0  # operator releases at or below the latch's epoch
     answers_refused: int = 0  # holders' released answers that would have released the latch
     stale_answers: int = 0  # engaged answers below the latch's epoch
+    implausible_epochs: int = 0  # robots' engaged answers above operator_epoch + 1
+    releases_refused_not_durable: int = 0  # operator releases refused: the latch is not kept
 
 
 @dataclass(frozen=True)
@@ -72,12 +89,45 @@ class Latch:
         self._msg = initial
         self.counters = LatchCounters()
         self.version = 0  # bumped on every change of the held message (persistence polls it)
+        # the greatest epoch an operator is known to have set (bounds robots' engaged answers)
+        self.operator_epoch = 0 if initial is None else initial.epoch
+        # persistence, set by the holder's keeper (``runtime.estop.LatchKeeper``): whether this
+        # holder keeps a file, the version last written, whether the last write failed
+        self.keeps = False
+        self.saved_version = 0
+        self.save_failing = False
 
     # -- reading
     def state(self) -> wire.EStop | None:
         """The held message (None while unknown): what this holder answers a latch query."""
         with self._lock:
             return self._msg
+
+    def answer(self) -> wire.EStop | None:
+        """What this holder answers a latch query: the held message, ``durable`` false when it
+        keeps a file and the held state is not in it (None while unknown)."""
+        with self._lock:
+            msg = self._msg
+            if msg is None or not self.keeps:
+                return msg
+            durable = not self.save_failing and self.saved_version == self.version
+            return msg if durable else dataclasses.replace(msg, durable=False)
+
+    @property
+    def durable(self) -> bool:
+        """Whether the held state is kept (always, for a holder without a file)."""
+        with self._lock:
+            if not self.keeps:
+                return True
+            return not self.save_failing and self.saved_version == self.version
+
+    def mark_saved(self, version: int, ok: bool) -> None:
+        """The keeper wrote ``version`` (``ok``) or failed to."""
+        with self._lock:
+            self.keeps = True
+            self.save_failing = not ok
+            if ok:
+                self.saved_version = version
 
     @property
     def known(self) -> bool:
@@ -108,16 +158,22 @@ class Latch:
         with self._lock:
             before = _word(self._msg)
             held = self._msg
+            msg = dataclasses.replace(msg, durable=True)  # not a holder's answer
             if msg.engaged:
                 epoch = max(msg.epoch, 0 if held is None else held.epoch)
                 self._set(dataclasses.replace(msg, epoch=epoch))
+                self.operator_epoch = max(self.operator_epoch, epoch)
                 return Change(before, "engaged", "operator", msg)
             if held is not None and msg.epoch <= held.epoch:
                 if not held.engaged:  # already released (a repeat of its own release): no-op
                     return Change(before, before, "already released", msg)
                 self.counters.replays_refused += 1
                 return Change(before, before, "refused: release at an old epoch", msg)
+            if self.keeps and self.save_failing:
+                self.counters.releases_refused_not_durable += 1
+                return Change(before, before, "refused: latch not durable", msg)
             self._set(msg)
+            self.operator_epoch = max(self.operator_epoch, msg.epoch)
             return Change(before, "released", "operator", msg)
 
     def answers(self, replies: Iterable[tuple[str, wire.EStop]]) -> Change | None:
@@ -129,25 +185,53 @@ class Latch:
             return self._engage_from(list(replies))
 
     def _adopt(self, replies: list[tuple[str, wire.EStop]]) -> Change | None:
-        usable = [m for role, m in replies if m.engaged or role in TRUSTED_ROLES]
-        self.counters.answers_refused += len(replies) - len(usable)
-        if not usable:
+        """The most restrictive state the answers show (see the module doc)."""
+        if not replies:
             return None
-        best = max(usable, key=lambda m: (m.epoch, m.engaged))
+        trusted = [m for role, m in replies if role in TRUSTED_ROLES]
+        ref = max(m.epoch for m in trusted) if trusted else min(m.epoch for _, m in replies)
+        released_at = max((m.epoch for m in trusted if not m.engaged), default=-1)
+        engaged: list[wire.EStop] = []
+        for role, m in replies:
+            if not m.engaged:
+                continue
+            if role not in TRUSTED_ROLES and m.epoch > ref + 1:
+                self.counters.implausible_epochs += 1
+                m = dataclasses.replace(m, epoch=ref + 1)
+            if m.epoch >= released_at:
+                engaged.append(m)
+            else:
+                self.counters.stale_answers += 1
+        self.counters.answers_refused += sum(
+            1 for role, m in replies if not m.engaged and role not in TRUSTED_ROLES
+        )
+        if engaged:
+            best = max(engaged, key=lambda m: m.epoch)
+        elif released_at >= 0:
+            best = max((m for m in trusted if not m.engaged), key=lambda m: m.epoch)
+        else:
+            return None
+        best = dataclasses.replace(best, durable=True)
         self._set(best)
+        self.operator_epoch = max(self.operator_epoch, best.epoch)
         return Change("unknown", _word(best), "adopted", best)
 
     def _engage_from(self, replies: list[tuple[str, wire.EStop]]) -> Change | None:
         held = self._msg
         if held is None:
             return None
+        for role, m in replies:  # a trusted holder's release is an operator's epoch
+            if role in TRUSTED_ROLES and not m.engaged:
+                self.operator_epoch = max(self.operator_epoch, m.epoch)
         best: wire.EStop | None = None
-        for _, m in replies:
+        for role, m in replies:
             if not m.engaged:
                 if held.engaged:
                     self.counters.answers_refused += 1
                 continue
-            if m.epoch < held.epoch:
+            if role not in TRUSTED_ROLES and m.epoch > self.operator_epoch + 1:
+                self.counters.implausible_epochs += 1
+            elif m.epoch < held.epoch:
                 self.counters.stale_answers += 1
             elif (not held.engaged or m.epoch > held.epoch) and (
                 best is None or m.epoch > best.epoch
@@ -156,7 +240,7 @@ class Latch:
         if best is None:
             return None
         before = _word(held)
-        self._set(dataclasses.replace(best, epoch=max(best.epoch, held.epoch)))
+        self._set(dataclasses.replace(best, epoch=max(best.epoch, held.epoch), durable=True))
         return Change(before, "engaged", "answer", best)
 
     def _set(self, msg: wire.EStop) -> None:

@@ -126,12 +126,18 @@ class EStop(Message):
     ``source`` names who set it (the operator's identity); ``epoch`` orders operators' actions:
     a counter only they advance (the latch, ``controller.latch``, refuses a release at or below
     the epoch it holds). ``t`` is the sender's clock, logged and never used to order e-stops.
+
+    ``durable`` (a holder's answer on ``estop/state/<role>/<id>`` only): false when the holder
+    keeps its latch in a file and this state is not (yet) in it - a failed write (full disk,
+    unwritable folder) or a write still to come. Sent only when false: receivers older than the
+    field refuse such an answer, as they refuse anything they cannot decode (they stay stopped).
     """
 
     engaged: bool
     source: str = ""
     reason: str = ""
     epoch: int = field(default=0, metadata={"min": 0})
+    durable: bool = field(default=True, metadata={"omit_default": True})
 
     TYPE: ClassVar[str] = "fleet.EStop"
 
@@ -198,8 +204,14 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
 
 
 def to_dict(msg: Message) -> dict[str, Any]:
-    """The message as plain JSON-ready data."""
-    return {f.name: getattr(msg, f.name) for f in dataclasses.fields(msg)}
+    """The message as plain JSON-ready data. A field marked ``omit_default`` (added to a type
+    after receivers were deployed) is left out while it holds its default, so a receiver that
+    predates it still decodes every message that does not use it."""
+    return {
+        f.name: getattr(msg, f.name)
+        for f in dataclasses.fields(msg)
+        if not (f.metadata.get("omit_default") and getattr(msg, f.name) == f.default)
+    }
 
 
 def encode(msg: Message) -> bytes:
@@ -340,7 +352,12 @@ def json_schema(cls: type[Message]) -> dict[str, Any]:
         "description": (cls.__doc__ or "").strip().splitlines()[0],
         "type": "object",
         "properties": props,
-        "required": list(props),
+        # a field left out while default (``omit_default``) is not required
+        "required": [
+            f.name
+            for f in dataclasses.fields(cls)
+            if f.name in props and not f.metadata.get("omit_default")
+        ],
         "additionalProperties": False,
     }
 

@@ -57,6 +57,16 @@ def run(args) -> int:
     problem = log_dir_problem(cfg.log.dir)  # what `fleet run` would fail on at its start
     if problem:
         errors.append(ConfigError(cfg.source, "log.dir", problem))
+    from controller.runtime.estop import state_folder
+
+    problem = log_dir_problem(state_folder(cfg))  # where the hub and daemon keep the e-stop
+    if problem:
+        where = (
+            "fleet.state_dir" if cfg.fleet.state_dir or not cfg.log.state_dir else "log.state_dir"
+        )
+        errors.append(
+            ConfigError(cfg.source, where, problem.replace("log files", "the e-stop latch"))
+        )
     shared = certificate_problem(cfg)  # the certificates readable here, by common name
     if shared:
         errors.append(ConfigError(cfg.source, *shared))

@@ -6,8 +6,10 @@ publishes a latched emergency stop straight to the agents (through the hub: ``fl
 the one a daemon starts when none runs): every agent stops its robot and refuses commands until
 an operator's ``resume``. Both then ask every holder of the latch (``estop/state/<role>/<id>``)
 until each known agent (the config's robots and every robot liveliness token) answers with the
-new state; exit 0 when all did, 1 otherwise, naming those that did not. The daemon's answer is
-reported, not needed.
+new state; exit 0 when all did, 1 otherwise, naming those that did not; 3 when every agent did
+but a hub or daemon cannot keep the latch in its state folder (``durable: false``, naming them in
+``not_durable``), or a resume was refused (nothing put) because one cannot. The daemon's answer
+is reported, not needed. ``holders`` lists every holder's answer: state, epoch, who set it.
 """
 
 from __future__ import annotations
@@ -87,25 +89,14 @@ def run(args) -> int:
         return 1
     with bus:
         if word in ("estop", "resume"):
-            from controller.runtime.estop import put_estop
+            from controller.runtime.estop import describe_put, exit_status, put_estop
 
             result = put_estop(bus, cfg, word, source, getattr(args, "reason", ""), args.timeout)
-            missing = result["agents_missing"]
             if args.json:
                 emit_json(result)
-            elif missing:
-                print(
-                    f"fleet {word}: sent; NOT confirmed by {', '.join(missing)} (confirmed by "
-                    f"{', '.join(result['agents_confirmed']) or 'no agent'})"
-                )
             else:
-                print(
-                    f"fleet {word}: confirmed by every agent "
-                    f"({', '.join(result['agents_confirmed'])}) in "
-                    f"{result['elapsed_s'] * 1e3:.0f} ms; daemon "
-                    f"{'too' if result['daemon_confirmed'] else 'not seen'}"
-                )
-            return 0 if not missing else 1
+                print(describe_put(word, result))
+            return exit_status(result)
         replies = bus.query("status", wire.FleetStatus, timeout=args.timeout)
         if not replies:
             if args.json:
@@ -116,11 +107,23 @@ def run(args) -> int:
             )
             return 1
         from controller.runtime.claim import newest_status
+        from controller.runtime.estop import holder_states
 
         st = newest_status(replies)
         others = sorted({r.controller for r in replies} - {st.controller})
+        holders = holder_states(bus, min(0.5, args.timeout))
+        not_kept = sorted({k for k, h in holders if h["durable"] is False})
         if args.json:
-            emit_json({"ok": True, **wire.to_dict(st), "controllers": [st.controller, *others]})
+            emit_json(
+                {
+                    "ok": True,
+                    **wire.to_dict(st),
+                    "controllers": [st.controller, *others],
+                    "estop_durable": not not_kept,
+                    "estop_not_durable": not_kept,
+                    "estop_holders": [h | {"holder": k} for k, h in holders],
+                }
+            )
         else:
             unknown = st.counters.get("estop_unknown")
             latch = "UNKNOWN (stopped)" if unknown else ("ENGAGED" if st.estop else "off")
@@ -128,6 +131,8 @@ def run(args) -> int:
                 f"fleet {st.fleet}: phase {st.phase}, e-stop {latch}"
                 f" (controller {st.controller or 'unnamed'})"
             )
+            if not_kept:
+                print(f"  E-STOP NOT DURABLE: {', '.join(not_kept)} cannot keep the latch")
             if others:
                 print(f"  MORE THAN ONE CONTROLLER ANSWERED: also {', '.join(others)}")
             for r in st.robots:

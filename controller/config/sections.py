@@ -89,6 +89,11 @@ class FleetSection:
     # s a fleet-wide silence (two or more robots missing at once: a hub, world or network
     # outage) may last before its missing robots count as lost; the mission pauses meanwhile
     outage_grace: float = _rule(3.0, min=0, max=600)
+    # where the hub and the daemon keep the latched e-stop across restarts and power cuts
+    # (``estop-<fleet>-hub.json``, ``-controller.json``), relative to the config file's folder;
+    # empty: ``log.state_dir`` if set (the older key, relative to the working folder as before),
+    # else ``state/`` beside the config file - never the log folder, which fills up by design
+    state_dir: str = _rule("")
 
     @property
     def period(self) -> float:
@@ -183,8 +188,8 @@ class ZenohIdentity:
 @dataclass(frozen=True, kw_only=True)
 class LogSection:
     dir: str = _rule("runs")
-    # where the hub and the daemon keep the latched e-stop across restarts
-    # (``estop-<fleet>-hub.json``, ``estop-<fleet>-controller.json``); empty: ``dir``
+    # the older key of ``fleet.state_dir`` (still obeyed when that is empty); empty: the
+    # default of ``fleet.state_dir`` (no longer ``dir``)
     state_dir: str = _rule("")
     flush_interval: float = _rule(0.5, gt=0, max=10)
     scene_hz: float = _rule(10.0, min=0, max=100)  # Foxglove scene channels per second (0: none)

@@ -7,6 +7,16 @@ the message's ``t``. Chunks are zstd-compressed and flushed at least every ``flu
 so a recorder killed without warning leaves a file that still yields every message older than
 about one flush interval (``read_log`` reads such a file up to the cut).
 
+Write errors (a full disk, a file-size limit, a folder gone or unwritable) never end the writer
+thread: each is counted (``log_errors``), said at most once a second, and the messages that could
+not be written are counted (``log_dropped``); the broken segment is left as it is (readable up to
+the failure: ``read_log``, ``fleet log recover``) and every ``RETRY_S`` a new segment is tried
+(``<stem>-resumed-NNN.mcap`` beside a single file, the next ``_NNN`` of a folder of segments).
+While none can be written, events (keys of rate 0: e-stops, phases, plans, robots' failures) are
+held in memory, up to ``HELD_MAX``, and written first into the new segment. The queue between the
+callbacks and the writer is bounded (``QUEUE_MAX``): when full, the oldest *non-event* sample is
+dropped (counted in ``log_dropped``); events and metadata are never dropped.
+
 Native channels (:meth:`McapRecorder.native_channel`) keep other middlewares' messages as they
 are: a ROS 2 robot's topics go in with schema encoding ``ros2msg`` and message encoding ``cdr``
 under their ROS topic names, so ROS tools (ros2 bag, Foxglove, mcap-ros2-support) read them.
@@ -14,6 +24,7 @@ under their ROS topic names, so ROS tools (ros2 bag, Foxglove, mcap-ros2-support
 
 from __future__ import annotations
 
+import collections
 import json
 import logging
 import queue
@@ -42,6 +53,48 @@ _NATIVE = object()  # queue tag of a native (non-fleet) sample, e.g. a ROS 2 rob
 MAX_PAYLOAD_BYTES = 4 * 1024 * 1024  # a bigger sample is dropped unread (as the bus does)
 SIM_EPOCH = 946_684_800.0  # 2000-01-01T00:00:00Z: a dry run's t = 0 (log and publish times)
 CLOCK_SKEW = 60.0  # s: a stamp further than this from the run's clock is from another clock
+# samples waiting for the writer thread: ≈ 10-20 s of a 50-robot lab (poses, commands, states)
+QUEUE_MAX = 100_000
+HELD_MAX = 10_000  # events held while no segment can be written
+RETRY_S = 1.0  # s between attempts at a new segment after a write error; also the log's pace
+
+
+class _Queue:
+    """The recorder's queue: FIFO, bounded to ``maxsize`` droppable items (the oldest dropped
+    first when full); items put with ``keep`` (events, metadata, the end) are never dropped."""
+
+    def __init__(self, maxsize: int) -> None:
+        self.maxsize = maxsize
+        self._keep: collections.deque[tuple[int, Any]] = collections.deque()
+        self._drop: collections.deque[tuple[int, Any]] = collections.deque()
+        self._n = 0
+        self._cv = threading.Condition()
+        self.dropped = 0
+
+    def put(self, item: Any, keep: bool = False) -> None:
+        with self._cv:
+            self._n += 1
+            if keep:
+                self._keep.append((self._n, item))
+            else:
+                if len(self._drop) >= self.maxsize:
+                    self._drop.popleft()
+                    self.dropped += 1
+                self._drop.append((self._n, item))
+            self._cv.notify()
+
+    def get(self, timeout: float) -> Any:
+        """The oldest item (raises queue.Empty after ``timeout`` s)."""
+        with self._cv:
+            if not self._cv.wait_for(lambda: self._keep or self._drop, timeout=timeout):
+                raise queue.Empty
+            if self._keep and (not self._drop or self._keep[0][0] < self._drop[0][0]):
+                return self._keep.popleft()[1]
+            return self._drop.popleft()[1]
+
+    def qsize(self) -> int:
+        with self._cv:
+            return len(self._keep) + len(self._drop)
 
 
 @dataclass(frozen=True)
@@ -115,11 +168,19 @@ class McapRecorder:
         self._meta: list[tuple[str, dict[str, str]]] = []
         self._bad_keys: set[str] = set()
         self._logged: dict[str, bool] = {}  # key: whether the registry logs it
+        self._events: dict[str, bool] = {}  # key: whether it carries events (never dropped)
         # native channels: key -> (topic, schema name, schema encoding, schema, message encoding)
         self._native: dict[str, tuple[str, str, str, bytes, str]] = {}
         self._segment_start: int | None = None
         self._open_segment()
-        self._q: queue.Queue[tuple[Any, ...] | None] = queue.Queue()
+        self._q = _Queue(QUEUE_MAX)
+        self.log_errors = 0  # write errors (each failed write, flush or new segment)
+        self.write_dropped = 0  # messages lost to write errors (not in any segment)
+        self._broken = False  # the current segment failed: no writer until a new one opens
+        self._held: list[tuple[Any, ...]] = []  # events kept while broken
+        self._unflushed = 0  # messages added since the last flush (lost if that flush fails)
+        self._retry_at = 0.0
+        self._said_at = -1e9
         self._sim_t = 0.0  # the latest plausible sim time seen (dry run)
         self._last_log_ns = 0
         self.written = 0  # bus messages
@@ -137,11 +198,13 @@ class McapRecorder:
         if self.split_s > 0:
             self.location.mkdir(parents=True, exist_ok=True)
             seg = self.location / f"{self.location.name}_{len(self.segments):03d}.mcap"
-        else:
+        elif not self.segments:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             seg = self.path
-        self.segments.append(seg)
+        else:  # after a write error: a continuation beside the file
+            seg = self.path.with_name(f"{self.path.stem}-resumed-{len(self.segments):03d}.mcap")
         self._stream: BinaryIO = open(seg, "wb")  # noqa: SIM115 - owned by the thread
+        self.segments.append(seg)
         self._writer = Writer(self._stream, compression=CompressionType.ZSTD)
         self._writer.start(profile=PROFILE, library="fleet-controller")
         self._schemas: dict[str, int] = {}
@@ -156,6 +219,7 @@ class McapRecorder:
     def _next_segment(self) -> None:
         self._writer.finish()
         self._stream.close()
+        self._unflushed = 0  # all in the finished segment
         self._open_segment()
 
     def on_sample(self, key: str, payload: bytes, recv_time: float) -> None:
@@ -165,7 +229,16 @@ class McapRecorder:
             logged = self._logged[key] = topic is None or topic.logged
         if not logged:
             return  # the registry says so (status replies, liveliness)
-        self._q.put((key, payload, recv_time))
+        self._q.put((key, payload, recv_time), keep=self._is_event(key))
+
+    def _is_event(self, key: str) -> bool:
+        """Whether ``key`` carries events (rate 0 in the registry: e-stops, phases, plans,
+        robots' failures), which are never dropped."""
+        event = self._events.get(key)
+        if event is None:
+            topic = wire.topic_for_key(self.fleet, key)
+            event = self._events[key] = topic is not None and topic.rate_hz == 0.0
+        return event
 
     def native_channel(
         self,
@@ -193,7 +266,7 @@ class McapRecorder:
     def metadata(self, name: str, data: dict[str, str]) -> None:
         """An MCAP metadata record (e.g. the run's config), written in order with the messages,
         so a file cut by a crash still carries it (and every later segment starts with it)."""
-        self._q.put((_META, name, {str(k): str(v) for k, v in data.items()}))
+        self._q.put((_META, name, {str(k): str(v) for k, v in data.items()}), keep=True)
 
     def _channel(self, key: str) -> tuple[int, str, bytes]:
         """The channel of a bus key: (id, schema name, schema data)."""
@@ -266,6 +339,7 @@ class McapRecorder:
         self._writer.add_message(
             ch, log_time=log_ns, publish_time=pub_ns, data=data, sequence=self.written & 0xFFFFFFFF
         )
+        self._unflushed += 1
 
     def _bad(self, key: str, why: Any) -> None:
         """A payload that does not decode: counted and dropped, one quiet line per key (no
@@ -350,11 +424,93 @@ class McapRecorder:
                 item = ()  # type: ignore[assignment]
             if item is None:
                 break
-            self._handle(item)
+            if self._broken and time.monotonic() >= self._retry_at:
+                self._reopen()
+            if self._broken:
+                self._hold(item)
+            else:
+                try:
+                    self._handle(item)
+                except OSError as exc:
+                    self._failed(exc, lost=1)
             if time.monotonic() - last_flush >= self.flush_interval:
-                self._writer.flush()
+                self._flush()
                 last_flush = time.monotonic()
         self._finish()
+
+    def _flush(self) -> None:
+        if self._broken:
+            return
+        try:
+            self._writer.flush()
+        except OSError as exc:
+            self._failed(exc)
+            return
+        self._unflushed = 0
+
+    def _failed(self, exc: OSError, lost: int = 0) -> None:
+        """A write failed: count it and what it lost, say so (at most once per ``RETRY_S``),
+        leave the segment as it is and try a new one in ``RETRY_S``."""
+        self.log_errors += 1
+        self.write_dropped += lost + (self._unflushed if not self._broken else 0)
+        self._unflushed = 0
+        if not self._broken:
+            try:
+                self._stream.close()
+            except OSError:
+                pass  # its buffer cannot be written either
+        self._broken = True
+        self._retry_at = time.monotonic() + RETRY_S
+        self._say(f"cannot write {self.segments[-1]}: {exc}")
+
+    def _say(self, what: str) -> None:
+        now = time.monotonic()
+        if now - self._said_at >= RETRY_S:
+            self._said_at = now
+            log.error(
+                "recorder: %s (%d write errors, %d messages not logged so far); the fleet goes "
+                "on, a new segment is tried every %g s",
+                what,
+                self.log_errors,
+                self.write_dropped + self._q.dropped,
+                RETRY_S,
+            )
+
+    def _hold(self, item: tuple[Any, ...]) -> None:
+        """An item while no segment can be written: metadata kept, events held, the rest lost."""
+        if not item:
+            return
+        if item[0] is _META:
+            self._meta.append((item[1], item[2]))
+        elif item[0] is not _NATIVE and self._is_event(item[0]) and len(self._held) < HELD_MAX:
+            self._held.append(item)
+        else:
+            self.write_dropped += 1
+
+    def _reopen(self) -> None:
+        """A new segment after a write error (its metadata first, then the events held)."""
+        self._retry_at = time.monotonic() + RETRY_S
+        try:
+            self._open_segment()
+        except OSError as exc:
+            self.log_errors += 1
+            self._say(f"cannot open a new segment: {exc}")
+            return
+        self._broken = False
+        self._unflushed = 0
+        log.warning(
+            "recorder: writing again, to %s (%d write errors, %d messages not logged)",
+            self.segments[-1],
+            self.log_errors,
+            self.write_dropped + self._q.dropped,
+        )
+        held, self._held = self._held, []
+        for item in held:
+            try:
+                self._handle(item)
+            except OSError as exc:
+                self._failed(exc, lost=1)
+                return
 
     def _handle(self, item: tuple[Any, ...]) -> None:
         if item and item[0] is _META:
@@ -369,24 +525,42 @@ class McapRecorder:
         elif item:
             try:
                 self._write(*item)
+            except OSError:
+                raise  # a write error: _run counts it and goes on
             except Exception:  # noqa: BLE001 - never lose the thread
                 self.dropped += 1
                 log.exception("could not record a sample on %s", item[0])
 
     def _finish(self) -> None:
-        if self.scene is not None:
-            try:
-                for m in self.scene.flush():
-                    self._write_scene(m, self._last_log_ns)
-            except Exception:  # noqa: BLE001 - the log matters more than its last frame
-                log.exception("could not write the last scene frame")
-        self._writer.finish()
-        self._stream.close()
+        if self._broken:
+            self._reopen()  # one last try: the events held, the index
+        if self._broken:
+            self.write_dropped += len(self._held)
+            return
+        try:
+            if self.scene is not None:
+                try:
+                    for m in self.scene.flush():
+                        self._write_scene(m, self._last_log_ns)
+                except OSError:
+                    raise
+                except Exception:  # noqa: BLE001 - the log matters more than its last frame
+                    log.exception("could not write the last scene frame")
+            self._writer.finish()
+            self._stream.close()
+        except OSError as exc:
+            self._failed(exc)
 
     def drops(self) -> dict[str, int]:
         """Samples the recorder could not write (e.g. a payload that is not JSON), and what its
-        taps dropped (the live view's full queue)."""
-        out = {"recorder_dropped": self.dropped}
+        taps dropped (the live view's full queue); ``log_errors`` (write errors: full disk...)
+        and ``log_dropped`` (messages not logged: lost to those errors or dropped from the full
+        queue)."""
+        out = {
+            "recorder_dropped": self.dropped,
+            "log_errors": self.log_errors,
+            "log_dropped": self.write_dropped + self._q.dropped,
+        }
         for tap in self.taps:
             out.update(tap.drops())
         return out
@@ -397,7 +571,7 @@ class McapRecorder:
         if self._closed:
             return
         self._closed = True
-        self._q.put(None)
+        self._q.put(None, keep=True)
         self._thread.join()
         for tap in self.taps:
             tap.close()
@@ -423,7 +597,8 @@ def segments(path: str | Path) -> list[Path]:
     path = Path(path)
     if path.is_dir():
         return sorted(path.glob("*.mcap"))
-    return [path]
+    # a single file continued after a write error (``<stem>-resumed-NNN.mcap``)
+    return [path, *sorted(path.parent.glob(f"{path.stem}-resumed-[0-9][0-9][0-9].mcap"))]
 
 
 def read_log(path: str | Path, topics: list[str] | None = None) -> Iterator[LogRecord]:

@@ -288,7 +288,7 @@ def run_daemon(
                 clock=time.monotonic,
                 planners=planners,
                 ident=claim.ident,
-                latch_at_start=file.load(),
+                latch_at_start=file.load_kept("controller/main"),
             )
             latch = LatchWatch(node, LatchKeeper(node.latch, file))
             latch.start(time.monotonic(), LATCH_WAIT_AT_START)
@@ -347,6 +347,9 @@ def run_daemon(
                 time.time(),
                 log=str(recorder.location),
                 plan_latency_s={} if planners is None else planners.summary(),
+                # write errors (full disk...) and messages not logged, so far
+                log_errors=recorder.drops()["log_errors"],
+                log_dropped=recorder.drops()["log_dropped"],
             )
             ticks = node.status().tick_ms
             health = (
@@ -360,12 +363,24 @@ def run_daemon(
         if planners is not None:
             planners.close()
     print(
-        f"fleet daemon: stopped; {recorder.written} messages in {recorder.location}{health}",
+        f"fleet daemon: stopped; {recorder.written} messages in {recorder.location}{health}"
+        f"{_log_health(recorder)}",
         file=sys.stderr,
     )
     if outcome is not None:
         print(report(outcome), flush=True)  # the verdict, the figures, the next steps
     return status
+
+
+def _log_health(recorder) -> str:
+    """The log's losses for the daemon's last line ("" when none)."""
+    lost = recorder.drops()
+    if not (lost["log_errors"] or lost["log_dropped"]):
+        return ""
+    return (
+        f"; LOG INCOMPLETE: {lost['log_errors']} write errors, {lost['log_dropped']} "
+        f"messages not logged ({len(recorder.segments)} segments)"
+    )
 
 
 def log_end(job: JobRecord) -> None:

@@ -48,7 +48,7 @@ class _Answers:
 def run_hub(cfg: FleetConfig, stop: threading.Event, duration: float = 0.0) -> int:
     """Serve until ``stop`` (or ``duration`` s). Exit 0; a BusError (endpoints taken) → 1."""
     file = LatchFile(cfg, "hub")
-    latch = Latch("hub/main", file.load())
+    latch = Latch("hub/main", file.load_kept("hub/main"))
     keeper = LatchKeeper(latch, file)
     with Bus(
         cfg.zenoh, cfg.fleet.name, mode="router", listen=list(cfg.zenoh.listen), connect=[]
@@ -60,7 +60,7 @@ def run_hub(cfg: FleetConfig, stop: threading.Event, duration: float = 0.0) -> i
             on_message=lambda r: note_latch("hub", latch.operator(r.msg)),
             lossless=True,  # every e-stop reaches the latch, whatever floods the key
         )
-        own = bus.serve_estop("hub", "main", latch.state)
+        own = bus.serve_estop("hub", "main", latch.answer)
         answers = _Answers(latch, own, cfg.fleet.name)
         held = latch.state()
         print(

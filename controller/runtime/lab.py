@@ -549,12 +549,11 @@ class Lab:
         for word in words:
             result = self.watch.put(word, reason="the operator, from fleet up's console")
             if result is not None:
-                missing = result["agents_missing"]
-                log.info(
-                    "%s: %s",
-                    word,
-                    "confirmed by every agent" if not missing else f"NOT confirmed by {missing}",
-                )
+                from controller.runtime.estop import describe_put, exit_status
+
+                # refused, unconfirmed or not durable (a holder cannot keep it): a warning
+                level = logging.INFO if exit_status(result) == 0 else logging.WARNING
+                log.log(level, "%s", describe_put(word, result))
 
     def shut_down(self) -> None:
         """The e-stop first (every robot stopped), then the daemon, the agents, the world, the

@@ -80,6 +80,11 @@ def _estop_words(result: dict[str, Any] | None) -> str:
     missing = result.get("agents_missing") or []
     if missing:
         return f"e-stop NOT confirmed by {', '.join(missing)} (their watchdogs stop them)"
+    if result.get("durable") is False:
+        return (
+            f"every robot e-stopped, but {', '.join(result.get('not_durable') or [])} could not "
+            "keep the e-stop in the state folder"
+        )
     return f"every robot e-stopped (confirmed by all {len(result['agents_confirmed'])} agents)"
 
 

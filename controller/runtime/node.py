@@ -175,7 +175,7 @@ class ControllerNode:
     def latch_state(self) -> wire.EStop | None:
         """The controller's latched e-stop, answered on ``estop/state/controller/main`` (zenoh's
         thread); None (no answer) while unknown."""
-        return self.latch.state()
+        return self.latch.answer()
 
     def expect_latch(self, timeout: float = 1.0) -> None:
         """Ask every holder of the latched e-stop (hub, agents) and command zero until one
@@ -507,6 +507,10 @@ class ControllerNode:
             "estop_unknown": int(not self.latch.known),
             "estop_replays_refused": c.replays_refused,
             "estop_answers_refused": c.answers_refused,
+            # 0 while the daemon's latch is not in its file (a failed write: full disk...)
+            "estop_durable": int(self.latch.durable),
+            "estop_implausible_epochs": c.implausible_epochs,
+            "estop_releases_refused_not_durable": c.releases_refused_not_durable,
         }
 
 

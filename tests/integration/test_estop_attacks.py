@@ -49,7 +49,7 @@ def _kill(procs) -> None:
 
 def _kept_engaged(tmp_path, holder: str) -> bool:
     """Whether ``holder``'s latch file says engaged (the handshake before a kill)."""
-    path = tmp_path / "runs" / f"estop-lab-{holder}.json"
+    path = tmp_path / "state" / f"estop-lab-{holder}.json"
     return path.exists() and wire.decode(wire.EStop, path.read_bytes()).engaged
 
 

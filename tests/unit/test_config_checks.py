@@ -225,6 +225,15 @@ def test_unwritable_log_dir_exits_2(tmp_path, capsys):
     assert not (blocker / "runs").exists()
 
 
+def test_a_state_folder_that_cannot_keep_the_estop_exits_2(tmp_path, capsys):
+    blocker = tmp_path / "afile"
+    blocker.write_text("not a directory")
+    path = _write(tmp_path, _set("fleet", "state_dir", str(blocker / "state")))
+    _check_fails(path, "fleet.state_dir", "the e-stop latch", capsys)
+    path = _write(tmp_path, _set("log", "state_dir", str(blocker / "state")))
+    _check_fails(path, "log.state_dir", "is not a directory", capsys)
+
+
 def test_fleet_run_refuses_the_same_before_starting(tmp_path, capsys):
     """`fleet run` gets the same checks: exit 2 naming the key, nothing started."""
     bad_zenoh = _write(tmp_path, _set("zenoh", "listen", ["tcp/not-an-endpoint"]))
