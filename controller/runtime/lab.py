@@ -48,7 +48,7 @@ log = logging.getLogger(__name__)
 BACKOFF_FIRST = 1.0  # s before the first restart of a crashed part
 BACKOFF_MAX = 30.0  # s: the back-off doubles up to this
 STABLE_AFTER = 30.0  # s up: a part that ran this long gets its back-off reset
-POLL = 0.25  # s between the supervisor's looks at its processes and the bus
+POLL = 0.5  # s between the supervisor's looks at its processes and the bus (a status query each)
 STOP_WAIT = 20.0  # s a part may take to stop on SIGTERM before it is killed
 ESTOP_AT_STOP = 3.0  # s the e-stop at the lab's end may take to be confirmed
 
