@@ -218,7 +218,9 @@ def test_live_agent_keeps_its_watchdog_under_a_garbage_flood(port):
     the garbage is counted, and the watchdog stops the robot within ttl + a tick."""
     ep = f"tcp/127.0.0.1:{port}"
     rng = np.random.default_rng(SEED)
-    junk = [p for t in ("robot_cmd", "estop") for p in garbage(t, rng)]
+    # each key its own topic's garbage: the e-stop's list holds {"t": 1.0} (an EStop without
+    # `engaged`), which on the command key would be a valid zero Twist2D, not garbage
+    junk = {t: garbage(t, rng) for t in ("robot_cmd", "estop")}
     with (
         Bus(ZenohSection(), FLEET, listen=[ep], connect=[]) as ctl,
         Bus(ZenohSection(), FLEET, listen=[], connect=[ep]) as rob,
@@ -235,7 +237,8 @@ def test_live_agent_keeps_its_watchdog_under_a_garbage_flood(port):
         def flood() -> None:
             i = 0
             while not stop_flood.is_set():
-                (raw_cmd if i % 3 else raw_estop).put(junk[i % len(junk)])
+                pub, bad = (raw_cmd, junk["robot_cmd"]) if i % 3 else (raw_estop, junk["estop"])
+                pub.put(bad[i % len(bad)])
                 sent[0] += 1
                 i += 1
 
