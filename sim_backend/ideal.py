@@ -18,12 +18,12 @@ import numpy as np
 from controller import geometry
 from controller.config import FleetConfig
 from sim_backend.base import WorldCheck
-from sim_backend.motion import GiveUp, ObjectScript
+from sim_backend.motion import GiveUp, ObjectScript, ScriptedObject
 
 CONTACT_SLACK = 1e-3  # m: a resting contact is not an overlap
 
 
-class IdealWorld:
+class IdealWorld(ScriptedObject):
     """Kinematic stand-in world with the ``sim_backend.base.World`` interface."""
 
     def __init__(self, cfg: FleetConfig):
@@ -54,26 +54,6 @@ class IdealWorld:
     @property
     def robot_ids(self) -> tuple[str, ...]:
         return self._ids
-
-    @property
-    def object_alive(self) -> bool:
-        return self._give_up.alive
-
-    def hold_object(self) -> None:
-        """The object's drive holds its start pose until :meth:`start_object`."""
-        self._script = self._script.held()
-
-    def start_object(self) -> None:
-        """The object's path begins now (``fleet world``: at the operator's first resume)."""
-        self._script = self._script.begun(self._t)
-
-    @property
-    def object_waiting(self) -> bool:
-        return self._script.waiting()
-
-    @property
-    def object_gave_up_at(self) -> float | None:
-        return self._give_up.gave_up_at
 
     def set_command(self, robot_id: str, vx: float, vy: float, wz: float) -> None:
         self._cmd[self._index[robot_id]] = (vx, vy, wz)

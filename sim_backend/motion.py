@@ -145,3 +145,33 @@ class ObjectScript:
             pull *= cap / norm
         wz = -self.pull_gain * wrap_angle(pose[2] - ref[2])
         return np.array([vel[0] + pull[0], vel[1] + pull[1], wz])
+
+
+class ScriptedObject:
+    """The live object's side of a world (pybullet or ideal): its drive's ``_script`` and its
+    give-up rule ``_give_up``, read and started the same way in both; the world supplies
+    ``t`` (sim time)."""
+
+    _script: ObjectScript
+    _give_up: GiveUp
+    t: float
+
+    @property
+    def object_alive(self) -> bool:
+        return self._give_up.alive
+
+    @property
+    def object_gave_up_at(self) -> float | None:
+        return self._give_up.gave_up_at
+
+    def hold_object(self) -> None:
+        """The object's drive holds its start pose until :meth:`start_object`."""
+        self._script = self._script.held()
+
+    def start_object(self) -> None:
+        """The object's path begins now (``fleet world``: at the operator's first resume)."""
+        self._script = self._script.begun(self.t)
+
+    @property
+    def object_waiting(self) -> bool:
+        return self._script.waiting()

@@ -51,7 +51,7 @@ from controller.config import FleetConfig
 from controller.geometry import wrap_angle
 from sim_backend.base import WorldCheck
 from sim_backend.ideal import check_discs
-from sim_backend.motion import GiveUp, ObjectScript
+from sim_backend.motion import GiveUp, ObjectScript, ScriptedObject
 
 GRAVITY = 9.81  # m/s^2
 
@@ -157,7 +157,7 @@ def quat_of(theta: float) -> tuple[float, float, float, float]:
 # --------------------------------------------------------------------------- the world
 
 
-class PybulletWorld:
+class PybulletWorld(ScriptedObject):
     """pybullet physics world with the ``sim_backend.base.World`` interface."""
 
     control_every = 2  # physics steps between robot pose reads, re-basing and re-aiming
@@ -535,26 +535,6 @@ class PybulletWorld:
     @property
     def robot_ids(self) -> tuple[str, ...]:
         return self._ids
-
-    @property
-    def object_alive(self) -> bool:
-        return self._give_up.alive
-
-    def hold_object(self) -> None:
-        """The object's drive holds its start pose until :meth:`start_object`."""
-        self._script = self._script.held()
-
-    def start_object(self) -> None:
-        """The object's path begins now (``fleet world``: at the operator's first resume)."""
-        self._script = self._script.begun(self.t)
-
-    @property
-    def object_waiting(self) -> bool:
-        return self._script.waiting()
-
-    @property
-    def object_gave_up_at(self) -> float | None:
-        return self._give_up.gave_up_at
 
     def set_command(self, robot_id: str, vx: float, vy: float, wz: float) -> None:
         """Body-frame velocity target (m/s, m/s, rad/s); a differential robot ignores vy."""

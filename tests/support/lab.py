@@ -16,11 +16,11 @@ from controller import wire
 from tests.support.config import ROOT, base_config_dict, write_toml
 
 
-def fleet(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
-    """Run one ``fleet`` command to its end."""
+def fleet(*args: str, timeout: float = 60, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    """Run one ``fleet`` command to its end (in ``cwd``: the repository by default)."""
     return subprocess.run(
         [sys.executable, "-m", "controller.cli", *args],
-        cwd=ROOT,
+        cwd=cwd,
         capture_output=True,
         text=True,
         timeout=timeout,

@@ -7,9 +7,7 @@ from __future__ import annotations
 
 import fnmatch
 import json
-import os
 import subprocess
-import sys
 import tomllib
 from importlib import resources
 
@@ -20,6 +18,7 @@ from controller.commands import NO_CONFIG_HERE
 from controller.config import load_config
 from controller.examples import CATALOG, DEFAULT_KIND, KINDS, example, example_text
 from tests.support.config import ROOT
+from tests.support.lab import fleet as run_fleet
 
 LAB_KINDS = tuple(k for k in KINDS if k != DEFAULT_KIND)
 # fleet.toml's job: what every lab example shares with the dry run
@@ -292,17 +291,9 @@ def test_fleet_init_then_fleet_run_in_an_empty_folder(tmp_path):
     ``fleet init`` then ``fleet run --config fleet.toml --max-time 5 --json`` starts the dry
     run and runs it; 5 s of sim time is too short for the capture, so it ends in a timeout
     failure (exit 1) with its JSON summary, its log in the folder's runs/."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
 
     def fleet(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run(
-            [sys.executable, "-m", "controller.cli", *args],
-            cwd=tmp_path,
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
+        return run_fleet(*args, timeout=120, cwd=tmp_path)
 
     init = fleet("init")
     assert init.returncode == 0, init.stderr
