@@ -182,6 +182,13 @@ def zenoh_config(
 
 
 _EVERY_REPLY = zenoh.ConsolidationMode.NONE  # queries: every reply, none merged by key
+_MIN_QUERY_S = 0.001
+
+
+def _positive(timeout: float) -> float:
+    """A query's timeout as zenoh takes it: a deadline already passed (a caller's time left,
+    gone negative on a loaded machine) still asks once, briefly, and never raises."""
+    return max(float(timeout), _MIN_QUERY_S)
 
 
 @dataclass(frozen=True)
@@ -711,7 +718,10 @@ class Bus:
         # no consolidation: every replier's answer, also two on one key (an e-stop latch key
         # answered by an impostor as well as by its holder must not hide the holder's answer)
         replies = self.session.get(
-            key_expr, target=zenoh.QueryTarget.ALL, consolidation=_EVERY_REPLY, timeout=timeout
+            key_expr,
+            target=zenoh.QueryTarget.ALL,
+            consolidation=_EVERY_REPLY,
+            timeout=_positive(timeout),
         )
         for reply in replies:
             if reply.ok is None:
@@ -742,7 +752,11 @@ class Bus:
             inbox.put(Received(time.time(), k, msg))
 
         self.session.get(
-            key_expr, cb, target=zenoh.QueryTarget.ALL, consolidation=_EVERY_REPLY, timeout=timeout
+            key_expr,
+            cb,
+            target=zenoh.QueryTarget.ALL,
+            consolidation=_EVERY_REPLY,
+            timeout=_positive(timeout),
         )
 
     # -- the latched e-stop
@@ -765,14 +779,16 @@ class Bus:
             if reply.ok is not None:
                 sink.append(str(reply.ok.key_expr)[len(prefix) :])
 
-        self.session.liveliness().get(wire.alive_key(self.fleet, role, "*"), cb, timeout=timeout)
+        self.session.liveliness().get(
+            wire.alive_key(self.fleet, role, "*"), cb, timeout=_positive(timeout)
+        )
 
     def alive_ids(self, role: str, timeout: float = 1.0) -> list[str]:
         """The idents of the ``role`` liveliness tokens on the bus now."""
         prefix = wire.alive_key(self.fleet, role, "")
         out = []
         for reply in self.session.liveliness().get(
-            wire.alive_key(self.fleet, role, "*"), timeout=timeout
+            wire.alive_key(self.fleet, role, "*"), timeout=_positive(timeout)
         ):
             if reply.ok is not None:
                 out.append(str(reply.ok.key_expr)[len(prefix) :])

@@ -104,6 +104,9 @@ def test_status_queryable_answers(port):
         assert present.wait(10.0)
         replies = b.query("status", wire.FleetStatus, timeout=5.0)
         assert [r.phase for r in replies] == ["approach"]
+        # a caller's time left gone negative (a loaded machine) asks briefly, never raises
+        assert isinstance(b.query("status", wire.FleetStatus, timeout=-0.05), list)
+        assert isinstance(b.alive_ids("controller", timeout=-1.0), list)
 
 
 def test_oversized_payloads_are_dropped_unread_and_a_flood_keeps_the_newest(port):

@@ -75,6 +75,7 @@ def _speeds_after(tracks: dict[str, list], t0: float) -> dict[str, float]:
     return out
 
 
+@pytest.mark.timeout(900)  # the whole block: bring-up, a minute's delay, the job, the log read
 def test_the_readme_lab_block_delivers_the_crate_with_the_resume_a_minute_late(tmp_path):
     lines = readme_block()
     assert [ln.split()[1] for ln in lines] == ["init", "up", "status", "resume", "down"], lines
