@@ -45,6 +45,10 @@ log = logging.getLogger(__name__)
 
 EPOCH_WAIT = 0.3  # s: how long the tool gathers the holders' epochs before it puts
 REPUT = 0.25  # s between repeats of an unconfirmed e-stop
+# s a live daemon (its liveliness token seen) is waited for after every agent confirmed: a daemon
+# slow to answer on a loaded machine is still counted (its durability with it); a hung one delays
+# the tool no longer than this
+DAEMON_GRACE = 1.0
 # how far above the trusted holders' greatest epoch a robot's answer is believed: the operator
 # releases an honest agent may have seen that a restarted hub and daemon missed (each release
 # is one operator's ``fleet resume``; 64 of them while both were down is not a lab's day)
@@ -67,6 +71,8 @@ def put_estop(
     pub = bus.publisher("estop")
     tokens: list[str] = []  # robot liveliness tokens, appended as the replies come
     bus.alive_ids_async("robot", tokens, timeout=min(1.0, timeout))
+    daemons: list[str] = []  # the daemons' tokens: a live daemon is a holder to wait for
+    bus.alive_ids_async("controller", daemons, timeout=min(1.0, timeout))
     known = set(cfg.robot_ids)
     # an engage goes out at once (any epoch latches, at the holder's own epoch or above); a
     # release must exceed every holder's epoch, and is not put while a holder cannot keep it:
@@ -92,7 +98,7 @@ def put_estop(
         time.sleep(0.005)  # polling for the subscribers' declarations (a handshake)
     pub.put(msg)
     sent = time.monotonic()
-    g = _Gather(msg, known, tokens, t0, bound)
+    g = _Gather(msg, known, tokens, t0, bound, daemons)
     _confirmations(bus, g, deadline, pub)
     known |= set(tokens[:])
     status = None
@@ -246,8 +252,10 @@ class _Gather:
         tokens: list[str],
         t0: float,
         bound: int = wire.MAX_SEQ - 1,
+        daemons: list[str] | None = None,
     ) -> None:
         self.msg, self.config, self.tokens, self.t0 = msg, config, tokens, t0
+        self.daemons = daemons if daemons is not None else []  # live daemons' tokens, as seen
         self.bound = bound  # the greatest epoch a robot's refusal is believed at
         self.agents: set[str] = set()
         self.holders: set[str] = set()
@@ -261,9 +269,13 @@ class _Gather:
         return self.config | set(self.tokens[:])
 
     def done(self) -> bool:
-        return (
+        if not (
             self.known() <= self.agents and self.present <= self.holders and not self.not_durable()
-        )
+        ):
+            return False
+        # a live daemon that has not answered yet: waited for a grace after the last agent
+        waiting = bool(self.daemons[:]) and "controller" not in self.present
+        return not waiting or time.monotonic() - self.t0 - (self.elapsed or 0.0) > DAEMON_GRACE
 
     def not_durable(self) -> set[str]:
         """The other holders whose last answer says their state is not kept."""
