@@ -51,7 +51,6 @@ from controller import geometry  # noqa: E402
 from controller.planning.capture import (  # noqa: E402
     PENALTY,
     CaptureParams,
-    brute_force_capture,
     evaluate,
     make_problem,
     plan_capture,
@@ -59,6 +58,7 @@ from controller.planning.capture import (  # noqa: E402
     run_ga,
     run_paper_ga,
 )
+from tests.support.capture_oracle import brute_force_capture  # noqa: E402
 
 L_SHAPE = np.array([[0, 0], [1, 0], [1, 0.4], [0.4, 0.4], [0.4, 1], [0, 1]], dtype=float)
 SUITE_SEED = 7919  # tests/unit/test_capture.py uses 2024

@@ -76,7 +76,6 @@ class AgentCore:
     latch: Latch = field(default_factory=lambda: Latch("robot", FRESH_WORLD))
     last_cmd: wire.Twist2D | None = None
     last_cmd_time: float = -math.inf
-    stopped_by_watchdog: bool = True
 
     def gate(self, cmd: wire.Twist2D) -> wire.Twist2D:
         """Clamp a command to the robot's limits (and drop vy on a differential robot)."""
@@ -109,7 +108,6 @@ class AgentCore:
         self.counters.commands += 1
         self.last_cmd = self.gate(cmd)
         self.last_cmd_time = now
-        self.stopped_by_watchdog = False
         return self.last_cmd
 
     @property

@@ -21,6 +21,9 @@ REASSIGN_PERIOD = 2.0  # s between looks at a better assignment during the appro
 REASSIGN_GAIN = 0.25  # the share of the total interception time a new assignment must save
 REASSIGN_MIN_S = 5.0  # s of total interception time it must save at least
 REASSIGN_MIN_SPEED = 0.1  # m/s: slower objects keep their first assignment
+# the interception search looks this many times ``approach.intercept_horizon`` ahead (at least
+# 1 s's worth): a costing, not a plan, so a meeting beyond the tracker's horizon still ranks
+COST_HORIZON_FACTOR = 10.0
 
 
 def interception_costs(cfg: FleetConfig, capture: CaptureSet, view: FleetView) -> np.ndarray:
@@ -35,7 +38,7 @@ def interception_costs(cfg: FleetConfig, capture: CaptureSet, view: FleetView) -
     rel = stations - np.asarray(view.object_pose)[:2]
     vel = ovel[:2] + ovel[2] * np.stack([-rel[:, 1], rel[:, 0]], 1)
     speed = np.array([r.max_speed for r in cfg.robots])
-    horizon = max(cfg.approach.intercept_horizon, 1.0) * 10.0
+    horizon = max(cfg.approach.intercept_horizon, 1.0) * COST_HORIZON_FACTOR
     oncoming = cfg.approach.intercept == "oncoming"
     cost = interception_times(view.poses[:, :2], stations, vel, speed, horizon, oncoming)
     # a robot behind the object goes around it: scale by the detour around its envelope

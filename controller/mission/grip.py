@@ -33,12 +33,15 @@ class GripSettings:
     """``contact_tolerance`` (m: a robot this close to its contact point is in contact),
     ``arrival_tolerance`` (m: a relocating robot this close to its contact arrived),
     ``waypoint_reached`` (m), ``park_margin`` (m beyond the lane's band where idle robots
-    wait)."""
+    wait); a relocating or parking robot's speed is ``move_gain`` (1/s) times its distance to
+    go plus ``move_floor`` (m/s), capped at its ``max_speed``."""
 
     contact_tolerance: float = 0.15
     arrival_tolerance: float = 0.03
     waypoint_reached: float = 0.08
     park_margin: float = 0.05
+    move_gain: float = 1.5
+    move_floor: float = 0.05
 
 
 class Grip:
@@ -164,7 +167,7 @@ class Grip:
                 del self.moves[i]
                 self.contacts[i] = self.targets.pop(i)
                 continue
-            speed = min(1.5 * dist + 0.05, self.cfg.robots[i].max_speed)
+            speed = min(self.s.move_gain * dist + self.s.move_floor, self.cfg.robots[i].max_speed)
             vel[i] = err / max(dist, 1e-9) * speed
             touch[i] = len(world) <= 2
 
@@ -186,7 +189,8 @@ class Grip:
             if d[0, k] >= clear or geometry.points_in_polygon(local, hull)[0]:
                 continue
             out = (local[0] - closest[0, k]) / max(float(d[0, k]), 1e-9)
-            speed = min(1.5 * (clear - float(d[0, k])) + 0.05, self.cfg.robots[i].max_speed)
+            go = clear - float(d[0, k])
+            speed = min(self.s.move_gain * go + self.s.move_floor, self.cfg.robots[i].max_speed)
             vel[i] = geometry.rot(float(pose[2])) @ out * speed
             hold[i] = False
 

@@ -45,6 +45,7 @@ from controller.planning.capture_set import (  # noqa: F401 - re-exported: the j
 
 PIN_RETRIES = 6  # re-plans that find no set before an object at rest is declared pinned
 PIN_STILL_SPEED = 0.03  # m/s: an object slower than this has come to rest against the wall
+CONTACT_REACH = 0.03  # m: at the carry, a robot's disc this near the object's surface holds it
 WATCHED = (Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD)  # phases a lost robot re-plans
 
 
@@ -105,7 +106,6 @@ class CaptureJob:
         self.failure_reason: str = Reason.PINNED
         self.start_tried = -1  # robots a start without the missing ones was last planned for
         self.loss_replans = 0
-        self.lost_t: float | None = None  # s: the last loss that re-planned
         self.transport: Any = None
         self.arrest_t: float | None = None
         self.route_planner: Any = None
@@ -178,7 +178,7 @@ class CaptureJob:
             planners=self.planners,
         )
 
-    def _carry_from_contact(self, view: FleetView, reach: float = 0.03) -> Intent:
+    def _carry_from_contact(self, view: FleetView, reach: float = CONTACT_REACH) -> Intent:
         """Entered at ``route``: the robots whose discs are within ``reach`` m of the object's
         surface hold their nearest boundary point; the others are free."""
         pose = np.asarray(view.object_pose, float)
@@ -262,7 +262,6 @@ class CaptureJob:
                 detail += f"; the re-plan failed: {got.error}"
             return self._fail(view, Reason.ROBOTS_LOST, detail, events)
         self.loss_replans += 1
-        self.lost_t = view.t
         self.capture = new
         self.reach.blocked_ticks = 0
         intent = self._start(view, pinned=bool(new.walls))

@@ -14,7 +14,7 @@ import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
-from controller.planning.contact_lp import ContactForceLP, required_wrench
+from controller.planning.contact_lp import GRAVITY, ContactForceLP, required_wrench
 
 TURN_SHARE = 0.3  # a segment whose turn takes more than this share of the unit twist turns
 
@@ -90,7 +90,7 @@ def plan_arrangement(
     twist_v = twist * speed
     turning = abs(twist[2]) * model.mean_radius > TURN_SHARE
     if not turning:
-        friction = model.floor_friction * model.mass * 9.81
+        friction = model.floor_friction * model.mass * GRAVITY
         first = int(min(robots, math.ceil(friction / weakest) + 1))
         # more pushers while the LP says the set cannot push, up to every robot
         for n in range(first, robots + 1):

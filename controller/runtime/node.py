@@ -122,7 +122,6 @@ class ControllerNode:
         # set by the runner when the process is stopping: robots leaving then are no news
         self.winding_down = False
         self.last_output: MissionOutput | None = None
-        self.last_tick = 0.0
         self._seq = 0
         self.inputs_arrived = threading.Condition()  # notified on every pose (lockstep waits)
         # bounded per robot (a flood drops the oldest), lossless in the lockstep dry run
@@ -342,7 +341,6 @@ class ControllerNode:
         """sample → estimate → plan → safety → publish, at time ``now``."""
         marks = [self._now()]
         self.sample(now)
-        self.last_tick = now
         view = self.view(now)
         marks.append(self._now())
         intent = self.mission.plan(view)

@@ -16,36 +16,12 @@ from controller import wire
 from controller.io.bus import Bus
 from controller.replay.log import events_of, load_run, phases_of
 from tests.support.config import base_config_dict, write_toml
-from tests.support.lab import connect_client, fleet_json, release, spawn, stop_all, tail
+from tests.support.lab import connect_client, release, spawn, stop_all, tail
 from tests.support.wait import wait_for
+from tests.support.world_lab import ROBOTS, all_present, daemon_status, rehearsal_config
 
-ROBOTS = ("r1", "r2", "r3", "r4")
 MOVED = 1e-4  # m or rad between two truth samples: the robot moved
 SCHED = 0.2  # s of scheduling delay allowed on the shared machine (see the bounds below)
-
-
-def rehearsal_config(tmp_path, port: int):
-    """Four robots around a small crate creeping east: the arrest comes in about 10 s. The
-    object has a goal but the transport waits 120 s, so the daemon holds after the arrest."""
-    cfg = base_config_dict()
-    cfg["robots"] = cfg["robots"][:4]
-    # one robot on each side of the crate: no robot has to cross another's way, also when a
-    # restarted daemon re-plans from where they stand
-    starts = ([3.4, 2.2, 1.57], [4.4, 3.2, 3.14], [3.2, 4.3, -1.57], [2.1, 3.3, 0.0])
-    for r, start in zip(cfg["robots"], starts, strict=True):
-        r["start"] = start
-    cfg["object"].update(
-        polygon=[[0.0, 0.0], [0.6, 0.0], [0.6, 0.4], [0.0, 0.4]],
-        start=[3.0, 3.0, 0.0],
-        goal=[8.0, 8.0, 0.0],
-        motion={"kind": "line", "speed": 0.03, "heading": 0.0, "max_force": 4.0},
-    )
-    cfg["transport"]["start_after"] = 120.0
-    cfg["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
-    # ideal backend at 60 Hz physics: the world stays a small share of the 2 cores
-    cfg["sim"].update(backend="ideal", world="process", timestep=1.0 / 60.0, seed=3)
-    cfg["log"] = {"dir": str(tmp_path / "runs")}
-    return write_toml(tmp_path / "rehearsal.toml", cfg), cfg["fleet"]
 
 
 class Truth:
@@ -76,16 +52,6 @@ class Truth:
         """How far (m) the robot went between t0 and t1."""
         pts = [(x, y) for t, x, y, _ in self.tracks[rid] if t0 <= t <= t1]
         return sum(math.dist(p, q) for p, q in zip(pts, pts[1:], strict=False))
-
-
-def _status(cfg) -> dict:
-    code, st = fleet_json("status", "--config", str(cfg), "--timeout", "1")
-    return st if code == 0 else {"ok": False}
-
-
-def _all_present(st: dict, ids: set[str] = set(ROBOTS)) -> bool:  # noqa: B006 - read only
-    present = {r["id"] for r in st.get("robots", []) if r.get("present")}
-    return bool(st.get("ok")) and present >= ids and st["counters"].get("poses", 0) > 0
 
 
 def _arrested(inbox, seen: list[str]) -> bool:
@@ -160,7 +126,7 @@ def test_world_daemon_drivers_arrest_kill_restart(tmp_path, port):
             procs += agents
             # a fresh lab is stopped until an operator's first resume; the daemon must be up to
             # hear it (a holder's answer never releases a fresh daemon's latch)
-            wait_for(lambda: _all_present(_status(cfg)), 60, "the daemon and its robots")
+            wait_for(lambda: all_present(daemon_status(cfg)), 60, "the daemon and its robots")
             release(cfg, timeout=90)
             seen: list[str] = []
             wait_for(lambda: _arrested(phases, seen), 45, "the daemon's arrest")
@@ -175,7 +141,7 @@ def test_world_daemon_drivers_arrest_kill_restart(tmp_path, port):
             # restarted (staging: the robots back off to a ring around the crate), it finds
             # the agents again; killed while they drive, each agent stops its own robot
             d2 = daemon(2, "stage")
-            wait_for(lambda: _all_present(_status(cfg)), 30, "the restarted daemon's agents")
+            wait_for(lambda: all_present(daemon_status(cfg)), 30, "the restarted daemon's agents")
             wait_for(lambda: _moving(truth, 1), 20, "the robots on their way")
             k = _kill_and_watch(d2, truth, cmds, ttl, tick)
             # (a daemon held up over 1 s by the machine commands zero until the e-stop latch
@@ -221,7 +187,9 @@ def test_a_driver_killed_mid_approach_is_lost_replanned_and_the_rest_arrest(tmp_
             agents = {r: spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ids}
             procs += list(agents.values())
             # the daemon up before the operator's first resume (see above)
-            wait_for(lambda: _all_present(_status(c), set(ids)), 60, "the daemon and its robots")
+            wait_for(
+                lambda: all_present(daemon_status(c), set(ids)), 60, "the daemon and its robots"
+            )
             release(c, timeout=90)
             events: list = []
 
@@ -268,7 +236,7 @@ def test_a_stalled_world_is_one_outage_not_six_losses_and_the_job_goes_on(tmp_pa
             procs.append(spawn(tmp_path / "d.txt", "daemon", "--config", c, "--mission",
                                "capture", "--out", str(out)))  # fmt: skip
             procs += [spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ROBOTS]
-            wait_for(lambda: _all_present(_status(c)), 60, "the daemon and its robots")
+            wait_for(lambda: all_present(daemon_status(c)), 60, "the daemon and its robots")
             release(c, timeout=90)
             seen: list[str] = []
             wait_for(lambda: _arrested(plans, seen) or "approach" in seen, 30, "the approach")

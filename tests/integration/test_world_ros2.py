@@ -25,11 +25,11 @@ from controller.wire import Twist2D
 from drivers.base import capabilities_of
 from drivers.ros2.driver import Ros2Driver
 from drivers.ros2.node import open_session
-from tests.integration.test_world_lab import rehearsal_config
 from tests.support.config import free_port
 from tests.support.lab import fleet
 from tests.support.mavlink_rig import make_config
 from tests.support.wait import wait_for
+from tests.support.world_lab import rehearsal_config
 
 SIM = {"id": "s", "kind": "omni", "start": [6.0, 3.0, 0.0]}
 OFFSET = 1.7e9  # s: the wall-clock instant of sim time 0 (the world's time_offset)

@@ -30,11 +30,11 @@ from controller.runtime.world import (
 from controller.wire import Twist2D
 from drivers.mavlink.driver import MavlinkDriver
 from drivers.mavlink.link import LinkPool
-from tests.integration.test_world_lab import _all_present, _status, rehearsal_config
 from tests.support.config import base_config_dict, free_port, write_toml
 from tests.support.lab import fleet, release, spawn, stop_all, tail
 from tests.support.mavlink_rig import free_udp_port, make_config, robot
 from tests.support.wait import wait_for
+from tests.support.world_lab import all_present, daemon_status, rehearsal_config
 
 pytestmark = pytest.mark.e2e
 
@@ -197,7 +197,7 @@ def test_a_mixed_fleet_in_the_world_captures_and_delivers_the_object(tmp_path, p
         procs.append(daemon)
         procs += [spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ids]
         # a fresh lab is stopped until an operator's first resume (the daemon up to hear it)
-        wait_for(lambda: _all_present(_status(cfg), set(ids)), 60, "the daemon and its robots")
+        wait_for(lambda: all_present(daemon_status(cfg), set(ids)), 60, "the daemon and its robots")
         release(cfg, timeout=90)
         wait_for(lambda: daemon.poll() is not None, JOB_S, "the daemon's end of the job")
         wall = time.monotonic() - t0

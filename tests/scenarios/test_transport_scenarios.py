@@ -20,80 +20,12 @@ import pytest
 
 from controller.cli import main
 from controller.runtime.dry_run import DryRun, judge
-from tests.support.transport_scenarios import CRATE, L_SHAPE, Scenario, scenario_config
-
-LONG_CRATE = [[0.0, 0.0], [0.6, 0.0], [0.6, 1.2], [0.0, 1.2]]  # pushed along x: a 1.2 m back
-
-ROOM = ((0.0, 0.0), (8.0, 6.0))
-PILLAR = ((3.6, 1.2), (4.0, 1.2), (4.0, 1.6), (3.6, 1.6))
-WALL_WITH_DOOR = (  # a wall across the room at x = 4 with a door 1.8 m wide
-    ((3.9, 0.0), (4.1, 0.0), (4.1, 2.1), (3.9, 2.1)),
-    ((3.9, 3.9), (4.1, 3.9), (4.1, 6.0), (3.9, 6.0)),
-)
-ENCLOSURE = (  # a closed pen around the goal
-    ((5.5, 3.5), (7.5, 3.5), (7.5, 3.7), (5.5, 3.7)),
-    ((5.5, 5.3), (7.5, 5.3), (7.5, 5.5), (5.5, 5.5)),
-    ((5.5, 3.5), (5.7, 3.5), (5.7, 5.5), (5.5, 5.5)),
-    ((7.3, 3.5), (7.5, 3.5), (7.5, 5.5), (7.3, 5.5)),
-)
-
-SCENARIOS = [
-    Scenario("open-floor-ideal", CRATE, (1.5, 2.5, 0.0), (5.5, 3.0, 0.0)),
-    Scenario(
-        "obstacle-beside-route", L_SHAPE, (1.5, 1.0, 0.0), (5.5, 1.5, 0.0), obstacles=(PILLAR,)
-    ),
-    # the door in pybullet only (real contacts, force-limited pushes through a 1.8 m gap); the
-    # ideal world's copy of it repeated the same route in the slower kinematic push model (44 s)
-    Scenario(
-        "doorway-pybullet",
-        L_SHAPE,
-        (1.5, 2.5, 0.0),
-        (5.5, 2.5, 0.0),
-        obstacles=WALL_WITH_DOOR,
-        backend="pybullet",
-    ),
-    Scenario(
-        "moving-when-captured",
-        L_SHAPE,
-        (2.0, 2.5, 0.0),
-        (5.0, 3.0, 0.0),
-        whole_job=True,
-        motion={"kind": "sine", "speed": 0.06, "amplitude": 0.3, "wavelength": 4.0},
-    ),
-    Scenario("open-floor-pybullet", CRATE, (1.5, 2.5, 0.0), (5.0, 3.0, 0.0), backend="pybullet"),
-    Scenario("turn-180-pybullet", CRATE, (2.0, 2.5, 0.0), (3.5, 3.0, 3.14159), backend="pybullet"),
-    Scenario(
-        "heavy-pybullet",  # 29 N of floor friction for robots of 8 N: four pushers at 92 % of
-        LONG_CRATE,  # their limit, on a back edge where five fit
-        (1.5, 2.5, 0.0),
-        (4.0, 2.5, 0.0),
-        backend="pybullet",
-        kinds="oooooooo",
-        mass=10.0,
-        floor_friction=0.3,
-        max_force=8.0,
-        patch={"capture": {"hold_force": 0.0}},
-    ),
-    Scenario(
-        "diff-pushers-pybullet",
-        CRATE,
-        (1.5, 2.5, 0.0),
-        (4.5, 2.5, 0.0),
-        backend="pybullet",
-        kinds="dddddd",
-    ),  # fmt: skip
-]
-TOO_HEAVY = Scenario(  # floor friction 14.4 N, 40 % of the six robots' 36 N; pushed along x on
-    "too-heavy-pybullet",  # its 0.5 m face, where two robots of 6 N fit
-    CRATE,
-    (1.5, 2.5, 0.0),
-    (4.5, 2.5, 0.0),
-    backend="pybullet",
-    mass=4.89,
-    floor_friction=0.3,
-)
-UNREACHABLE = Scenario(
-    "unreachable-goal", CRATE, (1.5, 2.0, 0.0), (6.1, 4.2, 0.0), obstacles=ENCLOSURE
+from tests.support.transport_scenarios import (
+    SCENARIOS,
+    TOO_HEAVY,
+    UNREACHABLE,
+    Scenario,
+    scenario_config,
 )
 
 

@@ -19,7 +19,7 @@ from controller.config import TRANSPORT_STRATEGIES
 from controller.mission.factory import build_mission
 from controller.runtime.dry_run import DryRun, judge
 from tests.support.config import base_config_dict
-from tests.support.transport_scenarios import CRATE, Scenario, scenario_config
+from tests.support.transport_scenarios import CRATE, SCENARIOS, Scenario, scenario_config
 
 # each local planner's closed-loop test: sa is the shipped default, so every transport scenario
 # (tests/scenarios/test_transport_scenarios.py) runs it; the other two run here
@@ -36,9 +36,7 @@ def test_every_strategy_runs_in_a_closed_loop_test():
     strategy)."""
     assert set(CLOSED_LOOP) == set(TRANSPORT_STRATEGIES)
     assert base_config_dict(transport=True)["transport"]["strategy"] == "sa"
-    from tests.scenarios import test_transport_scenarios as suite
-
-    assert all("strategy" not in sc.patch.get("transport", {}) for sc in suite.SCENARIOS)
+    assert all("strategy" not in sc.patch.get("transport", {}) for sc in SCENARIOS)
     assert all(name in globals() for name in list(CLOSED_LOOP.values())[1:])
 
 

@@ -15,7 +15,13 @@
   ``controller.wire``) and nothing of the drivers, with one listed exception: the MAVLink
   vehicle emulator shares the NED conversions of ``drivers/mavlink/convert.py``;
 - ``controller/commands`` modules parse and delegate: they define ``add_arguments`` and ``run``
-  and nothing else.
+  and nothing else;
+- ``controller/scene`` is pure too (the Foxglove scene from messages): the standard library
+  without a clock, numpy, and ``controller.config``/``geometry``/``wire``/``events``;
+- ``controller/replay`` reads what the runtime wrote: only the commands, the plots
+  (``controller/viz.py``) and the lab's verdict (``runtime/lab_outcome.py``) import it, never the
+  planning core, the bus or the drivers; its metrics are pure (numpy and ``geometry``);
+- the tests share helpers only through ``tests/support`` (no test module imports another).
 """
 
 from __future__ import annotations
@@ -172,6 +178,57 @@ def test_commands_parse_and_delegate(path):
     tree = ast.parse(path.read_text())
     defs = {n.name for n in tree.body if isinstance(n, ast.FunctionDef | ast.ClassDef)}
     assert defs <= {"add_arguments", "run"}, f"{rel(path)} defines {sorted(defs)}"
+
+
+SCENE_OURS = ("controller.scene",) + PURE_OURS
+
+
+@pytest.mark.parametrize("path", files("controller/scene"), ids=rel)
+def test_the_scene_is_pure(path):
+    import sys
+
+    bad = []
+    for name in sorted(imports_of(path)):
+        root = name.split(".")[0]
+        if root == "controller":
+            if name != "controller" and not name.startswith(SCENE_OURS):
+                bad.append(name)
+        elif root in FORBIDDEN_STDLIB or (
+            root not in sys.stdlib_module_names and root not in {"__future__", "numpy"}
+        ):
+            bad.append(name)
+    assert not bad, f"{rel(path)} imports {bad}: the scene is built from messages alone"
+
+
+# who may read the logs' analysis: the commands, the plots and the lab's verdict
+REPLAY_READERS = ("controller/commands/", "controller/replay/", "controller/viz.py")
+REPLAY_READERS_LISTED = {"controller/runtime/lab_outcome.py", "controller/docs.py"}
+
+
+@pytest.mark.parametrize("path", files("controller"), ids=rel)
+def test_replay_is_read_by_the_edges_only(path):
+    r = rel(path)
+    if r.startswith(REPLAY_READERS) or r in REPLAY_READERS_LISTED:
+        return
+    bad = {n for n in imports_of(path) if n.startswith("controller.replay")}
+    assert not bad, f"{r} imports {sorted(bad)}: only the commands and the plots read logs"
+
+
+def test_replay_metrics_are_pure():
+    names = imports_of(ROOT / "controller" / "replay" / "metrics.py")
+    ours = {n for n in names if n.split(".")[0] == "controller"}
+    assert ours <= {"controller", "controller.geometry"}, sorted(ours)
+    assert not top(names) & (FORBIDDEN_STDLIB | {"zenoh", "mcap"}), sorted(names)
+
+
+TEST_FILES = [p for p in files("tests") if "support" not in p.relative_to(ROOT / "tests").parts]
+
+
+@pytest.mark.parametrize("path", TEST_FILES, ids=rel)
+def test_tests_share_helpers_only_through_support(path):
+    own = {n for n in imports_of(path) if n.split(".")[0] == "tests"}
+    bad = {n for n in own if n != "tests" and not n.startswith(("tests.support",))}
+    assert not bad, f"{rel(path)} imports {sorted(bad)}: move the shared helper to tests/support"
 
 
 def test_the_checker_catches_violations(tmp_path):

@@ -14,8 +14,6 @@ from controller.planning.capture import (
     Candidates,
     CaptureParams,
     assign_robots,
-    brute_force_capture,
-    brute_force_push,
     candidate_nodes,
     certify_form_closure,
     evaluate,
@@ -23,6 +21,7 @@ from controller.planning.capture import (
     plan_capture,
     plan_push_arrangement,
 )
+from tests.support.capture_oracle import brute_force_capture, brute_force_push
 from tests.support.config import base_config_dict, write_toml
 
 RECT = np.array([[-1.0, -0.5], [1.0, -0.5], [1.0, 0.5], [-1.0, 0.5]])

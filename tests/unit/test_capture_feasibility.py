@@ -15,7 +15,6 @@ from controller.mission.job import CaptureJob, MissionError
 from controller.planning.capture import (
     INFEASIBLE_RANK,
     CaptureParams,
-    brute_force_capture,
     evaluate,
     make_problem,
     plan_capture,
@@ -23,6 +22,7 @@ from controller.planning.capture import (
     rank_strings,
     run_ga,
 )
+from tests.support.capture_oracle import brute_force_capture
 from tests.support.config import base_config_dict, deep_update, write_toml
 
 L_SHAPE = np.array([[0, 0], [1, 0], [1, 0.4], [0.4, 0.4], [0.4, 1], [0, 1]], dtype=float)

@@ -14,8 +14,8 @@ import pytest
 
 from controller.events import by_kind
 from controller.planning.arrangement import plan_arrangement
+from tests.support.transport_mission import lp_feasible, mission, view
 from tests.support.transport_scenarios import CRATE, Scenario
-from tests.unit.test_transport_mission import _lp_ok, mission, view
 
 LONG_CRATE = [[0.0, 0.0], [0.6, 0.0], [0.6, 1.2], [0.0, 1.2]]
 FLEET_N = 36.0  # six robots of 6 N
@@ -52,7 +52,7 @@ def test_a_push_no_set_of_contacts_can_make_is_refused_with_its_reason(polygon, 
     need = share * FLEET_N
     assert not a.feasible
     assert f"needs {need:.1f} N" in a.detail and f"{FLEET_N:.1f} N in all" in a.detail
-    assert not _lp_ok(m, a.points, a.normals, np.asarray(twist) * m.params.speed, 6.0)
+    assert not lp_feasible(m, a.points, a.normals, np.asarray(twist) * m.params.speed, 6.0)
 
 
 @pytest.mark.parametrize(
@@ -67,7 +67,7 @@ def test_a_push_no_set_of_contacts_can_make_is_refused_with_its_reason(polygon, 
 def test_a_push_a_larger_set_can_make_gets_that_set(polygon, share, twist):
     m, a = arrangement(heavy(polygon, share), twist)
     assert a.feasible and a.pushers >= 4
-    assert _lp_ok(m, a.points, a.normals, np.asarray(twist) * m.params.speed, 6.0)
+    assert lp_feasible(m, a.points, a.normals, np.asarray(twist) * m.params.speed, 6.0)
 
 
 def test_a_crate_too_heavy_for_the_robots_that_fit_fails_too_heavy_before_anyone_pushes():

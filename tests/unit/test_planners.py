@@ -16,8 +16,8 @@ from controller.mission.planners import DeferredPlanners, InlinePlanners, PlanSl
 from controller.mission.transport import TransportMission
 from controller.mission.types import Phase, Reason
 from controller.runtime.planner import PlannerWorker
+from tests.support.transport_mission import holders, view
 from tests.support.transport_scenarios import CRATE, Scenario, scenario_config
-from tests.unit.test_transport_mission import holders, view
 
 DT = 0.05
 OPEN = Scenario("open", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0))

@@ -11,43 +11,11 @@ import pytest
 
 from controller import geometry
 from controller.events import by_kind
-from controller.mission.guard import SafetyStage
-from controller.mission.transport import TransportMission
-from controller.mission.types import FleetView, Phase
+from controller.mission.types import Phase
 from controller.planning.arrangement import plan_arrangement
-from controller.planning.contact_lp import ContactForceLP, required_wrench
 from controller.planning.hold import contact_wrenches
-from tests.support.transport_scenarios import CRATE, Scenario, scenario_config
-
-ROBOT_R = 0.1
-
-
-def view(cfg, t, poses, obj, present=None):
-    n = len(cfg.robots)
-    return FleetView(
-        t, cfg.robot_ids, np.asarray(poses, float), np.zeros((n, 3)), np.zeros(n, bool),
-        np.ones(n, bool) if present is None else np.asarray(present, bool),
-        np.asarray(obj, float), np.zeros(3), None, False,
-    )  # fmt: skip
-
-
-def holders(cfg):
-    """The robots the scenario places on the crate: indices, contact points, outward normals."""
-    poly = geometry.ensure_ccw(cfg.object_polygon())
-    poses = np.array([r.start for r in cfg.robots])
-    local = geometry.inverse_transform(poses[:, :2], cfg.object.start)
-    d, closest = geometry.point_segment_distance(local, poly, np.roll(poly, -1, axis=0))
-    j = np.argmin(d, axis=1)
-    held = np.flatnonzero(d[np.arange(len(local)), j] - ROBOT_R < 0.03)
-    return held, closest[np.arange(len(local)), j][held], geometry.outward_normals(poly)[j][held]
-
-
-def mission(sc: Scenario, seed: int = 0) -> tuple[TransportMission, object, np.ndarray]:
-    cfg = scenario_config(sc)
-    held, pts, nrm = holders(cfg)
-    m = TransportMission(cfg, np.random.default_rng(seed), SafetyStage(cfg), held, pts, nrm)
-    return m, cfg, np.array([r.start for r in cfg.robots])
-
+from tests.support.transport_mission import lp_feasible, mission, view
+from tests.support.transport_scenarios import CRATE, Scenario
 
 OPEN = Scenario("open", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0))
 
@@ -111,16 +79,6 @@ def test_progress_is_measured_along_the_route_not_as_the_crow_flies():
     assert left[-1] < 1e-6 and left[0] >= m.way.route.length_m - 0.05 > 3.5
 
 
-def _lp_ok(m, pts, nrm, twist, fmax):
-    w = required_wrench(twist, m.model.mass, m.model.floor_friction, m.model.mean_radius)
-    lp = ContactForceLP(len(pts))
-    res = lp.solve(
-        pts - m.model.centroid, -nrm, np.full(len(pts), fmax), np.ones(len(pts), bool), w,
-        0.0, m.model.mean_radius,
-    )  # fmt: skip
-    return res.status == "optimal"
-
-
 def _arrangement(m, cfg, twist):
     """The re-arrangement set the mission would ask for (``planning.arrangement``)."""
     a = plan_arrangement(
@@ -142,12 +100,12 @@ def test_a_pushing_set_is_confirmed_by_the_lp_and_a_turning_set_turns():
     push = np.array([1.0, 0.0, 0.0])
     pts, nrm, value, n, basis = _arrangement(m, cfg, push)
     assert basis == "eq5" and n == len(pts) >= 2
-    assert _lp_ok(m, pts, nrm, push * m.params.speed, fmax)
+    assert lp_feasible(m, pts, nrm, push * m.params.speed, fmax)
     assert np.all(nrm @ [-1.0, 0.0] > -1e-9)  # nobody pulls: the pushers face +x
     turn = np.array([0.0, 0.0, 1.0 / m.model.mean_radius])
     pts, nrm, value, n, basis = _arrangement(m, cfg, turn)
     assert basis == "lp_capacity" and value >= 1.0
-    assert _lp_ok(m, pts, nrm, turn * m.params.speed, fmax)
+    assert lp_feasible(m, pts, nrm, turn * m.params.speed, fmax)
     assert contact_wrenches(pts, nrm, m.model.centroid)[2].max() > 0  # a push turns it CCW
 
 
@@ -165,7 +123,7 @@ def test_a_heavy_object_recruits_free_robots():
     held = sum(c is not None for c in m.grip.contacts.values())
     assert n >= 4 and len(pts) >= 4 and n > 0
     assert m.grip.n == len(cfg.robots) > held  # the free ones take part
-    assert _lp_ok(m, pts, nrm, push * m.params.speed, 8.0)
+    assert lp_feasible(m, pts, nrm, push * m.params.speed, 8.0)
 
 
 def test_a_lost_robot_leaves_the_job_and_is_told_nothing():
