@@ -180,6 +180,7 @@ class Agent:
         self.latch_answered = False  # some other holder answered a latch query
         self._seq = 0
         self._stopped_sent = False
+        self._skew_told = False  # the drop of skewed commands was logged (until one passes)
 
     def latch_state(self) -> wire.EStop | None:
         """This agent's latched e-stop (answered on ``estop/state/robot/<id>``; runs on zenoh's
@@ -256,9 +257,21 @@ class Agent:
             self._apply_operator(item.msg)
         latest = None
         for item in self._cmds.drain():
+            skewed = self.core.counters.skewed
             out = self.core.on_command(now, item.msg)
             if out is not None:
                 latest = out
+                self._skew_told = False
+            elif self.core.counters.skewed > skewed and not self._skew_told:
+                self._skew_told = True  # once per run of skewed commands: the reason, named
+                log.warning(
+                    "robot %s: commands are stamped %+.3f s from this computer's clock, beyond "
+                    "max_clock_skew (%.3f s): dropped, the robot stands still until the clocks "
+                    "agree (NTP or chrony here and on the controller's computer)",
+                    self.params.robot_id,
+                    item.msg.t - now,
+                    self.core.max_clock_skew,
+                )
         if latest is not None and self.link_ok:
             try:
                 self.driver.send(latest)

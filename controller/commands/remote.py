@@ -139,5 +139,6 @@ def run(args) -> int:
                 print(
                     f"  {r['id']}: {'present' if r['present'] else 'absent'}"
                     f"{', LINK LOST' if r.get('link_lost') else ''}"
+                    f"{', SKEWED: its clock is off, its poses dropped' if r.get('skewed') else ''}"
                 )
         return 0

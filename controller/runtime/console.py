@@ -82,6 +82,8 @@ def robot_rows(snap: Snapshot, now: float) -> list[list[str]]:
 def _row(snap: Snapshot, p: Part, name: str, r: dict | None, now: float) -> list[str]:
     seen = "-" if r is None else ("present" if r.get("present") else "absent")
     link = "-" if r is None else ("LOST" if r.get("link_lost") else "ok")
+    if r is not None and r.get("skewed"):
+        link = "SKEWED"  # its clock is off: its poses are dropped
     latch = snap.latches.get(f"robot/{name}", "-")
     if p.role in ("hub", "daemon"):  # one hub, one controller: their ids are their own
         holder = "hub/" if p.role == "hub" else "controller/"

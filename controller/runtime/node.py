@@ -116,6 +116,9 @@ class ControllerNode:
         # True from ``expect_latch`` until a holder answers: every command is zero meanwhile
         self.latch_pending = False
         self.present = np.zeros(len(self.ids), dtype=bool)
+        # the robot's last pose was dropped for its stamp (its clock is off): ``fleet status``
+        # says ``skewed``; the first such drop of a robot (and the next after a good pose) logged
+        self.skewed = np.zeros(len(self.ids), dtype=bool)
         self.link_lost = np.zeros(len(self.ids), dtype=bool)
         self._events_pending: dict[str, tuple[LinkLostEvent | LinkRestoredEvent, int]] = {}
         self.arrested = False
@@ -253,11 +256,25 @@ class ControllerNode:
             self.link_lost[i] = False
             self.counters.link_restored += 1
 
-    def _skewed(self, t: float, now: float | None) -> bool:
+    def _skewed(self, t: float, now: float | None, robot: int | None = None) -> bool:
+        """Whether a pose stamped ``t`` is too far from the tick ``now`` (dropped, counted; a
+        robot's first in a row logged with the offset, so a robot whose clock is off is named)."""
         if now is None or abs(t - now) <= self.cfg.fleet.max_clock_skew:
+            if robot is not None:
+                self.skewed[robot] = False
             return False
         self.counters.skewed += 1
-        if self.counters.skewed == 1 or self.counters.skewed % 100 == 0:
+        if robot is not None and not self.skewed[robot]:
+            self.skewed[robot] = True
+            log.warning(
+                "robot %s: its poses are stamped %+.3f s from the controller's clock, beyond "
+                "fleet.max_clock_skew (%.3f s): dropped until its clock agrees (NTP or chrony "
+                "on the robot's computer)",
+                self.ids[robot],
+                t - now,
+                self.cfg.fleet.max_clock_skew,
+            )
+        elif self.counters.skewed == 1 or self.counters.skewed % 100 == 0:
             log.warning(
                 "dropped a pose stamped %.3f s at tick %.3f s (%d so far)",
                 t,
@@ -288,7 +305,7 @@ class ControllerNode:
             if rid not in self.index:
                 continue
             m = item.msg
-            if self._skewed(m.t, now):
+            if self._skewed(m.t, now, self.index[rid]):
                 continue
             res = self.est.measure_robot(rid, self._stamp(m.t, now), m.x, m.y, m.theta)
             self.counters.poses += 1
@@ -470,7 +487,12 @@ class ControllerNode:
 
     def status(self) -> wire.FleetStatus:
         robots = [
-            {"id": rid, "present": bool(self.present[i]), "link_lost": bool(self.link_lost[i])}
+            {
+                "id": rid,
+                "present": bool(self.present[i]),
+                "link_lost": bool(self.link_lost[i]),
+                "skewed": bool(self.skewed[i]),
+            }
             for i, rid in enumerate(self.ids)
         ]
         return wire.FleetStatus(

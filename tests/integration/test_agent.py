@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import pytest
 
@@ -161,12 +163,18 @@ def test_core_expiry_honours_shorter_command_ttl():
     assert core.expired(1.11)
 
 
-def test_a_command_stamped_far_from_the_agents_clock_is_dropped_and_counted(rig):
+def test_a_command_stamped_far_from_the_agents_clock_is_dropped_and_counted(rig, caplog):
     w, hub, agent = rig["world"], rig["hub"], rig["agent"]
     deliver(rig["cmd"], agent, wire.Twist2D(t=100000.0, seq=1, vx=0.2))
-    agent.step(0.0)
+    with caplog.at_level(logging.WARNING):
+        agent.step(0.0)
+        deliver(rig["cmd"], agent, wire.Twist2D(t=100000.0, seq=2, vx=0.2))
+        agent.step(0.0)
     hub.advance_to(TICK)
-    assert speed(w) == 0.0 and agent.counters.skewed == 1 and agent.commands_seen() == 1
+    assert speed(w) == 0.0 and agent.counters.skewed == 2 and agent.commands_seen() == 2
+    # the agent says why its robot stands still, once for the run of skewed commands
+    told = [r for r in caplog.records if "beyond max_clock_skew" in r.getMessage()]
+    assert len(told) == 1 and "+100000.000 s" in told[0].getMessage(), caplog.text
     deliver(rig["cmd"], agent, wire.Twist2D(t=TICK, seq=2, vx=0.2))
     agent.step(TICK)
     hub.advance_to(2 * TICK)

@@ -4,6 +4,7 @@ in-memory bus (tests/support/fakebus.py) and a mission that records what it saw.
 from __future__ import annotations
 
 import itertools
+import logging
 
 import numpy as np
 import pytest
@@ -128,7 +129,9 @@ def test_status_reports_every_drop_counter(rig):
     assert "inbox_overflow" in counters
 
 
-def test_a_pose_stamped_far_in_the_future_is_dropped_and_counted_not_freezing_the_estimate(rig):
+def test_a_pose_stamped_far_in_the_future_is_dropped_and_counted_not_freezing_the_estimate(
+    rig, caplog
+):
     cfg, bus, mission, node = rig
     r1 = cfg.robot_ids[0]
     x0, y0, th = cfg.robot(r1).start
@@ -136,9 +139,15 @@ def test_a_pose_stamped_far_in_the_future_is_dropped_and_counted_not_freezing_th
     node.tick(1.0)
     bad = wire.PoseMeasurement(t=100001.0, x=x0, y=y0, theta=th)
     bus.deliver("robot_pose", bad, id=r1)
-    node.tick(1.05)
+    with caplog.at_level(logging.WARNING):
+        node.tick(1.05)
+    assert f"robot {r1}: its poses are stamped +99999.950 s" in caplog.text
     assert node.counters.skewed == 1
     assert node.status().counters["skewed"] == 1  # in fleet status
+    # the robot whose clock is off is named: skewed in fleet status, until a good pose
+    by_id = {r["id"]: r for r in node.status().robots}
+    assert by_id[r1]["skewed"] is True
+    assert not any(r["skewed"] for rid, r in by_id.items() if rid != r1)
     # later real poses still move the estimate (nothing is out of order)
     for k in range(1, 21):
         t = 1.05 + 0.05 * k
@@ -146,6 +155,7 @@ def test_a_pose_stamped_far_in_the_future_is_dropped_and_counted_not_freezing_th
         bus.deliver("robot_pose", m, id=r1)
         node.tick(t)
     assert node.counters.out_of_order == 0
+    assert {r["id"]: r["skewed"] for r in node.status().robots}[r1] is False
     i = cfg.robot_ids.index(r1)
     view = mission.views[-1]
     assert view.poses[i, 0] == pytest.approx(x0 + 0.2, abs=0.03)
