@@ -8,6 +8,7 @@ import time
 
 from controller.config import FleetConfig
 from controller.io.bus import Bus
+from controller.runtime.sole import already_served
 from controller.runtime.wiring import driver_class
 from drivers.agent import Agent, AgentParams
 from sim_backend.hub import SimHub
@@ -150,6 +151,12 @@ def _serve(
     link."""
     from controller.io.ratekeeper import Ratekeeper
 
+    if already_served(bus, "robot", robot.id, cfg.fleet.liveliness_lease, stop):
+        return 1, (
+            f"another agent already serves robot {robot.id} of fleet {cfg.fleet.name!r} (its "
+            "liveliness token stayed on the bus past its lease): two agents would drive one "
+            "robot; stop the other (fleet status names the robots present) or fix the robot ids"
+        )
     params = AgentParams(robot.id, cfg.fleet.name, cfg.fleet.cmd_ttl, cfg.fleet.max_clock_skew)
     # the latched e-stop first: a fresh agent is stopped ("fail closed") until it learns the
     # latch (an engaged answer, or the hub's or the controller's) or an operator releases it

@@ -55,6 +55,7 @@ from controller import wire
 from controller.config import ConfigError, FleetConfig
 from controller.io.ratekeeper import Ratekeeper
 from controller.runtime.daemon import open_daemon_bus
+from controller.runtime.sole import already_served
 from controller.runtime.wiring import make_hub, ros2_settings
 from sim_backend.hub import SimHub
 
@@ -379,7 +380,8 @@ def run_world(
     mavlink: str | None = None,
     ros2: str | None = None,
 ) -> int:
-    """Serve the world until ``stop`` (or ``duration`` s of wall time). Exit 0.
+    """Serve the world until ``stop`` (or ``duration`` s of wall time). Exit 0; 1 when another
+    world already serves the fleet.
 
     ``mavlink``: which MAVLink robots are emulated vehicles of this world, ``ros2``: which ROS
     2 robots are bodies of it (``"all"`` or ids separated by commas; None: none)."""
@@ -391,6 +393,15 @@ def run_world(
     try:
         bus, how = open_daemon_bus(cfg)
         with bus:
+            if already_served(bus, "world", "main", cfg.fleet.liveliness_lease, stop):
+                print(
+                    f"fleet world: another world already serves fleet {cfg.fleet.name!r} (its "
+                    "liveliness token alive/world/main stayed on the bus past its lease): two "
+                    "worlds would each move their own copy of the robots; stop the other one",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                return 1
             bus.declare_alive("world", "main")
             mono0, wall0 = time.monotonic(), time.time()
             noise = cfg.sim.pose_noise
