@@ -11,7 +11,13 @@ the oldest. The rule, which never leaves two controllers commanding once they se
 - the newcomer of a take-over takes a stamp newer than every controller it found, declares
   its token, and commands nothing until all of them are gone (the old one saw the token and
   stopped); if they are not gone within ``wait`` seconds (a hung old daemon, or one from before
-  this rule) it gives up, exit 1, and nothing was commanded.
+  this rule) it gives up, exit 1, and nothing was commanded;
+- a "newer" token stamped more than ``FUTURE_LIMIT_MS`` after this clock (and not just one
+  above this controller's own stamp, as a take-over of a controller whose clock runs ahead
+  takes) is no take-over: forged, or a clock far off. It is logged and ignored, so one such
+  token cannot make the running controller yield. On the open profile anyone on the port can
+  still declare a plausible one; the lab profile's ACL lets only the controller's user declare
+  ``alive/controller/*`` (docs/lab/safety.md).
 
 I/O shell only (the bus); the ordering of ids is pure (``newer``).
 """
@@ -31,6 +37,9 @@ log = logging.getLogger(__name__)
 ROLE = "controller"
 _ID = re.compile(r"^main-(\d+)-(\d+)-(.+)$")
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]")
+# ms a take-over's stamp may be ahead of this clock: lab clocks under NTP agree within
+# milliseconds; a minute leaves room for a host that is not synced yet
+FUTURE_LIMIT_MS = 60_000
 
 
 def stamp_of(ident: str) -> int:
@@ -52,6 +61,11 @@ def make_ident(now_ms: int, others: list[str], pid: int | None = None, host: str
     return f"main-{stamp}-{os.getpid() if pid is None else pid}-{host}"
 
 
+def far_ahead(ident: str, now_ms: float) -> bool:
+    """Whether a controller id is stamped more than ``FUTURE_LIMIT_MS`` after ``now_ms``."""
+    return stamp_of(ident) > now_ms + FUTURE_LIMIT_MS
+
+
 def newest_status(replies: list):
     """Of several ``FleetStatus`` answers, the newest controller's (the one a take-over
     leaves commanding)."""
@@ -68,12 +82,21 @@ class Claim:
     ``watch(bus)`` follows the other controllers' tokens (zenoh's thread): a newer one sets
     ``yielded_to`` and ``yielded``; older ones are ``predecessors`` while alive."""
 
-    def __init__(self, ident: str, found: list[str]) -> None:
+    def __init__(
+        self, ident: str, found: list[str], clock_ms: Callable[[], float] | None = None
+    ) -> None:
         self.ident = ident
         self.yielded = threading.Event()
         self.yielded_to = ""
         self._lock = threading.Lock()
         self.predecessors: set[str] = {o for o in found if o != ident}
+        self._clock_ms = clock_ms if clock_ms is not None else (lambda: time.time() * 1e3)
+        self.implausible: set[str] = set()  # "newer" tokens stamped too far ahead: ignored
+
+    def plausible(self, other: str) -> bool:
+        """Whether a newer token's stamp could be a take-over's: not further ahead of this
+        clock than ``FUTURE_LIMIT_MS``, or just one above this controller's own stamp."""
+        return not far_ahead(other, self._clock_ms()) or stamp_of(other) <= stamp_of(self.ident) + 1
 
     def on_alive(self, other: str, alive: bool) -> None:
         if other == self.ident:
@@ -81,6 +104,16 @@ class Claim:
         with self._lock:
             if not alive:
                 self.predecessors.discard(other)
+                return
+            if newer(other, self.ident) and not self.plausible(other):
+                if other not in self.implausible:
+                    self.implausible.add(other)
+                    log.warning(
+                        "controller token %s is stamped %.0f s ahead of this clock: no "
+                        "take-over (forged, or a clock far off); ignored",
+                        other,
+                        (stamp_of(other) - self._clock_ms()) / 1e3,
+                    )
                 return
             if newer(other, self.ident):
                 if not self.yielded_to:

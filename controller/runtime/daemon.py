@@ -37,7 +37,7 @@ from controller.io.bus import Bus, BusError
 from controller.io.ratekeeper import Ratekeeper
 from controller.mission.types import Mission
 from controller.outcome import report
-from controller.runtime.claim import ROLE, Claim, make_ident, wait_until_alone
+from controller.runtime.claim import ROLE, Claim, far_ahead, make_ident, wait_until_alone
 from controller.runtime.estop import LatchFile, LatchKeeper
 from controller.runtime.hub import HUB_START, start_hub_process, stop_hub_process
 from controller.runtime.job_record import JobRecord
@@ -110,9 +110,17 @@ def claim_fleet(
     name = cfg.fleet.name
     with bus:
         if not take_over:
+            odd = [f for f in found if far_ahead(f, time.time() * 1e3)]
             print(
                 f"fleet daemon: another controller of fleet {name!r} is running "
-                f"({', '.join(found)}): not starting (fleet daemon --take-over replaces it)",
+                f"({', '.join(found)}): not starting (fleet daemon --take-over replaces it)"
+                + (
+                    f"; {', '.join(odd)} is stamped far in the future: forged, or a clock far "
+                    "off (on the open profile anyone on the port can declare a controller; the "
+                    "lab profile's ACL stops that: docs/lab/safety.md)"
+                    if odd
+                    else ""
+                ),
                 file=sys.stderr,
             )
             stop_hub_process(own_hub)

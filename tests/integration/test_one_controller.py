@@ -8,7 +8,7 @@ import signal
 
 import pytest
 
-from tests.support.lab import fleet, fleet_json, lab_config, spawn, stop_all, tail
+from tests.support.lab import connect_client, fleet, fleet_json, lab_config, spawn, stop_all, tail
 from tests.support.wait import wait_for
 
 pytestmark = pytest.mark.e2e
@@ -92,5 +92,35 @@ def test_a_hung_daemon_taken_over_exits_when_it_resumes(tmp_path, port):
         assert f"controller {new} took over" in tail(first)
         st = _status(cfg)
         assert st["controllers"] == [new] and newcomer.poll() is None
+    finally:
+        stop_all(procs)
+
+
+FORGED = "main-9999999999999-6-evil"  # stamped in the year 2286: one peer on the port can put it
+
+
+def test_a_forged_controller_token_stamped_far_ahead_neither_stops_nor_hides_the_daemon(
+    tmp_path, port
+):
+    """Open profile: a peer's liveliness token under alive/controller/ with a far-future stamp
+    does not make the running daemon yield; a second daemon is refused with the reason named."""
+    cfg = lab_config(tmp_path, port, robots=1)
+    c = str(cfg)
+    args = ("daemon", "--config", c, "--mission", "hold", "--out")
+    hub = spawn(tmp_path / "hub.txt", "hub", "--config", c)
+    procs = [hub]
+    try:
+        with connect_client(port, "the hub") as bus:
+            daemon = spawn(tmp_path / "d.txt", *args, str(tmp_path / "d.mcap"))
+            procs.append(daemon)
+            wait_for(lambda: _status(cfg).get("ok"), 40, "the daemon")
+            own = _status(cfg)["controller"]
+            bus.declare_alive("controller", FORGED)
+            wait_for(lambda: "stamped" in tail(daemon) and FORGED in tail(daemon), 10, "its log")
+            ticks = _status(cfg)["counters"]["ticks"]
+            wait_for(lambda: _status(cfg)["counters"]["ticks"] > ticks + 10, 10, "ticks")
+            assert daemon.poll() is None and _status(cfg)["controller"] == own
+            second = fleet(*args, str(tmp_path / "second.mcap"), timeout=60)
+            assert second.returncode == 1 and "stamped far in the future" in second.stderr
     finally:
         stop_all(procs)

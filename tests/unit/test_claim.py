@@ -43,3 +43,19 @@ def test_a_take_over_gives_up_when_the_old_controller_never_goes():
     assert not wait_until_alone(claim, 0.1, stop)
     stop.set()
     assert not wait_until_alone(claim, 10.0, stop)
+
+
+def test_a_token_stamped_far_ahead_of_the_clock_is_no_take_over():
+    """One forged token (or a clock far off) cannot make the running controller yield; a real
+    take-over's stamp (its clock within a minute, or one above this one's own stamp) can."""
+    now = 1_000_000.0
+    claim = Claim("main-999000-1-h", found=[], clock_ms=lambda: now)
+    claim.on_alive("main-99999999-6-evil", True)  # a day ahead of this test's clock
+    assert not claim.yielded.is_set() and claim.implausible == {"main-99999999-6-evil"}
+    assert claim.alone()  # nor a predecessor to wait for
+    claim.on_alive(f"main-{int(now) + 30_000}-2-h", True)  # a host 30 s ahead: believed
+    assert claim.yielded.is_set() and claim.yielded_to == f"main-{int(now) + 30_000}-2-h"
+    # a controller whose own clock ran far ahead is still taken over one above its stamp
+    ahead = Claim("main-5000000-1-h", found=[], clock_ms=lambda: now)
+    ahead.on_alive("main-5000001-2-h", True)
+    assert ahead.yielded.is_set()
