@@ -34,6 +34,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -87,6 +88,11 @@ def _warm() -> None:
     import controller.mission.transport  # noqa: F401
 
 
+# times one job is run again on a restarted worker after the worker died under it (a job that
+# kills its worker every time is then a failed plan, not a restart loop)
+JOB_RETRIES = 1
+
+
 @dataclass
 class _Job:
     kind: str
@@ -95,6 +101,10 @@ class _Job:
     wall: float  # clock() at submit
     future: Future
     done_wall: float | None = None
+    fn: Callable[..., Any] | None = None  # the job, kept to run it again on a restarted worker
+    args: tuple[Any, ...] = ()
+    generation: int = 0  # the worker process it was sent to
+    retries: int = 0
 
 
 @dataclass
@@ -104,6 +114,7 @@ class KindStats:
     timeouts: int = 0
     failed: int = 0
     waited_s: float = 0.0  # lockstep: wall s the tick waited for a due plan
+    restarts: int = 0  # jobs of this kind run again after the worker died under them
 
     def summary(self) -> dict[str, Any]:
         a = np.asarray(self.latencies)
@@ -116,6 +127,7 @@ class KindStats:
             "timeouts": self.timeouts,
             "failed": self.failed,
             "waited_s": round(self.waited_s, 6),
+            "restarts": self.restarts,
         }
 
 
@@ -139,21 +151,68 @@ class PlannerWorker:
         self.timeout = timeout
         self.clock = clock
         self.process = process
-        self._pool: Executor
-        if process:
-            ctx = multiprocessing.get_context("spawn")  # never fork a process with threads
-            self._pool = ProcessPoolExecutor(
-                max_workers=1, mp_context=ctx, initializer=_follow_parent, initargs=(os.getpid(),)
-            )
-            self._pool.submit(_warm)
-        else:
-            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
+        self._pool: Executor = self._start_pool()
+        self.generation = 0  # worker processes started after the first (restarts)
         self._tokens: dict[int, tuple[int, JobOwned]] = {}  # id(box) -> (token, box)
         self._jobs: dict[int, _Job] = {}
         self._next = 0
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()  # _revive sends under it
         self.stats = {k: KindStats() for k in PLANNER_KINDS}
         self._waiting = threading.Event()
+
+    def _start_pool(self) -> Executor:
+        if not self.process:
+            return ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner")
+        ctx = multiprocessing.get_context("spawn")  # never fork a process with threads
+        pool = ProcessPoolExecutor(
+            max_workers=1, mp_context=ctx, initializer=_follow_parent, initargs=(os.getpid(),)
+        )
+        pool.submit(_warm)
+        return pool
+
+    def _send(self, job: _Job) -> None:
+        """Submit ``job`` to the current worker (its boxes as tokens once sent); a worker found
+        dead at submit (it died under an earlier job) is restarted first."""
+        with self._lock:
+            try:
+                self._submit(job)
+            except BrokenProcessPool:
+                self._restart(job.kind)
+                self._submit(job)
+            job.generation = self.generation
+        job.future.add_done_callback(lambda _: setattr(job, "done_wall", self.clock()))
+
+    def _submit(self, job: _Job) -> None:
+        if self.process:
+            refs = tuple(self._ref(a) for a in job.args)
+            job.future = self._pool.submit(_run_owned, job.fn, refs)
+        else:
+            job.future = self._pool.submit(run_job, job.fn, job.args)
+
+    def _restart(self, kind: str) -> None:
+        """A new worker process in place of the dead one (what it held is lost: each box is
+        sent whole again, as the mission left it)."""
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._pool = self._start_pool()
+        self.generation += 1
+        self._tokens.clear()
+        log.error(
+            "the planner worker died (a %s plan was running): restarted (%d so far); its plans "
+            "run again, their warm starts lost",
+            kind,
+            self.generation,
+        )
+
+    def _revive(self, job: _Job) -> None:
+        """The worker died under ``job``: a new one (once per death: the other jobs sent to
+        the dead one only resend) runs the job again."""
+        with self._lock:
+            if job.generation == self.generation:
+                self._restart(job.kind)
+            job.retries += 1
+            job.wall, job.done_wall = self.clock(), None
+            self.stats.setdefault(job.kind, KindStats()).restarts += 1
+            self._send(job)
 
     @property
     def waiting(self) -> bool:
@@ -169,12 +228,8 @@ class PlannerWorker:
             self._next += 1
             ticket = self._next
         due = t + self.latency_ticks.get(kind, 0) * self.dt - 1e-9
-        job = _Job(kind, t, due, self.clock(), Future())
-        if self.process:
-            job.future = self._pool.submit(_run_owned, fn, tuple(self._ref(a) for a in args))
-        else:
-            job.future = self._pool.submit(run_job, fn, args)
-        job.future.add_done_callback(lambda _: setattr(job, "done_wall", self.clock()))
+        job = _Job(kind, t, due, self.clock(), Future(), fn=fn, args=args)
+        self._send(job)
         self._jobs[ticket] = job
         return ticket
 
@@ -199,6 +254,8 @@ class PlannerWorker:
             res = self._wait(job)
         elif job.future.done():
             res = self._result(job)
+            if res is None:  # the worker died: the job runs again on a new one
+                return None
         elif self.clock() - job.wall > self.timeout:
             self.stats.setdefault(job.kind, KindStats()).timeouts += 1
             del self._jobs[ticket]
@@ -212,20 +269,30 @@ class PlannerWorker:
 
     def _wait(self, job: _Job) -> PlanResult:
         if job.future.done():
-            return self._result(job)
+            res = self._result(job)
+            if res is not None:
+                return res
         start = self.clock()
         self._waiting.set()
         try:
-            return self._result(job)
+            while (res := self._result(job)) is None:  # the worker died: wait for the rerun
+                pass
+            return res
         finally:
             self._waiting.clear()
             self.stats.setdefault(job.kind, KindStats()).waited_s += self.clock() - start
 
-    @staticmethod
-    def _result(job: _Job) -> PlanResult:
+    def _result(self, job: _Job) -> PlanResult | None:
+        """The job's result (waiting for it); None when its worker died and the job was sent
+        to a new one (``JOB_RETRIES`` times at most, then a failed plan)."""
         try:
             return job.future.result()
-        except Exception as exc:  # noqa: BLE001 - the worker process died, a pickling error
+        except BrokenProcessPool as exc:
+            if job.retries < JOB_RETRIES:
+                self._revive(job)
+                return None
+            return PlanResult(False, error=f"the planner worker died running it: {exc!r}")
+        except Exception as exc:  # noqa: BLE001 - a pickling error, a cancelled job
             return PlanResult(False, error=f"the planner worker failed: {exc!r}")
 
     def _account(self, job: _Job, res: PlanResult) -> None:

@@ -204,3 +204,56 @@ def test_the_process_worker_keeps_job_owned_state_in_the_worker():
         assert [_count(inline, k) for k in (1, 2, 3)] == values
     finally:
         w.close()
+
+
+def _die_once(marker: str, box, k):
+    """Kill the worker process the first time (a planner crashing its interpreter: a segfault
+    in a solver, an out-of-memory kill); add ``k`` to the box the next."""
+    import os
+    from pathlib import Path
+
+    if not Path(marker).exists():
+        Path(marker).write_text("died")
+        os._exit(1)
+    return _count(box, k)
+
+
+def _always_die():
+    import os
+
+    os._exit(1)
+
+
+@pytest.mark.parametrize("lockstep", [True, False])
+def test_a_dead_planner_worker_is_restarted_and_its_plan_run_again(tmp_path, lockstep):
+    """A planner that kills its worker process does not end the job: the worker is restarted,
+    the plan runs again there (from the mission's own copy of what the dead worker held), the
+    next plans go on, the restart is counted; one that kills it every time is a failed plan."""
+    from controller.mission.planners import JobOwned
+
+    w = PlannerWorker({"route": 0}, DT, lockstep=lockstep, process=True, timeout=60.0)
+    box = JobOwned(10)
+    try:
+        slot = PlanSlot(w, "route")
+
+        def take():
+            got = None
+            while got is None:
+                got = slot.take(0.0)
+            return got
+
+        slot.request(0.0, _count, box, 1)
+        assert take().value == 11  # the worker's copy holds 11 now
+        slot.request(0.0, _die_once, str(tmp_path / "died"), box, 2)
+        got = take()
+        assert got.ok and got.value == 12  # the rerun starts from the mission's box (10)
+        slot.request(0.0, _count, box, 3)
+        assert take().value == 15  # the new worker keeps its state again
+        assert w.generation == 1 and w.summary()["route"]["restarts"] == 1
+        slot.request(0.0, _always_die)
+        got = take()
+        assert not got.ok and "died" in got.error
+        slot.request(0.0, _count, box, 1)
+        assert take().ok  # and the worker after that one serves on
+    finally:
+        w.close()
