@@ -46,6 +46,9 @@ from controller.planning.capture_set import (  # noqa: F401 - re-exported: the j
 PIN_RETRIES = 6  # re-plans that find no set before an object at rest is declared pinned
 PIN_STILL_SPEED = 0.03  # m/s: an object slower than this has come to rest against the wall
 CONTACT_REACH = 0.03  # m: at the carry, a robot's disc this near the object's surface holds it
+# times a capture re-plan after a loss that gave no answer (over planner.timeout on a loaded
+# machine, a dead worker) is asked again, every robot held, before the job fails robots_lost
+LOST_REPLAN_RETRIES = 2
 WATCHED = (Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD)  # phases a lost robot re-plans
 
 
@@ -95,6 +98,7 @@ class CaptureJob:
                 raise MissionError(str(exc)) from None
         self._replan_job = PlanSlot(planners or InlinePlanners(), "capture")
         self._replan_why = ""  # what the pending capture re-plan is for: lost, pinned, start
+        self._lost_retries = 0  # re-plans after a loss asked again for want of an answer
         self.outage = OutageWatch(cfg.fleet.outage_grace)
         self.assignment: np.ndarray | None = None
         self.inner: Any = None
@@ -248,8 +252,15 @@ class CaptureJob:
         """Every robot holds until the re-plan comes; then it is re-assigned (the approach
         starts over), or the job fails with ``robots_lost``."""
         got = self._replan_job.take(view.t)
+        hold = Intent(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
         if got is None:
-            return Intent(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
+            return hold
+        if not got.ok and self._lost_retries < LOST_REPLAN_RETRIES:
+            # no answer is not "no capture": asked again, every robot still held
+            self._lost_retries += 1
+            self._ask_replan_lost(view)
+            return hold
+        self._lost_retries = 0
         new = got.value if got.ok else None
         if new is None:
             k = int(self.roster.available.sum())

@@ -10,7 +10,8 @@ import pytest
 
 from controller.config import ConfigError
 from controller.events import by_kind
-from controller.mission.job import CaptureJob
+from controller.mission.job import LOST_REPLAN_RETRIES, CaptureJob
+from controller.mission.planners import InlinePlanners, PlanResult
 from controller.mission.roster import LOST_STALE_S
 from controller.mission.types import FleetView, Phase, step
 from tests.support.config import base_config_dict, deep_update, make_config
@@ -84,6 +85,45 @@ def test_losing_an_assigned_robot_mid_approach_replans_over_the_robots_left():
     assert np.all(out.commands[lost] == 0.0)  # a lost robot is told nothing
     summary = j.summary().plan
     assert summary.loss_replans == 1 and summary.robots_lost == [j.cfg.robots[lost].id]
+
+
+class SlowFirst(InlinePlanners):
+    """The capture re-plans' first ``n`` answers are a timeout (a loaded machine)."""
+
+    def __init__(self, n: int) -> None:
+        super().__init__()
+        self.left = n
+
+    def submit(self, kind, t, fn, *args):
+        ticket = super().submit(kind, t, fn, *args)
+        if kind == "capture" and self.left > 0:
+            self.left -= 1
+            self._results[ticket] = PlanResult(False, error="timeout after 10 s")
+        return ticket
+
+
+@pytest.mark.parametrize("timeouts", [LOST_REPLAN_RETRIES, LOST_REPLAN_RETRIES + 1])
+def test_a_replan_after_a_loss_that_times_out_is_asked_again_before_failing(timeouts):
+    """No answer is not "no capture": the re-plan is asked again (every robot held) and the
+    approach goes on with its answer; only an answer that never comes fails robots_lost."""
+    cfg = make_config({"sim": {"backend": "ideal"}, "capture": {"hold_force": 4.0}})
+    j = CaptureJob(cfg, planners=SlowFirst(timeouts))
+    t = started(j)
+    lost = int(j.assignment[0])
+    held = []
+    for _ in range(LOST_REPLAN_RETRIES + 2):
+        out = step(j, view(j, t, present=without(j.n, lost)))
+        t += DT
+        if out.failed or "capture" in kinds(out):
+            break
+        held.append(bool(np.all(out.commands == 0.0)))
+    assert held and all(held)  # every robot held while the answer was awaited
+    if timeouts <= LOST_REPLAN_RETRIES:
+        assert not out.failed and "capture" in kinds(out) and out.phase == Phase.APPROACH
+        assert lost not in j.assignment
+    else:
+        assert out.failed and out.reason == "robots_lost"
+        assert "timeout after 10 s" in by_kind(out.events)["failure"].detail
 
 
 def test_a_stale_robot_is_lost_only_after_the_grace():
