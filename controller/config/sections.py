@@ -117,6 +117,8 @@ class PlannerSection:
     route_latency_ticks: int = _rule(10, min=0, max=10_000)
     rearrange_latency_ticks: int = _rule(4, min=0, max=10_000)
     capture_latency_ticks: int = _rule(10, min=0, max=10_000)
+    # the approach's detours around static obstacles (a robot roadmap and A* per blocked robot)
+    detour_latency_ticks: int = _rule(4, min=0, max=10_000)
     timeout: float = _rule(10.0, gt=0, max=3600)
 
     def latency_ticks(self) -> dict[str, int]:
@@ -125,6 +127,7 @@ class PlannerSection:
             "route": self.route_latency_ticks,
             "rearrange": self.rearrange_latency_ticks,
             "capture": self.capture_latency_ticks,
+            "detour": self.detour_latency_ticks,
         }
 
 

@@ -52,6 +52,7 @@ from controller.mission.capture_phase import (
     advance,
 )
 from controller.mission.guard import SafetyStage
+from controller.mission.planners import InlinePlanners, Planners, PlanSlot
 from controller.mission.summary import CaptureSummary
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase
 from controller.planning.approach import (
@@ -65,6 +66,7 @@ from controller.planning.approach import (
     separate_stations,
     static_free_distance,
 )
+from controller.planning.roadmap import plan_detours
 
 STATION_SLACK = 0.02  # m beyond the safety filter's margin a station keeps from walls, obstacles
 
@@ -95,6 +97,7 @@ class CaptureMission:
     settings: CaptureSettings | None = None
     guard: SafetyStage | None = None
     waypoints: dict[int, list[np.ndarray]] = field(default_factory=dict)
+    planners: Planners | None = None  # the port the detours are asked of (None: at once)
 
     def __post_init__(self) -> None:
         cfg = self.cfg
@@ -117,6 +120,9 @@ class CaptureMission:
         self.state = CaptureState(contact_t=np.full(len(self.points), np.nan))
         self.heading: np.ndarray | None = None
         self._detours_planned = False
+        self._detour_job = PlanSlot(self.planners or InlinePlanners(), "detour")
+        self._detour_robots: list[int] = []
+        self.detour_hold: np.ndarray | None = None  # robots held until their detours come
         self.last_distance: np.ndarray | None = None
         # stations keep the discs this far from walls and obstacles (what the safety filter
         # lets a robot reach, with a station gap to spare)
@@ -163,29 +169,56 @@ class CaptureMission:
         preload = pts + (r - self.s.preload_depth)[:, None] * nrm
         return Goals(pts, nrm, pts + nrm * out[:, None], touch, preload, shortfall)
 
-    # --- stage 3: detours around static obstacles (once) ----------------------------------
-    def plan_detours(self, centers: np.ndarray, stations: np.ndarray) -> None:
-        """Robot routes (A*) for robots whose straight line to their station is blocked."""
-        from controller.planning.roadmap import RobotRoadmap
-
-        self._detours_planned = True
-        blocked = []
+    # --- stage 3: detours around static obstacles (planned once, off the tick) -------------
+    def blocked(self, centers: np.ndarray, stations: np.ndarray) -> list[tuple[int, int]]:
+        """(capture point, robot) of the robots whose straight line to their station crosses
+        an obstacle grown by their radius (a cheap test, on the tick)."""
+        out = []
         for m, i in enumerate(self.assignment):
             r = self.radii[i] + self.s.detour_clearance
             grown = [envelope(p, r, 8) for p in self.obstacles]
             seg = np.linspace(centers[i], stations[m], self.s.detour_samples)
             if any(geometry.points_in_polygon(seg, g).any() for g in grown):
-                blocked.append((m, i))
+                out.append((m, int(i)))
+        return out
+
+    def ask_detours(self, view: FleetView, centers: np.ndarray, stations: np.ndarray) -> None:
+        """The blocked robots' routes asked of the planner port (kind ``detour``: a robot
+        roadmap and A* over it); they hold until the routes come (``detour_hold``)."""
+        self._detours_planned = True
+        blocked = self.blocked(centers, stations)
         if not blocked:
             return
         rr = float(self.radii.max()) + self.cfg.approach.safety_margin + self.s.detour_clearance
-        rm = RobotRoadmap.build(
-            self.cfg.bounds_array(), self.obstacles, rr, self.cfg.route.robot_resolution
+        robots = [i for _, i in blocked]
+        starts = np.array([centers[i] for i in robots])
+        goals = np.array([stations[m] for m, _ in blocked])
+        self.detour_hold = np.zeros(self.n, bool)
+        self.detour_hold[robots] = True
+        self._detour_job.request(
+            view.t,
+            plan_detours,
+            self.cfg.bounds_array(),
+            self.obstacles,
+            rr,
+            self.cfg.route.robot_resolution,
+            starts,
+            goals,
+            self.s.detour_spacing,
         )
-        for m, i in blocked:
-            res = rm.plan(centers[i], stations[m], subgoal_spacing=self.s.detour_spacing)
-            if res.ok:
-                self.waypoints[i] = [w[:2] for w in res.subgoals[:-1]]
+        self._detour_robots = robots
+
+    def take_detours(self, t: float) -> None:
+        """The detour routes, once they came: each blocked robot follows its waypoints (a
+        robot with no route found goes straight, the safety filter keeping it off)."""
+        got = self._detour_job.take(t)
+        if got is None:
+            return
+        if got.ok:
+            for i, wps in zip(self._detour_robots, got.value, strict=True):
+                if wps:
+                    self.waypoints[i] = wps
+        self.detour_hold = None
 
     # --- stage 4: targets and feed-forward of the phase --------------------------------------
     def point_velocity(self, view: FleetView, pose: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -296,9 +329,13 @@ class CaptureMission:
         pose = self.goal_pose(view)
         goals = self.goals(pose)
         if not self._detours_planned:
-            self.plan_detours(view.poses[:, :2], goals.stations)
+            self.ask_detours(view, view.poses[:, :2], goals.stations)
+        if self._detour_job.pending:
+            self.take_detours(view.t)
         goal, gvel, tgt = self.targets(view, pose, goals)
         vel = self.projective(view, goal, gvel, pose)
+        if self.detour_hold is not None:  # the blocked robots wait for their routes
+            vel[self.detour_hold] = 0.0
         m = self.measures(view, tgt, goals)
         step = advance(self.state, m, self.s)
         self.state = step.state

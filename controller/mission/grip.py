@@ -44,6 +44,25 @@ class GripSettings:
     move_floor: float = 0.05
 
 
+CONTACT_REACH = 0.03  # m: at the carry, a robot's disc this near the object's surface holds it
+
+
+def touching(
+    cfg: FleetConfig, object_pose, poses: np.ndarray, reach: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The robots whose discs are within ``reach`` m of the object's surface: their indices,
+    their nearest boundary points and the outward normals there (object frame)."""
+    pose = np.asarray(object_pose, float)
+    poly = geometry.ensure_ccw(cfg.object_polygon())
+    local = geometry.inverse_transform(np.asarray(poses)[:, :2], pose)
+    d, closest = geometry.point_segment_distance(local, poly, np.roll(poly, -1, axis=0))
+    j = np.argmin(d, axis=1)
+    rows = np.arange(len(local))
+    radii = np.array([r.radius for r in cfg.robots])
+    held = np.flatnonzero(d[rows, j] - radii < reach)
+    return held, closest[rows, j][held], geometry.outward_normals(poly)[j][held]
+
+
 class Grip:
     """Every robot's part in the hold (the fleet in config order, indices 0..N-1)."""
 

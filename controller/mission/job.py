@@ -11,12 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from controller import geometry
 from controller.config import FleetConfig
 from controller.events import CaptureEvent
 from controller.mission.assign import Reassigner, assign, interception_costs
 from controller.mission.capture import CaptureMission
 from controller.mission.capture_phase import CaptureSettings
+from controller.mission.grip import CONTACT_REACH, touching
 from controller.mission.guard import SafetyStage
 from controller.mission.outage import OutageWatch
 from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spawn_rng
@@ -45,7 +45,6 @@ from controller.planning.capture_set import (  # noqa: F401 - re-exported: the j
 
 PIN_RETRIES = 6  # re-plans that find no set before an object at rest is declared pinned
 PIN_STILL_SPEED = 0.03  # m/s: an object slower than this has come to rest against the wall
-CONTACT_REACH = 0.03  # m: at the carry, a robot's disc this near the object's surface holds it
 # times a capture re-plan after a loss that gave no answer (over planner.timeout on a loaded
 # machine, a dead worker) is asked again, every robot held, before the job fails robots_lost
 LOST_REPLAN_RETRIES = 2
@@ -182,19 +181,11 @@ class CaptureJob:
             planners=self.planners,
         )
 
-    def _carry_from_contact(self, view: FleetView, reach: float = CONTACT_REACH) -> Intent:
-        """Entered at ``route``: the robots whose discs are within ``reach`` m of the object's
-        surface hold their nearest boundary point; the others are free."""
-        pose = np.asarray(view.object_pose, float)
-        poly = geometry.ensure_ccw(self.cfg.object_polygon())
-        local = geometry.inverse_transform(view.poses[:, :2], pose)
-        d, closest = geometry.point_segment_distance(local, poly, np.roll(poly, -1, axis=0))
-        j = np.argmin(d, axis=1)
-        rows = np.arange(len(local))
-        radii = np.array([r.radius for r in self.cfg.robots])
-        held = np.flatnonzero(d[rows, j] - radii < reach)
-        normals = geometry.outward_normals(poly)[j]
-        self._carry(SafetyStage(self.cfg), held, closest[rows, j][held], normals[held])
+    def _carry_from_contact(self, view: FleetView) -> Intent:
+        """Entered at ``route``: the robots touching the object hold their nearest boundary
+        point (``grip.touching``); the others are free."""
+        held, points, normals = touching(self.cfg, view.object_pose, view.poses, CONTACT_REACH)
+        self._carry(SafetyStage(self.cfg), held, points, normals)
         return self.transport.plan(view)
 
     def _wait(self, view: FleetView) -> Intent:
@@ -341,6 +332,7 @@ class CaptureJob:
             self.cfg,
             self.rng,
             settings=settings,
+            planners=self.planners,
         )
 
     def _await_pinned(self, view: FleetView, intent: Intent) -> Intent:

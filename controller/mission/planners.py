@@ -26,7 +26,7 @@ from typing import Any, Protocol
 import numpy as np
 
 # the planners a mission runs off the tick (``fleet status`` and the run summary report each)
-PLANNER_KINDS = ("transport", "route", "rearrange", "capture")
+PLANNER_KINDS = ("transport", "route", "rearrange", "capture", "detour")
 
 
 class JobOwned:

@@ -196,3 +196,23 @@ def plan_robot_route(
     """
     rm = roadmap or RobotRoadmap.build(bounds, obstacles, radius, resolution, speed)
     return rm.plan(start_xy, goal_xy, heuristic=heuristic, wg=wg, wh=wh)
+
+
+def plan_detours(
+    bounds: np.ndarray,
+    obstacles: list,
+    radius: float,
+    resolution: float,
+    starts: np.ndarray,
+    goals: np.ndarray,
+    spacing: float,
+) -> list[list[np.ndarray]]:
+    """The detour job (off the tick): a robot roadmap of the room for discs of ``radius`` and
+    each robot's A* route from its start to its station, as waypoints (the station itself
+    excluded: the approach takes over there); an empty list where no route is found."""
+    rm = RobotRoadmap.build(bounds, obstacles, radius, resolution)
+    out = []
+    for start, goal in zip(starts, goals, strict=True):
+        res = rm.plan(start, goal, subgoal_spacing=spacing)
+        out.append([np.asarray(w[:2], float) for w in res.subgoals[:-1]] if res.ok else [])
+    return out

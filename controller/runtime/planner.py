@@ -1,5 +1,6 @@
 """The planner worker: the missions' slow plans (transport local plan, object route,
-re-arrangement set, capture re-plan) run here, off the control loop (docs/architecture.md, "Time").
+re-arrangement set, capture re-plan, the approach's detours) run here, off the control loop
+(docs/architecture.md, "Time").
 
 One worker thread runs the jobs in submission order, so what a job owns (a planner's warm start,
 its generator) is never touched by two at once, and the tick never waits on a planner:
