@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
 
 import numpy as np
 
@@ -45,9 +44,7 @@ from controller.planning.capture_set import (  # noqa: F401 - re-exported: the j
 
 PIN_RETRIES = 6  # re-plans that find no set before an object at rest is declared pinned
 PIN_STILL_SPEED = 0.03  # m/s: an object slower than this has come to rest against the wall
-# times a capture re-plan after a loss that gave no answer (over planner.timeout on a loaded
-# machine, a dead worker) is asked again, every robot held, before the job fails robots_lost
-LOST_REPLAN_RETRIES = 2
+LOST_REPLAN_RETRIES = 2  # re-plans after a loss with no answer (a timeout) asked again
 WATCHED = (Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD)  # phases a lost robot re-plans
 
 
@@ -100,7 +97,7 @@ class CaptureJob:
         self._lost_retries = 0  # re-plans after a loss asked again for want of an answer
         self.outage = OutageWatch(cfg.fleet.outage_grace)
         self.assignment: np.ndarray | None = None
-        self.inner: Any = None
+        self.inner: CaptureMission | None = None  # the capture stage, once started
         self.roster = Roster(self.n)
         self.reach = Reach(cfg)
         self.reassigner = Reassigner()
@@ -109,11 +106,10 @@ class CaptureJob:
         self.failure_reason: str = Reason.PINNED
         self.start_tried = -1  # robots a start without the missing ones was last planned for
         self.loss_replans = 0
-        self.transport: Any = None
+        self.transport: TransportMission | None = None  # the carry, once started
         self.arrest_t: float | None = None
-        self.route_planner: Any = None
-        if cfg.object.goal is not None:  # built before the loop: it takes a second
-            self.route_planner = route_planner_for(cfg)
+        # the object's route planner, built before the loop (it takes a second)
+        self.route_planner = route_planner_for(cfg) if cfg.object.goal is not None else None
 
     @property
     def phase(self) -> Phase:

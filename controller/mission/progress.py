@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -16,6 +16,8 @@ from controller.mission.planners import JobOwned
 from controller.planning.transport_model import ObjectModel
 from controller.planning.transport_types import RouteSegment
 
+if TYPE_CHECKING:
+    from controller.planning.route import RoutePlanner
 _TRANSPORT = TransportSection()  # the config's defaults: the settings' defaults of its keys
 
 
@@ -152,7 +154,7 @@ def plan_route_job(box: JobOwned, cfg: FleetConfig, pose: np.ndarray) -> Any:
     return box.value.plan(pose)
 
 
-def route_planner_for(cfg: FleetConfig) -> Any:
+def route_planner_for(cfg: FleetConfig) -> RoutePlanner:
     """The object's route planner toward ``object.goal`` (C-space and cost-to-go table built)."""
     from controller.planning.route import RoutePlanner
 

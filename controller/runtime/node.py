@@ -55,6 +55,7 @@ class Estimator(Protocol):
     def object_estimate(self, now: float) -> Any: ...
     def predict_object(self, now: float, horizon: float) -> Any: ...
     def set_object_arrested(self, arrested: bool) -> None: ...
+    def push_object(self, t: float, vx: float, vy: float, wz: float) -> None: ...
 
 
 @dataclass
@@ -399,7 +400,7 @@ class ControllerNode:
         if out.arrest and not self.arrested:
             self.arrested = True
             self.est.set_object_arrested(True)
-        if out.object_push is not None and hasattr(self.est, "push_object"):
+        if out.object_push is not None:
             self.est.push_object(now, *(float(v) for v in out.object_push))
         self.phase = out.phase
         self.counters.ticks += 1
