@@ -7,6 +7,7 @@ and the config's JSON Schema from the code, so they cannot drift from it.
 - docs/reference/bus.md: the bus keys (``controller.wire.TOPICS``), the message types and
   their JSON Schemas, the typed plan events, phases and failure reasons (``controller.events``);
 - docs/reference/run-json.md: the ``fleet run --json`` fields (``controller.runtime.summary``);
+- docs/reference/replay-json.md: the ``fleet replay --json`` keys (``controller.replay.fields``);
 - fleet.schema.json and its packaged copy controller/examples/fleet.schema.json (``fleet
   schema`` writes the same).
 
@@ -372,6 +373,40 @@ def _json_row(key: str, where: dict[str, tuple[type, Any, str]], run: type) -> s
     return f"| `{key}` | | `{run.__name__}` | {prose(doc)} |\n"
 
 
+# --------------------------------------------------------------------------- fleet replay --json
+
+
+def replay_json_page() -> str:
+    from controller.replay import fields
+
+    def table(rows: dict[str, tuple[str, str]]) -> str:
+        out = "| key | type | meaning |\n|---|---|---|\n"
+        return out + "".join(f"| `{k}` | {t} | {prose(m)} |\n" for k, (t, m) in rows.items())
+
+    def keys(names: tuple[str, ...]) -> str:
+        return ", ".join(f"`{k}`" for k in names)
+
+    return "".join(
+        [
+            _header("controller/replay/fields.py"),
+            "# `fleet replay --json` reference\n\n",
+            "`fleet replay LOG --json` prints one object: what the log holds, the figures the "
+            "dry run would report for it (from the world's truth when the log has it, else "
+            "from the estimates), the verdict and the job's end. The keys in the order it "
+            "writes them; a figure is `null` when the log does not reach it. ",
+            f"Written only for an object with a goal: {keys(fields.GOAL_ONLY)}; only once it "
+            f"was carried: {keys(fields.CARRIED_ONLY)}; only when the log holds its config: "
+            f"{keys(fields.CONFIG_ONLY)}. ",
+            "Extend, never rename: tools outside the repository read these keys.\n\n",
+            table(fields.TOP),
+            "\n## `robots.<id>`\n\n",
+            table(fields.ROBOT),
+            "\n## `object`\n\n",
+            table(fields.OBJECT),
+        ]
+    )
+
+
 # --------------------------------------------------------------------------- all of it
 
 GENERATED: dict[str, Callable[[], str]] = {
@@ -379,6 +414,7 @@ GENERATED: dict[str, Callable[[], str]] = {
     "docs/reference/config.md": config_page,
     "docs/reference/bus.md": bus_page,
     "docs/reference/run-json.md": run_json_page,
+    "docs/reference/replay-json.md": replay_json_page,
     **{path: schema_text for path in SCHEMA_COPIES},
 }
 

@@ -197,3 +197,19 @@ def test_object_penetration_of_a_disc_pushed_into_a_square():
     robot = Track(t, np.stack([1.0 - 0.45 * t, 0 * t, 0 * t], 1))  # ends 0.05 m from the edge
     depth, when = object_penetration([robot], [0.1], obj, square)
     assert depth == pytest.approx(0.05) and when == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("name", ["capture", "transport"])
+def test_replay_json_writes_exactly_the_documented_keys(name):
+    """Every key ``fleet replay --json`` writes is in ``controller.replay.fields`` (the generated
+    reference page), in its order, and none documented is missing (a capture without a goal
+    writes no transport keys)."""
+    from controller.replay import fields
+    from tests.support.config import ROOT
+
+    out = metrics_of(load_run(ROOT / "tests" / "replay" / "data" / f"{name}.mcap"))
+    skip = () if name == "transport" else fields.GOAL_ONLY + fields.CARRIED_ONLY
+    assert list(out) == [k for k in fields.TOP if k not in skip]
+    for robot in out["robots"].values():
+        assert list(robot) == list(fields.ROBOT)
+    assert list(out["object"]) == list(fields.OBJECT)
