@@ -30,6 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench import stats  # noqa: E402
 from controller.mission.factory import build_mission  # noqa: E402
 from controller.runtime.dry_run import DryRun  # noqa: E402
 from tests.support.arrest_scenarios import (  # noqa: E402
@@ -83,15 +84,10 @@ WALL_CLEAR_M = 0.05  # m: an arrest counts only if the object never came this ne
 HOLD_MARGIN_S = 12.0  # s of sim time after the object would reach a wall: hold, arrest, settle
 
 
-def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """Wilson score interval (95 % for z = 1.96) of a rate of k successes in n runs."""
-    if n == 0:
-        return (0.0, 1.0)
-    p = k / n
-    den = 1.0 + z * z / n
-    mid = (p + z * z / (2 * n)) / den
-    half = z * math.sqrt(p * (1.0 - p) / n + z * z / (4 * n * n)) / den
-    return (round(max(0.0, mid - half), 3), round(min(1.0, mid + half), 3))
+def wilson(k: int, n: int) -> tuple[float, float]:
+    """Wilson's 95 % score interval of a rate of k successes in n runs (``bench/stats.py``)."""
+    lo, hi = stats.wilson(k, n)
+    return (round(lo, 3), round(hi, 3))
 
 
 def edge_case(v: float, k: int) -> tuple[ArrestScenario, float]:

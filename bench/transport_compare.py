@@ -11,10 +11,12 @@
    never tuned on) × strategies, each a whole ``fleet run --mission transport`` in lockstep on
    ``--backend`` (pybullet by default: only it measures contact forces). Per strategy: success
    on our criterion (delivered within the position *and* heading tolerance, clean verdict) and
-   on Sharma's (the CG within the position tolerance at the end, heading free), median
-   transport time and contact impulse Σ|f|·dt with 95 % bootstrap intervals (2000 resamples,
-   over the runs each strategy delivered). Paired per (scenario, seed): Wilcoxon signed-rank
-   (scipy) on success (0/1), on time and impulse (runs both delivered), the median paired ratio.
+   on Sharma's (the CG within the position tolerance at the end, heading free), each with its
+   95 % Wilson interval; median transport time and contact impulse Σ|f|·dt with n and a 95 %
+   bootstrap interval (over the runs each strategy delivered). Paired per (scenario, seed):
+   McNemar's exact test on success, Wilcoxon's signed-rank test on time and impulse (runs both
+   delivered) with n, the median paired ratio, and Holm's adjustment across every pairwise test
+   of the table (``p_holm``; ``bench/stats.py``).
 3. ``--sweep N``: the robustness runs (one open-floor crate, 3 m) with Yamashita's robot motion
    errors (``sim.robot_position_error`` = ±0.04 m, ±0.01 m) plus the world's object off
    (mass, floor friction ×U(0.9, 1.1), CoM ±1 cm; pybullet only), N runs per strategy.
@@ -43,10 +45,10 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import wilcoxon
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from bench import stats  # noqa: E402
 from bench.transport_loop import draw_suite, sweep_suite  # noqa: E402
 from controller.planning.transport import plan_local  # noqa: E402
 from controller.planning.transport_model import Rollout  # noqa: E402
@@ -54,7 +56,6 @@ from controller.planning.transport_types import ACTIONS, TransportParams  # noqa
 from tests.support.transport_cases import diamond_case, push_case  # noqa: E402
 
 STRATEGIES = ("sa", "downhill", "serpentine")
-BOOT = 2000
 
 
 def log(msg: str) -> None:
@@ -62,34 +63,20 @@ def log(msg: str) -> None:
 
 
 # --------------------------------------------------------------------------- statistics
-
-
-def boot_median(values, rng: np.random.Generator) -> dict:
-    """Median and its 95 % percentile-bootstrap interval (None when empty)."""
-    v = np.asarray([x for x in values if x is not None], float)
-    if len(v) == 0:
-        return {"n": 0, "median": None, "ci95": None}
-    meds = np.median(rng.choice(v, size=(BOOT, len(v)), replace=True), axis=1)
-    lo, hi = np.percentile(meds, [2.5, 97.5])
-    med = round(float(np.median(v)), 3)
-    return {"n": len(v), "median": med, "ci95": [round(lo, 3), round(hi, 3)]}
-
-
-def boot_rate(flags, rng: np.random.Generator) -> dict:
-    f = np.asarray(flags, float)
-    if len(f) == 0:
-        return {"n": 0, "rate": None, "ci95": None}
-    means = rng.choice(f, size=(BOOT, len(f)), replace=True).mean(axis=1)
-    lo, hi = np.percentile(means, [2.5, 97.5])
-    return {"n": len(f), "rate": round(float(f.mean()), 3), "ci95": [round(lo, 3), round(hi, 3)]}
+# (bench/stats.py: Wilson for rates, McNemar's exact test for paired success, Wilcoxon with n
+# for paired times and impulses, Holm across a table's pairwise tests)
 
 
 def signed_rank(diffs) -> dict:
-    d = np.asarray(diffs, float)
-    out = {"pairs": len(d), "a_lower": int(np.sum(d < 0)), "a_higher": int(np.sum(d > 0))}
-    if len(d) == 0 or not np.any(d != 0):
-        return {**out, "wilcoxon_p": None}
-    return {**out, "wilcoxon_p": float(f"{wilcoxon(d, zero_method='zsplit').pvalue:.3g}")}
+    """Wilcoxon's signed-rank test of paired differences (``pairs``, ``wilcoxon_p``)."""
+    out = stats.signed_rank(diffs)
+    p = out["p"]
+    return {
+        "pairs": out["n"],
+        "a_lower": out["a_lower"],
+        "a_higher": out["a_higher"],
+        "wilcoxon_p": None if p is None else float(f"{p:.3g}"),
+    }
 
 
 # --------------------------------------------------------------------------- 1. the planner
@@ -220,11 +207,13 @@ def aggregate(rows: list[dict], strategies, rng: np.random.Generator) -> dict:
         ok = [r for r in mine if r["success"]]
         out[s] = {
             "runs": len(mine),
-            "success": boot_rate([r["success"] for r in mine], rng),
-            "success_paper_criterion": boot_rate([r["success_paper"] for r in mine], rng),
-            "transport_time_s": boot_median([r["transport_time_s"] for r in ok], rng),
-            "impulse_ns": boot_median([r["impulse_ns"] for r in ok], rng),
-            "lateral_deviation_rms_m": boot_median([r["lateral_deviation_rms_m"] for r in ok], rng),
+            "success": stats.rate([r["success"] for r in mine]),
+            "success_paper_criterion": stats.rate([r["success_paper"] for r in mine]),
+            "transport_time_s": stats.median([r["transport_time_s"] for r in ok], rng),
+            "impulse_ns": stats.median([r["impulse_ns"] for r in ok], rng),
+            "lateral_deviation_rms_m": stats.median(
+                [r["lateral_deviation_rms_m"] for r in ok], rng
+            ),
             "failures": sorted({str(r["reason"]) for r in mine if not r["success"]}),
         }
     pairs: dict = {}
@@ -240,7 +229,7 @@ def aggregate(rows: list[dict], strategies, rng: np.random.Generator) -> dict:
                 "pairs": len(keys),
                 "only_a_delivered": wins.count(1),
                 "only_b_delivered": wins.count(-1),
-                "wilcoxon_p": signed_rank(wins)["wilcoxon_p"],
+                "mcnemar_p": stats.mcnemar(wins.count(1), wins.count(-1)),
             }
             for key in ("transport_time_s", "impulse_ns"):
                 good = [k for k in both if ra[k][key] and rb[k][key]]
@@ -250,8 +239,20 @@ def aggregate(rows: list[dict], strategies, rng: np.random.Generator) -> dict:
                     round(float(np.median(ratios)), 3) if ratios else None
                 )
             pairs[f"{a}_vs_{b}"] = p
+    _holm(pairs)
     out["paired"] = pairs
     return out
+
+
+def _holm(pairs: dict) -> None:
+    """Holm's adjustment across every pairwise test of the table (success, time, impulse of
+    each pair): each test gains ``p_holm``."""
+    tests = [
+        (p, key) for p in pairs.values() for key in ("success", "transport_time_s", "impulse_ns")
+    ]
+    raw = [p[key].get("mcnemar_p", p[key].get("wilcoxon_p")) for p, key in tests]
+    for (p, key), adj in zip(tests, stats.holm(raw), strict=True):
+        p[key]["p_holm"] = None if adj is None else float(f"{adj:.3g}")
 
 
 def _key(r: dict) -> tuple:
@@ -346,13 +347,15 @@ def table(out: dict) -> str:
             w = p["success"]
             parts = [
                 f"success: only first {w.get('only_a_delivered', w.get('a_lower'))}, only "
-                f"second {w.get('only_b_delivered', w.get('a_higher'))} (p {_p(w['wilcoxon_p'])})"
+                f"second {w.get('only_b_delivered', w.get('a_higher'))} (McNemar p "
+                f"{_p(w.get('mcnemar_p', w.get('wilcoxon_p')))}, Holm {_p(w.get('p_holm'))})"
             ]
             for key, name in (("transport_time_s", "time"), ("impulse_ns", "impulse")):
                 q = p[key]
                 parts.append(
                     f"{name}: ratio {q['median_ratio_a_over_b']}, first lower in "
-                    f"{q['a_lower']}/{q['pairs']} (p {_p(q['wilcoxon_p'])})"
+                    f"{q['a_lower']}/{q['pairs']} (Wilcoxon p {_p(q['wilcoxon_p'])}, Holm "
+                    f"{_p(q.get('p_holm'))})"
                 )
             lines.append(
                 f"| {label} | {pair.replace('_vs_', ' vs ')} | paired | "
@@ -360,7 +363,7 @@ def table(out: dict) -> str:
                 + " | | | |"
             )
     head = (
-        "| set | strategy | runs | success (ours) [95 % CI] | success (Sharma: CG only) "
+        "| set | strategy | runs | success (ours) [95 % Wilson] | success (Sharma: CG only) "
         "| time, median [CI] | impulse, median [CI] |"
     )
     notes = [
