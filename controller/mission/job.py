@@ -128,7 +128,9 @@ class CaptureJob:
         gone = self.roster.gone(view)
         if self.inner is None:
             return self._wait(view)
-        gone, pause, events = self.outage.filter(view.t, gone, self.roster.available, view.ids)
+        gone, pause, events = self.outage.filter(
+            view.t, gone, self.roster.available, view.ids, self.roster.silent
+        )
         if pause:  # one fleet-wide silence: every robot still until it ends or its grace runs out
             return Intent(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
         events += self.roster.joins(view, gone)

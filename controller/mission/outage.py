@@ -6,7 +6,10 @@ the job around nobody and fail it with ``robots_lost``. Instead, when two or mor
 the mission relies on go missing together, the mission pauses (every robot commanded still; the
 agents' watchdogs stop them anyway) for up to ``fleet.outage_grace`` s: robots that come back
 within it carry on as if nothing happened; those still missing after it are lost, and only
-they are re-planned around. A single robot going missing is a loss at once, as before.
+they are re-planned around. A single robot whose liveliness goes is a loss at once; a single
+robot gone *silent* (its estimate stale, its liveliness still up) may be the first of a
+fleet-wide silence whose robots' last poses came a few tens of milliseconds apart, so it is
+given ``window`` s for others to follow (then an outage, which it is part of) before it is lost.
 """
 
 from __future__ import annotations
@@ -20,11 +23,14 @@ from controller.mission.types import Event
 class OutageWatch:
     """Decides, tick by tick, which missing robots count as lost and whether to pause."""
 
-    def __init__(self, grace: float, together: int = 2) -> None:
+    def __init__(self, grace: float, together: int = 2, window: float = 0.5) -> None:
         """``grace`` (s) an outage may last before its missing robots are lost; ``together``:
-        robots missing at once that make an outage."""
+        robots missing at once that make an outage; ``window`` (s) a lone silent robot waits
+        for others."""
         self.grace = grace
         self.together = together
+        self.window = window
+        self.silent_since: dict[int, float] = {}  # a lone silent robot: since when
         self.start: float | None = None
         self.robots: np.ndarray | None = None  # (N,) the robots the outage took
         self.outages = 0
@@ -34,16 +40,23 @@ class OutageWatch:
         return self.start is not None
 
     def filter(
-        self, t: float, gone: np.ndarray, relied: np.ndarray, ids: tuple[str, ...]
+        self,
+        t: float,
+        gone: np.ndarray,
+        relied: np.ndarray,
+        ids: tuple[str, ...],
+        silent: np.ndarray | None = None,
     ) -> tuple[np.ndarray, bool, list[Event]]:
-        """``gone`` (N,) robots missing now, ``relied`` (N,) those the mission counts on.
+        """``gone`` (N,) robots missing now, ``relied`` (N,) those the mission counts on,
+        ``silent`` (N,) the gone ones whose liveliness is still up (None: none told apart).
         Returns (the gone robots to treat as lost now, whether the mission pauses, events)."""
         gone = np.asarray(gone, bool)
         missing = gone & np.asarray(relied, bool)
         events: list[Event] = []
         if self.start is None:
             if int(missing.sum()) < self.together or self.grace <= 0:
-                return gone, False, events
+                return gone & ~self._waiting(t, missing, silent), False, events
+            self.silent_since.clear()
             self.start, self.robots = t, missing.copy()
             self.outages += 1
             robots = [ids[i] for i in np.flatnonzero(missing)]
@@ -56,3 +69,16 @@ class OutageWatch:
         events.append(OutageEndEvent(t=t, duration_s=round(t - self.start, 3), lost=lost))
         self.start, self.robots = None, None
         return gone, False, events
+
+    def _waiting(self, t: float, missing: np.ndarray, silent: np.ndarray | None) -> np.ndarray:
+        """(N,) the lone silent robots still within ``window`` of going silent (not lost yet)."""
+        wait = np.zeros_like(missing)
+        quiet = missing & (np.zeros_like(missing) if silent is None else np.asarray(silent, bool))
+        if self.grace <= 0:
+            return wait
+        for i in list(self.silent_since):
+            if not quiet[i]:
+                del self.silent_since[i]
+        for i in np.flatnonzero(quiet):
+            wait[i] = t - self.silent_since.setdefault(int(i), t) < self.window - 1e-9
+        return wait

@@ -25,6 +25,7 @@ class Roster:
         self.available = np.ones(n, bool)
         self.lost: list[int] = []
         self.stale_since = np.full(n, np.nan)  # s: when each estimate turned stale
+        self.silent = np.zeros(n, bool)  # gone by a stale estimate alone (liveliness still up)
         self.first_t: float | None = None
 
     def seen(self, view: FleetView) -> np.ndarray:
@@ -40,7 +41,9 @@ class Roster:
         self.stale_since[~stale] = np.nan
         self.stale_since[stale & np.isnan(self.stale_since)] = view.t
         held = stale & (view.t - np.nan_to_num(self.stale_since, nan=view.t) >= LOST_STALE_S)
-        return ~np.asarray(view.present, bool) | held
+        present = np.asarray(view.present, bool)
+        self.silent = held & present
+        return ~present | held
 
     def joins(self, view: FleetView, gone: np.ndarray) -> list[Event]:
         """Robots present with a fresh estimate again (or seen at last) are available again."""

@@ -127,12 +127,14 @@ def test_a_replan_after_a_loss_that_times_out_is_asked_again_before_failing(time
 
 
 def test_a_stale_robot_is_lost_only_after_the_grace():
+    """A robot silent alone (its estimate stale, its liveliness up) is lost after
+    ``LOST_STALE_S`` and the outage watch's window for others to follow."""
     j = job()
     t0 = started(j)
     i = int(j.assignment[1])
     stale = without(j.n, i) == 0
     t = t0
-    while t - t0 < LOST_STALE_S - 1e-9:
+    while t - t0 < LOST_STALE_S + j.outage.window - 1e-9:
         out = step(j, view(j, t, stale=stale))
         assert "robot_lost" not in kinds(out) and np.all(out.commands[i] == 0.0)
         t += DT
@@ -283,3 +285,25 @@ def test_an_outage_loses_only_the_robots_still_missing_after_its_grace():
     assert kinds(out)[:3] == ["outage_end", "robot_lost", "capture"]
     assert by_kind(out.events)["robot_lost"].robot == j.cfg.robots[first].id
     assert first not in j.assignment and j.summary().plan.loss_replans == 1
+
+
+def test_a_silence_whose_robots_go_quiet_a_few_ticks_apart_is_one_outage():
+    """The world stalls: one robot's last pose came 50 ms before the others' (their estimates
+    turn stale apart; their liveliness stays up a while). The first one alone is not lost at
+    once: the others follow within the window, and it is one outage that nobody is lost in."""
+    j = job()
+    t = started(j)
+    first = int(j.assignment[0])
+    quiet_first = without(j.n, first) == 0  # only `first` stale
+    t_out = t
+    seen: list[str] = []
+    while t - t_out < 1.5:  # `first` stale from t_out, every robot from 2 ticks later
+        stale = quiet_first if t - t_out < 2 * DT - 1e-9 else np.ones(j.n, bool)
+        out = step(j, view(j, t, stale=stale))
+        seen += kinds(out)
+        assert not out.failed
+        t += DT
+    assert "robot_lost" not in seen and seen.count("outage") == 1, seen
+    out = step(j, view(j, t))
+    assert kinds(out)[0] == "outage_end" and by_kind(out.events)["outage_end"].lost == []
+    assert j.summary().plan.robots_lost == []
