@@ -2,7 +2,7 @@
 #   make run    set up .venv and run the pybullet dry run of fleet.toml
 #   make test   set up .venv, lint, build the docs, and run the whole test suite
 #   make docs   the docs site, built strictly into site/ (a broken link or a missing page fails)
-#   make test-fast   lint and the fast tier (no e2e: dry runs, processes, pybullet), ~1 min
+#   make test-fast   lint and the fast tier (no e2e: dry runs, processes, pybullet), on both cores
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -43,7 +43,7 @@ test: lint
 	$(BIN)/python -m pytest -q -m serial --durations=15
 
 test-fast: lint
-	$(BIN)/python -m pytest -q -m "not e2e"
+	$(BIN)/python -m pytest -q -n 2 -m "not e2e"
 
 bench: $(STAMP)
 	for b in bench/*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

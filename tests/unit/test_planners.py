@@ -224,6 +224,7 @@ def _always_die():
     os._exit(1)
 
 
+@pytest.mark.e2e  # worker processes started, killed and started again: not the fast tier
 @pytest.mark.parametrize("lockstep", [True, False])
 def test_a_dead_planner_worker_is_restarted_and_its_plan_run_again(tmp_path, lockstep):
     """A planner that kills its worker process does not end the job: the worker is restarted,
