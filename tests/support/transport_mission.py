@@ -6,14 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller import geometry
+from controller.mission.grip import CONTACT_REACH, touching
 from controller.mission.guard import SafetyStage
 from controller.mission.transport import TransportMission
 from controller.mission.types import FleetView
 from controller.planning.contact_lp import ContactForceLP, required_wrench
 from tests.support.transport_scenarios import Scenario, scenario_config
-
-ROBOT_R = 0.1
 
 
 def view(cfg, t, poses, obj, present=None):
@@ -28,14 +26,10 @@ def view(cfg, t, poses, obj, present=None):
 
 
 def holders(cfg):
-    """The robots the scenario places on the crate: indices, contact points, outward normals."""
-    poly = geometry.ensure_ccw(cfg.object_polygon())
+    """The robots the scenario places on the crate: indices, contact points, outward normals
+    (the job's own measure of who touches the object at the carry, ``grip.touching``)."""
     poses = np.array([r.start for r in cfg.robots])
-    local = geometry.inverse_transform(poses[:, :2], cfg.object.start)
-    d, closest = geometry.point_segment_distance(local, poly, np.roll(poly, -1, axis=0))
-    j = np.argmin(d, axis=1)
-    held = np.flatnonzero(d[np.arange(len(local)), j] - ROBOT_R < 0.03)
-    return held, closest[np.arange(len(local)), j][held], geometry.outward_normals(poly)[j][held]
+    return touching(cfg, cfg.object.start, poses, CONTACT_REACH)
 
 
 def mission(sc: Scenario, seed: int = 0) -> tuple[TransportMission, object, np.ndarray]:
