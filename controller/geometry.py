@@ -282,19 +282,23 @@ def convex_hull(points: ArrayLike) -> FloatArray:
     pts = np.unique(np.asarray(points, dtype=float), axis=0)
     if len(pts) < 3:
         return pts
-    pts = pts[np.lexsort((pts[:, 1], pts[:, 0]))]
+    seq = pts[np.lexsort((pts[:, 1], pts[:, 0]))].tolist()  # Python floats: the same
+    # arithmetic as _orient on arrays, without numpy's per-element overhead (a tick's hot loop)
 
-    def half(seq):
-        out: list[np.ndarray] = []
+    def half(seq: list[list[float]]) -> list[list[float]]:
+        out: list[list[float]] = []
         for p in seq:
-            while len(out) >= 2 and _orient(out[-2], out[-1], p) <= 0:
+            while len(out) >= 2:
+                a, b = out[-2], out[-1]
+                if (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]) > 0:
+                    break
                 out.pop()
             out.append(p)
         return out
 
-    lower = half(pts)
-    upper = half(pts[::-1])
-    return np.array(lower[:-1] + upper[:-1])
+    lower = half(seq)
+    upper = half(seq[::-1])
+    return np.array(lower[:-1] + upper[:-1], dtype=float)
 
 
 def _crosses_convex(a: FloatArray, b: FloatArray, hull: FloatArray) -> bool:
