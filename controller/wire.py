@@ -13,6 +13,7 @@ Frames: world ENU (x east, y north, theta CCW from x, rad); commands are body fr
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import typing
@@ -467,12 +468,18 @@ def _match(template: str, k: list[str]) -> dict[str, str] | None:
 def parse_key(k: str, fleet: str | None = None) -> KeyParts | None:
     """Take a concrete key apart through the registry (None if it is not one of ours, or not of
     ``fleet`` when given): ``parse_key("fleet/lab/robot/r1/pose").id == "r1"``."""
+    got = _parse_key(k, fleet)
+    return None if got is None else KeyParts(got[0], got[1], dict(got[2]))
+
+
+@functools.lru_cache(maxsize=4096)  # a fleet's keys repeat: every sample of a log, every pose
+def _parse_key(k: str, fleet: str | None) -> tuple[Topic, str, tuple[tuple[str, str], ...]] | None:
     segs = k.split("/")
     for t in TOPICS.values():
         got = _match(t.template, segs)
         if got is not None and (fleet is None or got["fleet"] == fleet):
             f = got.pop("fleet")
-            return KeyParts(t, f, got)
+            return t, f, tuple(got.items())
     return None
 
 
