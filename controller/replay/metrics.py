@@ -179,11 +179,34 @@ def object_clearance(
     if len(obj) == 0 or (not obstacles and bounds is None):
         return None
     poly = np.asarray(polygon, dtype=float)
-    d = [
-        geometry.polygon_clearance(geometry.transform(poly, p), obstacles, bounds) for p in obj.pose
-    ]
+    d = track_clearance(poly, np.asarray(obj.pose, dtype=float), obstacles, bounds)
     k = int(np.argmin(d))
     return float(d[k]), float(obj.t[k])
+
+
+def track_clearance(
+    poly: np.ndarray, poses: np.ndarray, obstacles: list[ArrayLike], bounds: ArrayLike | None
+) -> np.ndarray:
+    """``geometry.polygon_clearance`` of the body-frame polygon at every pose (K, 3) at once
+    (K,): the object's vertices in the world against each obstacle, and each obstacle's
+    vertices in the object's frame against the body polygon (a rigid motion keeps distances)."""
+    k, v = len(poses), len(poly)
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)  # (K, 2, 2)
+    world = np.einsum("kij,vj->kvi", rot, poly) + poses[:, None, :2]  # (K, V, 2)
+    best = np.full(k, np.inf)
+    for o in obstacles:
+        q = np.asarray(o, dtype=float)
+        a = geometry.polygon_signed_distance(world.reshape(-1, 2), q).reshape(k, v).min(1)
+        body = np.einsum("kji,kqj->kqi", rot, q[None] - poses[:, None, :2])  # (K, Q, 2)
+        b = geometry.polygon_signed_distance(body.reshape(-1, 2), poly).reshape(k, -1).min(1)
+        best = np.minimum(best, np.minimum(a, b))
+    if bounds is not None:
+        (x0, y0), (x1, y1) = np.asarray(bounds, dtype=float)
+        x, y = world[..., 0], world[..., 1]
+        walls = np.minimum(np.minimum(x - x0, x1 - x), np.minimum(y - y0, y1 - y)).min(1)
+        best = np.minimum(best, walls)
+    return best
 
 
 def phase_index(times: ArrayLike, starts: ArrayLike) -> NDArray[np.int_]:
