@@ -65,6 +65,9 @@ def stop_all(procs: list[subprocess.Popen]) -> list[int]:
         except subprocess.TimeoutExpired:
             p.kill()  # never leave a process behind
             codes.append(p.wait())
+    for p, code in zip(procs, codes, strict=True):  # shown by pytest when the test fails
+        print(f"--- {' '.join(p.args[-6:])} (exit {code}) ---", file=sys.stderr)
+        print(tail(p, 1500), file=sys.stderr)
     return codes
 
 
