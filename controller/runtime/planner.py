@@ -98,6 +98,9 @@ def _warm() -> None:
     import controller.mission.transport  # noqa: F401
 
 
+# s to wait for the process pool's thread once its worker is terminated (it ends at once)
+CLOSE_JOIN_S = 5.0
+
 # times one job is run again on a restarted worker after the worker died under it (a job that
 # kills its worker every time is then a failed plan, not a restart loop)
 JOB_RETRIES = 1
@@ -343,4 +346,17 @@ class PlannerWorker:
         )
 
     def close(self) -> None:
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        """End the worker now: queued jobs cancelled, a plan still running abandoned (its
+        process terminated, not waited for), the pool's thread joined. A pool only told to shut
+        down kept the interpreter's exit waiting for the running plan, then could print
+        ``OSError: Bad file descriptor`` from ``concurrent.futures`` (its exit hook woke a
+        thread that was closing its pipe)."""
+        pool = self._pool
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        manager = getattr(pool, "_executor_manager_thread", None)
+        pool.shutdown(wait=False, cancel_futures=True)
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+        if manager is not None:
+            manager.join(timeout=CLOSE_JOIN_S)

@@ -258,3 +258,49 @@ def test_a_dead_planner_worker_is_restarted_and_its_plan_run_again(tmp_path, loc
         assert take().ok  # and the worker after that one serves on
     finally:
         w.close()
+
+
+def _mark_and_sleep(path: str, seconds: float) -> None:
+    """A plan that says it started (a file), then runs long."""
+    import time
+    from pathlib import Path
+
+    Path(path).write_text("started")
+    time.sleep(seconds)
+
+
+_CLOSE_SCRIPT = """
+import sys, time
+from pathlib import Path
+from controller.runtime.planner import PlannerWorker
+from tests.unit.test_planners import _mark_and_sleep
+from tests.support.wait import wait_for
+mark = Path(sys.argv[1])
+w = PlannerWorker({"route": 0}, 0.05, lockstep=False, process=True, timeout=60.0)
+w.submit("route", 0.0, _mark_and_sleep, str(mark), 30.0)
+wait_for(mark.exists, 30, "the plan under way")
+w.close()
+print("closed", flush=True)
+"""
+
+
+@pytest.mark.e2e  # a worker process started and ended: not the fast tier
+def test_closing_the_worker_mid_plan_ends_at_once_without_a_traceback(tmp_path):
+    """A daemon that ends while a plan runs (Ctrl-C during a transport plan) exits at once,
+    its worker gone, and prints no traceback from the process pool at the interpreter's exit."""
+    import subprocess
+    import sys
+    import time
+
+    from tests.support.config import ROOT
+
+    t0 = time.monotonic()
+    proc = subprocess.run(
+        [sys.executable, "-c", _CLOSE_SCRIPT, str(tmp_path / "started")], cwd=ROOT,
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    took = time.monotonic() - t0
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "closed"
+    assert "Traceback" not in proc.stderr and "Error" not in proc.stderr, proc.stderr
+    assert took < 15.0, took  # not the 30 s plan's end
