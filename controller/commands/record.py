@@ -44,7 +44,7 @@ def run(args) -> int:
     recorder = open_recorder(cfg, out, "record", who="fleet record")
     try:
         with Bus(cfg.zenoh, cfg.fleet.name, mode="peer", listen=[], connect=connect) as bus:
-            bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
+            bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample, limit=True)
             record_ros2(bus, cfg, recorder)  # ROS 2 robots' own topics too
             print(
                 f"fleet record: recording fleet {cfg.fleet.name!r} to {recorder.location}",

@@ -168,6 +168,11 @@ class ZenohSection:
     # samples kept per key in a subscriber's inbox (a pose key normally holds 1-2 per tick); a
     # flood drops the oldest (inbox_overflow); the lockstep dry run's inboxes are unbounded
     inbox_depth: int = _rule(8, min=1, max=1_000_000)
+    # samples/s a key may bring into a bounded inbox (bursts of 0.25 s allowed); what comes
+    # faster is dropped unread and counted (rate_limited): a robot flooding its own pose key
+    # costs the loop little. Above any real sensor's rate (motion capture: 100-360 Hz; the
+    # robots' poses: 10-50 Hz); 0: no limit. Lossless inboxes (lockstep, e-stops) never limit.
+    key_rate_hz: float = _rule(1000.0, min=0, max=1_000_000)
 
     @property
     def secured(self) -> bool:

@@ -213,6 +213,7 @@ class DecodeStats:
         self.counts: dict[str, int] = {}
         self.oversize: dict[str, int] = {}
         self.overflow: dict[str, int] = {}
+        self.rate_limited: dict[str, int] = {}
         self._last_logged: dict[tuple[str, str], float] = {}
         self._quiet_after = quiet_after
 
@@ -239,10 +240,19 @@ class DecodeStats:
         """A full inbox dropped the oldest sample of ``key``."""
         self._count(self.overflow, "the oldest queued sample (inbox full)", key, "a flood?")
 
+    def too_fast(self, key: str, rate_hz: float) -> None:
+        """A sample of ``key`` over its rate limit, dropped unread."""
+        self._count(self.rate_limited, "a sample over the key's rate", key, f"> {rate_hz:g} Hz")
+
     @property
     def total(self) -> int:
         with self._lock:
             return sum(self.counts.values())
+
+    @property
+    def total_rate_limited(self) -> int:
+        with self._lock:
+            return sum(self.rate_limited.values())
 
     @property
     def total_oversize(self) -> int:
@@ -393,6 +403,37 @@ class _Raw:
     on_message: Callable[[Received], None] | None
 
 
+class KeyRate:
+    """Per-key token buckets: a key may deliver ``rate_hz`` samples a second on average, in
+    bursts of up to ``burst_s`` seconds' worth (at least 2); what comes faster is refused. One
+    per subscription, checked on zenoh's thread before a byte is copied, so a key flooded at
+    tens of kHz costs a dictionary look-up per sample, not a decode (issue 31: a robot flooding
+    its own pose key at 47 kHz stopped every robot's watchdog 13-15 times in 10 s). At most
+    ``MAX_KEYS`` keys are followed (a flood of fresh keys forgets the oldest)."""
+
+    MAX_KEYS = 4096
+
+    def __init__(self, rate_hz: float, burst_s: float = 0.25) -> None:
+        self.rate = float(rate_hz)
+        self.burst = max(2.0, self.rate * burst_s)
+        self._buckets: dict[str, tuple[float, float]] = {}
+
+    def allow(self, key: str, now: float) -> bool:
+        """Whether a sample of ``key`` arriving at ``now`` (monotonic s) is within its rate."""
+        got = self._buckets.get(key)
+        if got is None:
+            if len(self._buckets) >= self.MAX_KEYS:
+                self._buckets.pop(next(iter(self._buckets)))
+            tokens = self.burst
+        else:
+            tokens = min(self.burst, got[0] + (now - got[1]) * self.rate)
+        if tokens < 1.0:
+            self._buckets[key] = (tokens, now)
+            return False
+        self._buckets[key] = (tokens - 1.0, now)
+        return True
+
+
 class Decoder:
     """The bus's decoder thread: zenoh's callbacks only stage the raw bytes (bounded per
     subscriber and key, dropping the oldest); this thread decodes them, in arrival order, into
@@ -474,6 +515,7 @@ class Bus:
         self.stats = DecodeStats()
         self.max_payload = section.max_payload  # bytes: larger samples are dropped unread
         self.inbox_depth = section.inbox_depth  # samples per key in a bounded inbox
+        self.key_rate_hz = section.key_rate_hz  # samples/s per key into a bounded inbox (0: any)
         self._inboxes: list[Inbox] = []
         self._decoder_thread: Decoder | None = None
         self._handles: list[Any] = []
@@ -521,6 +563,7 @@ class Bus:
             "oversize_payloads": self.stats.total_oversize,
             "inbox_overflow": sum(b.overflow for b in self._inboxes)
             + (self._decoder_thread.stage.overflow if self._decoder_thread else 0),
+            "rate_limited": self.stats.total_rate_limited,
         }
 
     def drops_by_key(self) -> dict[str, dict[str, int]]:
@@ -531,6 +574,7 @@ class Bus:
                 "bad": dict(st.counts),
                 "oversize": dict(st.oversize),
                 "overflow": dict(st.overflow),
+                "rate_limited": dict(st.rate_limited),
             }
 
     def inbox(self, *, lossless: bool = False, waker: threading.Condition | None = None) -> Inbox:
@@ -621,9 +665,15 @@ class Bus:
 
         decoder = self._decoder()
         staged_lossless = lossless or (box.depth == 0 and box.maxsize == 0)
+        # a bounded inbox takes each key at up to zenoh.key_rate_hz; a lossless one (the
+        # lockstep dry run, e-stops, commands) takes everything
+        limiter = None if staged_lossless or not self.key_rate_hz else KeyRate(self.key_rate_hz)
 
         def callback(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
+            if limiter is not None and not limiter.allow(k, time.monotonic()):
+                stats.too_fast(k, limiter.rate)
+                return
             payload = self._payload(sample, k)
             if payload is not None:
                 raw = _Raw(time.time(), k, payload, decode, box, on_message)
@@ -650,12 +700,19 @@ class Bus:
         k = t.key(self.fleet, **parts) if parts else t.wildcard(self.fleet)
         return self.subscribe(k, t.msg, inbox)
 
-    def subscribe_raw(self, key_expr: str, callback: Callable[[str, bytes, float], None]) -> None:
+    def subscribe_raw(
+        self, key_expr: str, callback: Callable[[str, bytes, float], None], *, limit: bool = False
+    ) -> None:
         """Raw bytes (key, payload, receive time) for the recorder; the callback must not raise.
-        A payload over ``max_payload`` is counted and dropped unread, as for every subscriber."""
+        A payload over ``max_payload`` is dropped unread, as for every subscriber; ``limit``
+        (the lab's recorder): so is a sample over its key's ``zenoh.key_rate_hz``. Neither is
+        counted here (a decoding subscriber counts the same sample)."""
+        limiter = KeyRate(self.key_rate_hz) if limit and self.key_rate_hz else None
 
         def cb(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
+            if limiter is not None and not limiter.allow(k, time.monotonic()):
+                return
             payload = self._payload(sample, k, count=False)
             if payload is None:
                 return

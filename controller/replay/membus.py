@@ -75,7 +75,7 @@ class MemoryBus:
         pass
 
     def drops(self) -> dict[str, int]:
-        return {"bad_payloads": self.bad, "inbox_overflow": 0}
+        return {"bad_payloads": self.bad, "inbox_overflow": 0, "rate_limited": 0}
 
     # -- the feeding side
     def deliver(self, topic: str, msg: wire.Message, **parts: str) -> None:

@@ -277,7 +277,7 @@ def run_daemon(
     try:
         with bus:
             claim.watch(bus)
-            bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample)
+            bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample, limit=True)
             record_ros2(bus, cfg, recorder)  # ROS 2 robots' own topics too
             rk = Ratekeeper(cfg.fleet.rate_hz)
             # the latch it left (without a hub it is the keeper; with one it learns from it too)

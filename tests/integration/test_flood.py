@@ -44,6 +44,19 @@ def _flood(port: int, cfg, kind: str, rate: float) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+def _own_key_flood(port: int, cfg, robot) -> dict:
+    """One robot's own pose key, flooded as fast as the flooder can put for SECONDS."""
+    where = ",".join(str(v) for v in robot.start)
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "tests" / "support" / "flooder.py")]
+        + [f"tcp/127.0.0.1:{port}", cfg.fleet.name, robot.id, "1e6", str(SECONDS), "poses"]
+        + [where],
+        capture_output=True, text=True, timeout=60, cwd=ROOT, env={"PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
 def _delta(a: dict, b: dict, key: str) -> int:
     return b["counters"].get(key, 0) - a["counters"].get(key, 0)
 
@@ -129,6 +142,26 @@ def test_the_daemon_keeps_its_rate_under_a_pose_flood_and_4_mib_payloads(tmp_pat
         stops_quiet = _stops(agents, marks[0], marks[1])
         stops_flood = _stops(agents, marks[1], marks[2])
         assert stops_flood <= stops_quiet + 1, (stops_flood, stops_quiet)
+
+        # one robot floods its own pose key as fast as a process can put (tens of kHz): the
+        # key brings in at most zenoh.key_rate_hz, the rest dropped unread and counted; the
+        # loop keeps its rate and the other robot's watchdog never fires
+        r1 = cfg.robots[0]
+        before = _status(path)
+        sent = _own_key_flood(port, cfg, r1)
+        after = _status(path)
+        limit = cfg.zenoh.key_rate_hz * SECONDS
+        assert sent["sent"] > 2 * limit, sent  # a flood beyond the limit
+        limited = _delta(before, after, "rate_limited")
+        taken = _delta(before, after, "poses")
+        # taken in: r1's limit (a burst of 0.25 s' worth on top) and both robots' own poses
+        # over the window (the flooder's start-up included)
+        assert taken <= 1.2 * limit + 0.25 * cfg.zenoh.key_rate_hz + 2 * rate * (SECONDS + 5)
+        assert limited > 0.5 * (sent["sent"] - limit), (limited, taken, sent)
+        _kept_its_rate(_window(before, after), quiet, expected_ticks)
+        marks.append(_log_sizes(agents))
+        others = agents[1:]
+        assert _stops(others, marks[2][1:], marks[3][1:]) == 0, [tail(a) for a in others]
         assert all(a.poll() is None for a in agents)
     finally:
         stop_all(procs)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import threading
 
 from controller import wire
-from controller.io.bus import Decoder, DecodeStats, Inbox, Received, _Raw, decode_payload
+from controller.io.bus import Decoder, DecodeStats, Inbox, KeyRate, Received, _Raw, decode_payload
 
 FLEET = "lab"
 
@@ -74,3 +74,14 @@ def test_the_decoder_thread_decodes_off_the_producers_thread_and_drops_garbage()
     assert seen == [1, 2]  # on_message after enqueueing
     assert set(threads) == {"bus-decoder"}
     assert stats.counts == {_key("r1"): 1} and box.qsize() == 0  # junk counted, never queued
+
+
+def test_a_key_over_its_rate_is_refused_and_other_keys_are_not():
+    """A key at 20x its limit gets the limit's rate (after a burst of 0.25 s' worth); another
+    key at a normal rate loses nothing; a key quiet for a while gets its burst back."""
+    rate = KeyRate(100.0)  # 100 Hz, bursts of 25
+    flood = [rate.allow("r1", i / 2000.0) for i in range(2000)]  # 2 kHz for 1 s
+    normal = [rate.allow("r2", i / 30.0) for i in range(30)]  # 30 Hz for 1 s
+    assert 120 <= sum(flood) <= 126  # 25 at once, then 100 a second
+    assert all(normal)
+    assert sum(rate.allow("r1", 11.0 + i * 1e-4) for i in range(40)) == 25  # 10 s later
