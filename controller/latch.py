@@ -13,7 +13,10 @@ stopped ("fail closed") and answers no latch query. The rules:
   identities and the controller may put there) is obeyed when it engages, whatever its epoch
   (the epoch is raised to it); a release is obeyed only when its epoch is greater than the
   latch's (an old release replayed, or re-put by a stale tool, is refused while engaged, and
-  is a no-op while released: ``fleet resume`` repeats its release until every agent has it);
+  is a no-op while released: ``fleet resume`` repeats its release until every agent has it,
+  stamped anew each time); in the lab a release is also refused unless stamped within
+  ``fleet.max_clock_skew`` of the receiver's clock (a release recorded and replayed later, to
+  holders that lost their files and so their epoch, releases nobody: ``stale_releases``);
 - another **holder's answer** to a latch query (``estop/state/<role>/<id>``) can only engage:
   an engaged answer at the latch's epoch or above engages it. A released answer never releases
   a latch. The one exception is a fresh holder: an *unknown* latch adopts the newest answer of
@@ -42,6 +45,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import threading
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -63,6 +67,7 @@ class LatchCounters:
     stale_answers: int = 0  # engaged answers below the latch's epoch
     implausible_epochs: int = 0  # robots' engaged answers above operator_epoch + 1
     releases_refused_not_durable: int = 0  # operator releases refused: the latch is not kept
+    stale_releases: int = 0  # operator releases stamped too far from the receiver's clock
 
 
 @dataclass(frozen=True)
@@ -152,13 +157,21 @@ class Latch:
             return 0 if self._msg is None else self._msg.epoch
 
     # -- transitions
-    def operator(self, msg: wire.EStop) -> Change:
+    def operator(
+        self, msg: wire.EStop, now: float | None = None, max_age: float = math.inf
+    ) -> Change:
         """An operator's message (live on ``fleet/<fleet>/estop``): an engage always latches
-        (epoch raised to the message's); a release only with a greater epoch."""
+        (epoch raised to the message's); a release only with a greater epoch, and (``now``
+        given: the receiver's clock, on the lab's wall clock) only stamped within ``max_age``
+        s of ``now``: an old release replayed to holders that lost their latch files (whose
+        epoch it would exceed) releases nobody."""
         with self._lock:
             before = _word(self._msg)
             held = self._msg
             msg = dataclasses.replace(msg, durable=True)  # not a holder's answer
+            if not msg.engaged and now is not None and not abs(now - msg.t) <= max_age:
+                self.counters.stale_releases += 1
+                return Change(before, before, "refused: release stamped too far from now", msg)
             if msg.engaged:
                 epoch = max(msg.epoch, 0 if held is None else held.epoch)
                 self._set(dataclasses.replace(msg, epoch=epoch))

@@ -49,6 +49,10 @@ class AgentParams:
     fleet: str
     cmd_ttl: float = 0.3
     max_clock_skew: float = 1.0
+    # s: an operator's release stamped further than this from the agent's clock is refused
+    # (a replayed old resume); the lab's wall clock only (in the dry run, commands and the
+    # agent's clock are sim time, an operator's e-stop is not)
+    release_max_age: float = math.inf
 
 
 @dataclass
@@ -220,9 +224,11 @@ class Agent:
         before = self.core.estop
         self._note_estop(before, self.core.latch.answers(answers))
 
-    def _apply_operator(self, msg: wire.EStop) -> None:
+    def _apply_operator(self, msg: wire.EStop, now: float) -> None:
         before = self.core.estop
-        self._note_estop(before, self.core.latch.operator(msg))
+        age = self.params.release_max_age
+        change = self.core.latch.operator(msg, now if math.isfinite(age) else None, age)
+        self._note_estop(before, change)
 
     @property
     def pose_publisher(self):
@@ -254,7 +260,7 @@ class Agent:
             self.latch_answered = True
             self._apply_answers(replies)
         for item in self._estops.drain():
-            self._apply_operator(item.msg)
+            self._apply_operator(item.msg, now)
         latest = None
         for item in self._cmds.drain():
             skewed = self.core.counters.skewed

@@ -157,7 +157,9 @@ def _serve(
             "liveliness token stayed on the bus past its lease): two agents would drive one "
             "robot; stop the other (fleet status names the robots present) or fix the robot ids"
         )
-    params = AgentParams(robot.id, cfg.fleet.name, cfg.fleet.cmd_ttl, cfg.fleet.max_clock_skew)
+    skew = cfg.fleet.max_clock_skew
+    # on the lab's wall clock: an operator's release older than the clocks' skew is a replay
+    params = AgentParams(robot.id, cfg.fleet.name, cfg.fleet.cmd_ttl, skew, release_max_age=skew)
     # the latched e-stop first: a fresh agent is stopped ("fail closed") until it learns the
     # latch (an engaged answer, or the hub's or the controller's) or an operator releases it
     agent = Agent(bus, driver, params, latch_at_start=None)

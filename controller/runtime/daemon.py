@@ -298,6 +298,7 @@ def run_daemon(
                 ident=claim.ident,
                 latch_at_start=file.load_kept("controller/main"),
             )
+            node.release_max_age = cfg.fleet.max_clock_skew  # the wall clock: see the latch
             latch = LatchWatch(node, LatchKeeper(node.latch, file))
             latch.start(time.monotonic(), LATCH_WAIT_AT_START)
             print(

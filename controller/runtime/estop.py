@@ -231,12 +231,12 @@ def _confirmations(bus, g: _Gather, deadline: float, pub) -> None:
         for key, st in bus.query_replies(bus.estop_wildcard(), wire.EStop, min(0.3, left)):
             parsed = wire.parse_key(key, bus.fleet)
             if parsed is not None and g.take(parsed, st):  # refused: put it above
-                pub.put(g.msg)
+                pub.put(g.restamped())
                 next_put = time.monotonic() + REPUT
             if g.done():
                 break
         if not g.done() and time.monotonic() >= next_put:
-            pub.put(g.msg)
+            pub.put(g.restamped())
             next_put = time.monotonic() + REPUT
         if not g.done():
             time.sleep(0.005)  # between rounds of a poll (each round is a real check)
@@ -267,6 +267,12 @@ class _Gather:
 
     def known(self) -> set[str]:
         return self.config | set(self.tokens[:])
+
+    def restamped(self) -> wire.EStop:
+        """The message to put again, stamped now (a holder refuses a release stamped further
+        than the clocks' skew from its clock: an old one is a replay)."""
+        self.msg = dataclasses.replace(self.msg, t=time.time())
+        return self.msg
 
     def done(self) -> bool:
         if not (

@@ -57,7 +57,10 @@ def run_hub(cfg: FleetConfig, stop: threading.Event, duration: float = 0.0) -> i
             bus.key("estop"),
             wire.EStop,
             Inbox(maxsize=1),
-            on_message=lambda r: note_latch("hub", latch.operator(r.msg)),
+            # an operator's release stamped beyond the clocks' skew from its arrival: a replay
+            on_message=lambda r: note_latch(
+                "hub", latch.operator(r.msg, r.recv_time, cfg.fleet.max_clock_skew)
+            ),
             lossless=True,  # every e-stop reaches the latch, whatever floods the key
         )
         own = bus.serve_estop("hub", "main", latch.answer)

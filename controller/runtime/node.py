@@ -20,6 +20,7 @@ clock for control decisions; ``now`` is passed in.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from collections import deque
 from collections.abc import Callable
@@ -125,6 +126,9 @@ class ControllerNode:
         self.arrested = False
         # set by the runner when the process is stopping: robots leaving then are no news
         self.winding_down = False
+        # s: an operator's release stamped further than this from the tick's time is refused
+        # (a replayed old resume); the daemon sets fleet.max_clock_skew, the dry run none
+        self.release_max_age = math.inf
         self.last_output: MissionOutput | None = None
         self._seq = 0
         self.inputs_arrived = threading.Condition()  # notified on every pose (lockstep waits)
@@ -206,7 +210,7 @@ class ControllerNode:
             log.info("no holder answered the e-stop latch query; the e-stop is %s", state)
         self.latch_pending = False
 
-    def _sample_estop(self) -> None:
+    def _sample_estop(self, now: float) -> None:
         fleet = self.cfg.fleet.name
         replies = [
             (role_of(i.key, fleet), i.msg)
@@ -216,8 +220,10 @@ class ControllerNode:
         if replies:
             self.latch_pending = False
             note_latch("controller", self.latch.answers(replies))
+        age = self.release_max_age  # the lab's wall clock only (see drivers.agent.AgentParams)
         for item in self._estops.drain():
-            note_latch("controller", self.latch.operator(item.msg))
+            stamp = now if math.isfinite(age) else None
+            note_latch("controller", self.latch.operator(item.msg, stamp, age))
 
     def _sample_events(self) -> None:
         """Robot events, believed only when the robot's liveliness token agrees: its agent
@@ -299,7 +305,7 @@ class ControllerNode:
         time: the same clock domain as the stamps) a pose stamped further than
         ``fleet.max_clock_skew`` from it is dropped and counted (``skewed``), and one stamped
         after it is taken at ``now`` (``ahead``)."""
-        self._sample_estop()
+        self._sample_estop(now)
         self._sample_events()
         for item in self._poses.drain():
             rid = self._robot_id(item.key)
@@ -532,6 +538,7 @@ class ControllerNode:
             "estop_durable": int(self.latch.durable),
             "estop_implausible_epochs": c.implausible_epochs,
             "estop_releases_refused_not_durable": c.releases_refused_not_durable,
+            "estop_stale_releases": c.stale_releases,
         }
 
 

@@ -225,6 +225,57 @@ def test_a_replayed_or_future_stamped_operator_release_is_refused(tmp_path, port
     assert all(code == 0 for code in codes), (codes, [tail(p) for p in procs])
 
 
+def test_an_old_resume_replayed_after_the_latch_files_are_lost_releases_nobody(tmp_path, port):
+    """Issue 31 item 6: an eavesdropper records the operator's resume; later every process is
+    killed and the state folder lost (a new disk), so every holder comes back fresh (epoch 0)
+    and the recording's epoch is above theirs. Replayed, it releases nobody (stamped long
+    before the holders' clocks: refused, counted); the operator's own resume then releases."""
+    cfg = lab_config(tmp_path, port, robots=2)
+    c = str(cfg)
+    daemon_args = ("daemon", "--config", c, "--mission", "hold", "--out")
+
+    def start(n: int) -> list:
+        out = [spawn(tmp_path / f"hub{n}.txt", "hub", "--config", c)]
+        out.append(spawn(tmp_path / f"d{n}.txt", *daemon_args, str(tmp_path / f"d{n}.mcap")))
+        out += [spawn(tmp_path / f"{r}-{n}.txt", "driver", r, "--config", c) for r in ("r1", "r2")]
+        return out
+
+    procs = start(1)
+    try:
+        with connect_client(port, "the hub") as bus:
+            recorded = bus.subscribe_topic("estop")
+            wait_for(lambda: status(cfg).get("ok"), 40, "the daemon")
+            _resume(cfg)
+            release = recorded.get(timeout=5.0)  # the recording
+            assert release is not None and release.msg.engaged is False
+        _kill(procs)
+        for f in (tmp_path / "state").glob("estop-*"):
+            f.unlink()  # the latch files lost
+        procs = start(2)
+        with connect_client(port, "the hub after the restart") as bus:
+            wait_for(lambda: status(cfg).get("ok"), 40, "the daemon after the restart")
+            wait_for(lambda: _states(bus, 0.5) == {}, 20, "every holder fresh (unknown)")
+            # the recording is older than the clocks' skew by now (the restart took longer)
+            assert time.time() - release.msg.t > load_config(c).fleet.max_clock_skew
+            bus.publisher("estop").put(release.msg)  # the replay
+
+            def taken_in() -> bool:  # handshake: each process refused it, or one obeyed
+                if any(not st.engaged for st in _states(bus, 0.5).values()):
+                    return True
+                return all("release stamped too far" in tail(p, 20000) for p in procs)
+
+            wait_for(taken_in, 10, "every holder taking in the replay")
+            assert _states(bus) == {}, _states(bus)  # still unknown: robots held
+            st = status(cfg)
+            assert st["counters"]["estop_unknown"] == 1, st
+            assert st["counters"]["estop_stale_releases"] == 1, st
+            out = _resume(cfg)  # the operator's own release goes through
+            assert out["daemon_confirmed"] and out["hub_confirmed"], out
+    finally:
+        codes = stop_all(procs)
+    assert all(code == 0 for code in codes), (codes, [tail(p) for p in procs])
+
+
 def test_the_estop_survives_a_hub_restart_and_a_full_restart(tmp_path, port):
     cfg = lab_config(tmp_path, port, robots=2)
     c = str(cfg)

@@ -106,6 +106,23 @@ def test_the_attack_a_robots_future_released_answer_then_a_replayed_release():
     assert not latch.stopped and latch.state().source == "alice@lab"
 
 
+def test_an_old_release_replayed_to_a_fresh_holder_releases_nothing():
+    """Holders that lost their files start unknown (epoch 0): a release recorded an hour ago
+    (epoch 7, above theirs) is refused on the lab's clock and counted; the operator's fresh
+    release is obeyed; an engage is never refused for its stamp."""
+    now = 10_000.0
+    latch = start("unknown")
+    change = latch.operator(op(False, 7, t=now - 3600.0), now, 1.0)
+    assert word(latch) == "unknown" and not change.changed and "stamped" in change.how
+    assert latch.counters.stale_releases == 1
+    latch.operator(op(False, 7, t=now - 3600.0))  # the dry run (no clock check): obeyed
+    assert word(latch) == "released"
+    latch = start("unknown")
+    assert latch.operator(op(False, 1, t=now + 5.0), now, 1.0).after == "unknown"  # ahead too
+    assert latch.operator(op(False, 1, t=now - 0.4), now, 1.0).after == "released"
+    assert latch.operator(op(True, 2, t=now - 3600.0), now, 1.0).after == "engaged"
+
+
 def test_a_robot_may_stop_the_fleet():
     latch = Latch("hub/main", op(False, 3))
     change = latch.answers([("robot", wire.EStop(t=0.0, engaged=True, epoch=3, source="r1"))])
