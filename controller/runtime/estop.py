@@ -130,6 +130,12 @@ def describe_put(word: str, result: dict[str, Any]) -> str:
             f"fleet {word}: sent; NOT confirmed by {', '.join(missing)} (confirmed by "
             f"{', '.join(result['agents_confirmed']) or 'no agent'})"
         )
+        if word == "resume":
+            text += (
+                "\n  is each agent up (fleet status)? A holder also refuses a release stamped "
+                "further than fleet.max_clock_skew from its clock: check this computer's clock "
+                "against the robots' (NTP or chrony), and their logs"
+            )
     else:
         text = (
             f"fleet {word}: confirmed by every agent "

@@ -272,3 +272,15 @@ def test_state_dir_overrides_the_log_dir(tmp_path):
     cfg = make_config({"log": {"dir": str(tmp_path / "runs"), "state_dir": str(tmp_path / "s")}})
     assert LatchFile(cfg, "controller").path == tmp_path / "s" / "estop-lab-controller.json"
     assert LogSection().state_dir == ""
+
+
+def test_an_unconfirmed_resume_names_what_to_check():
+    """A resume some agent did not confirm says what to check: the agent up, the clocks (a
+    release stamped beyond fleet.max_clock_skew of a holder's clock is refused as a replay)."""
+    from controller.runtime.estop import describe_put
+
+    result = {"agents_missing": ["r2"], "agents_confirmed": ["r1"], "durable": True}
+    text = describe_put("resume", result)
+    assert text.startswith("fleet resume: sent; NOT confirmed by r2 (confirmed by r1)")
+    assert "fleet status" in text and "max_clock_skew" in text and "NTP" in text
+    assert "clock" not in describe_put("estop", result)  # an engage is never refused so
