@@ -66,8 +66,9 @@ def stop_all(procs: list[subprocess.Popen]) -> list[int]:
             p.kill()  # never leave a process behind
             codes.append(p.wait())
     for p, code in zip(procs, codes, strict=True):  # shown by pytest when the test fails
-        print(f"--- {' '.join(p.args[-6:])} (exit {code}) ---", file=sys.stderr)
-        print(tail(p, 1500), file=sys.stderr)
+        if getattr(p, "log_path", None) is not None:  # one of spawn's (others log elsewhere)
+            print(f"--- {' '.join(map(str, p.args[-6:]))} (exit {code}) ---", file=sys.stderr)
+            print(tail(p, 1500), file=sys.stderr)
     return codes
 
 
