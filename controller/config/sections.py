@@ -150,6 +150,11 @@ class ZenohSection:
     listen: tuple[str, ...] = _rule(("tcp/127.0.0.1:7447",))
     connect: tuple[str, ...] = _rule(())
     multicast_scouting: bool = _rule(False)
+    # s: the longest a session waits between attempts to reach a lost ``connect`` endpoint
+    # (the hub restarted): it retries after 0.25 s, then doubling up to this; 0: zenoh's own
+    # back-off (1 s, doubling up to 4 s), which let a hub restart take seconds longer to heal
+    # than the hub took to come back (bench/hub_restart.py)
+    reconnect_s: float = _rule(1.0, min=0, max=60)
     gossip_scouting: bool = _rule(False)
     # Security (docs/lab/secure.md). Files are checked when a session that
     # needs them is built (a robot's computer holds only its own), relative to the config file.

@@ -163,6 +163,10 @@ def zenoh_config(
     conf.insert_json5(
         "connect/endpoints", json.dumps(list(section.connect if connect is None else connect))
     )
+    if section.reconnect_s > 0:  # a lost endpoint retried soon (a hub restart heals fast)
+        cap_ms = max(1, int(section.reconnect_s * 1000))
+        retry = {"period_init_ms": min(250, cap_ms), "period_max_ms": cap_ms}
+        conf.insert_json5("connect/retry", json.dumps(retry | {"period_increase_factor": 2}))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(section.multicast_scouting))
     conf.insert_json5("scouting/gossip/enabled", json.dumps(section.gossip_scouting))
     if lease_s is not None:

@@ -122,6 +122,16 @@ def test_config_file_is_the_base_and_our_settings_win(tmp_path):
     assert json.loads(conf.get_json("mode")) == "peer"
 
 
+def test_a_lost_hub_is_retried_within_reconnect_s():
+    """Every session retries a lost connect endpoint after 0.25 s, doubling up to
+    zenoh.reconnect_s (1 s); 0 leaves zenoh's own back-off (1 s doubling to 4 s)."""
+    retry = json.loads(zenoh_config(ZenohSection()).get_json("connect/retry"))
+    assert retry["period_init_ms"] == 250 and retry["period_max_ms"] == 1000
+    assert retry["period_increase_factor"] == 2
+    own = json.loads(zenoh_config(ZenohSection(reconnect_s=0.0)).get_json("connect/retry"))
+    assert own is None  # not set: zenoh's default applies
+
+
 def test_exposed_listen_without_auth_warns_once(caplog, tmp_path):
     caplog.set_level(logging.WARNING, logger="controller.io.bus")
     for ep in ("tcp/127.0.0.1:7447", "tcp/[::1]:7447", "tcp/localhost:7447"):
