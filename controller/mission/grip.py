@@ -180,8 +180,9 @@ class Grip:
         on the last leg a robot may touch the object (it is coming to its contact)."""
         for i, path in list(self.moves.items()):
             here = view.poses[i, :2]
-            if len(path) > 2 and self._straight_in(i, here, pose, path[-1]):
-                del path[1:-1]  # the lane's detour is not needed (and may run into a wall)
+            if len(path) > 2 and self._lane_blocked(i, pose, path):
+                if self._straight_in(i, here, pose, path[-1]):
+                    del path[1:-1]  # the lane runs into an obstacle: straight in instead
             world = geometry.transform(np.asarray(path), pose)
             while len(world) > 1 and np.linalg.norm(world[0] - here) < self.s.waypoint_reached:
                 path.pop(0)
@@ -196,13 +197,21 @@ class Grip:
             vel[i] = err / max(dist, 1e-9) * speed
             touch[i] = len(world) <= 2
 
+    def _lane_blocked(self, i: int, pose: np.ndarray, path: list[np.ndarray]) -> bool:
+        """Whether a point of robot ``i``'s remaining lane path puts its disc within the safety
+        margin of an obstacle or a wall (the lane is drawn round the object alone)."""
+        pts = geometry.transform(np.asarray(path[1:-1]), pose)
+        r = self.cfg.robots[i].radius + self.cfg.approach.safety_margin
+        obstacles = self.cfg.obstacle_polygons()
+        return bool(geometry.discs_touch_static(pts, r, obstacles, self.cfg.bounds_array()).any())
+
     def _straight_in(self, i: int, here: np.ndarray, pose: np.ndarray, end: np.ndarray) -> bool:
         """Whether robot ``i`` at ``here`` (world) can go straight to its path's ``end`` (its
         station beside the contact, object frame) with its disc clear of the object all the
-        way: a robot already near its contact on the same side takes the straight line, not
-        the lane around the object (the lane ignores walls and obstacles: a crate stopped
-        beside a bench left a robot squeezed between them, its lane point inside the bench's
-        margin, stalling the job until the re-arrangement timed out)."""
+        way: a robot near its contact on the same side whose lane runs into an obstacle takes
+        the straight line (a crate stopped beside a bench left a robot squeezed between them,
+        its lane point inside the bench's margin, stalling the job until the re-arrangement
+        timed out)."""
         a = geometry.inverse_transform(here[None], pose)[0]
         b = np.asarray(end, float)
         if np.linalg.norm(b - a) > STRAIGHT_IN * self.cfg.robots[i].radius:
