@@ -91,6 +91,9 @@ class Grip:
         self.moves: dict[int, list[np.ndarray]] = {}  # robot -> object-frame path (relocating)
         self.targets: dict[int, Contact] = {}
         self.lost: set[int] = set()  # robots gone during the job
+        # the room as a relocation's lane is checked against (built once, read every tick)
+        self.obstacles = cfg.obstacle_polygons()
+        self.bounds = cfg.bounds_array()
         self.relocations = 0
 
     def active(self) -> list[int]:
@@ -202,8 +205,7 @@ class Grip:
         margin of an obstacle or a wall (the lane is drawn round the object alone)."""
         pts = geometry.transform(np.asarray(path[1:-1]), pose)
         r = self.cfg.robots[i].radius + self.cfg.approach.safety_margin
-        obstacles = self.cfg.obstacle_polygons()
-        return bool(geometry.discs_touch_static(pts, r, obstacles, self.cfg.bounds_array()).any())
+        return bool(geometry.discs_touch_static(pts, r, self.obstacles, self.bounds).any())
 
     def _straight_in(self, i: int, here: np.ndarray, pose: np.ndarray, end: np.ndarray) -> bool:
         """Whether robot ``i`` at ``here`` (world) can go straight to its path's ``end`` (its
