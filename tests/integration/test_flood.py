@@ -28,9 +28,11 @@ def _status(cfg) -> dict:
     return st if code == 0 else {"ok": False}
 
 
-def _flood(port: int, cfg, kind: str, rate: float) -> dict:
-    where = ";".join(",".join(str(v) for v in r.start) for r in cfg.robots)
-    ids = ",".join(cfg.robot_ids)
+def _flood(port: int, cfg, kind: str, rate: float, robots=None) -> dict:
+    """Flood ``robots``' pose keys (default: every robot's) at ``rate`` for SECONDS."""
+    robots = cfg.robots if robots is None else robots
+    where = ";".join(",".join(str(v) for v in r.start) for r in robots)
+    ids = ",".join(r.id for r in robots)
     proc = subprocess.run(
         [sys.executable, str(ROOT / "tests" / "support" / "flooder.py")]
         + [f"tcp/127.0.0.1:{port}", cfg.fleet.name, ids, str(rate), str(SECONDS), kind, where],
@@ -40,19 +42,6 @@ def _flood(port: int, cfg, kind: str, rate: float) -> dict:
         cwd=ROOT,
         env={"PYTHONPATH": str(ROOT)},
     )
-    assert proc.returncode == 0, proc.stderr
-    return json.loads(proc.stdout.strip().splitlines()[-1])
-
-
-def _own_key_flood(port: int, cfg, robot) -> dict:
-    """One robot's own pose key, flooded as fast as the flooder can put for SECONDS."""
-    where = ",".join(str(v) for v in robot.start)
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "tests" / "support" / "flooder.py")]
-        + [f"tcp/127.0.0.1:{port}", cfg.fleet.name, robot.id, "1e6", str(SECONDS), "poses"]
-        + [where],
-        capture_output=True, text=True, timeout=60, cwd=ROOT, env={"PYTHONPATH": str(ROOT)},
-    )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -150,7 +139,7 @@ def test_the_daemon_keeps_its_rate_under_a_pose_flood_and_4_mib_payloads(tmp_pat
         # window on the 2-core CI machine - issue 31 item 5c, left open)
         r1 = cfg.robots[0]
         before = _status(path)
-        sent = _own_key_flood(port, cfg, r1)
+        sent = _flood(port, cfg, "poses", 1e6, [r1])  # as fast as it can put
         after = _status(path)
         limit = cfg.zenoh.key_rate_hz * SECONDS
         assert sent["sent"] > 2 * limit, sent  # a flood beyond the limit
