@@ -48,6 +48,7 @@ class SafetyStage:
             cfg.bounds_array(),
             len(self.obstacles) + 1,
             margin=ap.safety_margin,
+            axial=~self.limits.holonomic,
         )
         self.v_prev = np.zeros((self.n, 2))
         self.counters = GuardCounters()
@@ -96,13 +97,14 @@ class SafetyStage:
             # out; in transport a robot stuck inside a margin stops, as it always did (its
             # pushes are deliberate contacts)
             relax=intent.phase in RELAX_PHASES,
+            headings=view.poses[:, 2],
         )
         if res.stopped.any():
             self.counters.infeasible += 1
             robots = [view.ids[i] for i in np.flatnonzero(res.stopped)]
             out.events.append(SafetyStopEvent(robots=robots))
         self.v_prev = res.velocities
-        cmds = track_reversible(view.poses, res.velocities, self.limits)
+        cmds = track_reversible(view.poses, res.velocities, self.limits, aim=res.aim)
         if intent.steady is not None:
             # a differential robot holding a contact resists sideways with its tyres and along
             # its axis with its motor; turning toward a few mm of error only lets go

@@ -87,25 +87,34 @@ def track_reversible(
     limits: RobotLimits,
     heading_gain: float = 4.0,
     turn_deadband: float = 0.03,
+    aim: np.ndarray | None = None,
 ) -> np.ndarray:
     """Like :func:`controller.mission.track_velocity`, but a differential robot may drive
     backwards: it aligns its axis (either way) with the desired velocity and drives with the
-    signed component along its heading. Station keeping then needs no U-turns."""
+    signed component along its heading. Station keeping then needs no U-turns.
+
+    With ``aim`` (N, 2), the safety filter's free solution, ``v_world`` is already along each
+    differential robot's axis (the filter's axis rows): the robot drives exactly that (the
+    velocity the barriers were kept for) and turns toward ``aim``."""
     cmds = track_velocity(poses, v_world, limits)
     diff = ~limits.holonomic
     if not np.any(diff):
         return cmds
     th = poses[diff, 2]
     v = v_world[diff]
-    speed = np.linalg.norm(v, axis=1)
-    body = world_to_body(th, v)
+    toward = v if aim is None else np.asarray(aim, float)[diff]
+    speed = np.linalg.norm(toward, axis=1)
+    body = world_to_body(th, toward)
     err = np.arctan2(body[:, 1], body[:, 0])
     err = np.where(err > np.pi / 2, err - np.pi, np.where(err < -np.pi / 2, err + np.pi, err))
     # below ``turn_deadband`` m/s a differential robot does not turn (only drives along its
     # axis): turning toward a few mm/s of noise makes it spin in place against its contact
     moving = speed > turn_deadband
     wz = np.where(moving, heading_gain * err, 0.0)
-    fwd = body[:, 0] * np.abs(np.cos(err))
+    if aim is None:
+        fwd = body[:, 0] * np.abs(np.cos(err))
+    else:
+        fwd = world_to_body(th, v)[:, 0]
     fwd = np.clip(fwd, -limits.max_speed[diff], limits.max_speed[diff])
     cmds[diff, 0] = fwd
     cmds[diff, 1] = 0.0

@@ -51,6 +51,7 @@ class FilterResult:
     status: str
     stopped: np.ndarray
     changed: float
+    aim: np.ndarray | None = None  # (N, 2): the free solution (differential robots turn to it)
 
 
 @dataclass
@@ -64,6 +65,7 @@ class SafetyFilter:
     margin: float = 0.05
     gamma: float = 4.0
     warm: bool = True
+    axial: np.ndarray | None = None  # (N,) bool: differential robots (they move along their axis)
     _prob: osqp.OSQP | None = field(default=None, repr=False)
     _perm: np.ndarray | None = field(default=None, repr=False)
 
@@ -91,9 +93,16 @@ class SafetyFilter:
         for k in range(2):
             rows.append(rd)
             cols.append(2 * np.repeat(np.arange(n), 2) + k)
+        ra = npair + n * self.n_polygons + 4 * n + np.arange(n)  # axis rows: 1 per robot
+        for k in range(2):
+            rows.append(ra)
+            cols.append(2 * np.arange(n) + k)
         self._rows = np.concatenate(rows)
         self._cols = np.concatenate(cols)
-        self.m = npair + n * self.n_polygons + 4 * n
+        self.m = npair + n * self.n_polygons + 5 * n
+        self.axial = np.zeros(n, bool) if self.axial is None else np.asarray(self.axial, bool)
+        self._box = slice(npair + n * self.n_polygons, npair + n * self.n_polygons + 4 * n)
+        self._axis = slice(self.m - n, self.m)
         tag = sparse.csc_matrix(
             (np.arange(1, len(self._rows) + 1, dtype=float), (self._rows, self._cols)),
             shape=(self.m, 2 * n),
@@ -132,6 +141,7 @@ class SafetyFilter:
         overlap: np.ndarray | None = None,
         hold: np.ndarray | None = None,
         relax: bool = True,
+        headings: np.ndarray | None = None,
     ) -> FilterResult:
         """Filter nominal world velocities (N, 2) at robot centres (N, 2).
 
@@ -144,7 +154,10 @@ class SafetyFilter:
         polygon's estimate by that much (a robot preloading its contact pushes into it; the
         physics stops it at the surface, the estimates may overlap by their noise). ``hold``
         (N,) robots hold their ground against moving polygons: their barrier ignores the
-        polygon's motion (a robot caging the object must not yield to its push).
+        polygon's motion (a robot caging the object must not yield to its push). ``headings``
+        (N,) rad: with them, the ``axial`` (differential) robots' velocities come out along
+        their axes (``aim`` holds the free solution they turn toward); without, every robot
+        is filtered as a point that moves any way.
         """
         n, npoly = self.n, self.n_polygons
         stale = np.zeros(n, bool) if stale is None else np.asarray(stale, bool)
@@ -191,6 +204,9 @@ class SafetyFilter:
         vals.append(np.ones(2 * n))
         h = np.sqrt(0.5)
         vals += [np.full(2 * n, h), np.tile([h, -h], n)]  # diagonals (u_x ± u_y) / √2
+        axial = self.axial & ~stale if headings is not None else np.zeros(n, bool)
+        th = np.zeros(n) if headings is None else np.asarray(headings, float)
+        vals += [np.where(axial, -np.sin(th), 0.0), np.where(axial, np.cos(th), 0.0)]
         ax = np.concatenate(vals)
         # box: speed and world bounds (stay in by gamma * distance to the wall)
         vmax = np.repeat(self.max_speed, 2)
@@ -209,42 +225,102 @@ class SafetyFilter:
         diag = vmax.copy()
         diag[st] = 0.0
         # stale robots: others see them as fixed; the pair row stays (u_stale = 0)
-        lo = np.concatenate([lo_pair, lo_poly.reshape(-1), lo_b, -diag])
-        hi = np.concatenate([np.full(len(lo_pair) + n * npoly, INF), hi_b, diag])
+        free = np.full(n, INF)
+        lo = np.concatenate([lo_pair, lo_poly.reshape(-1), lo_b, -diag, -free])
+        hi = np.concatenate([np.full(len(lo_pair) + n * npoly, INF), hi_b, diag, free])
         lo = np.minimum(lo, hi)
         q = -u_nom.reshape(-1).astype(float)
         if self._prob is None or not self.warm:
             self._setup(ax, q, lo, hi)
         else:
             self._prob.update(q=q, l=lo, u=hi, Ax=ax[self._perm])
-        res = self._prob.solve(raise_error=False)
-        status = str(res.info.status)
-        stopped = np.zeros(n, bool)
         # rows a squeezed robot may relax: inside its margin to a polygon it is not closing
         # in on (a robot in contact with the object stops as before)
         squeezed = lo_poly > 0
         if exempt is not None:
             squeezed &= ~np.asarray(exempt, bool)[:, : lo_poly.shape[1]]
-        if relax and not _solved(res) and squeezed.any():
+        rows = (lo_pair, lo_poly, squeezed if relax else None)
+        u, status, stopped = self._solve(lo, hi, rows, np.zeros(n, bool), fresh=True)
+        aim = None
+        if axial.any():
+            # again with the differential robots on their axes: the velocity each one drives
+            # toward the free solution's share along the axis, shrunk the more it is askew (a
+            # robot turning toward its aim creeps, it does not sweep sideways at speed)
+            aim = u
+            along = np.cos(th) * u[:, 0] + np.sin(th) * u[:, 1]
+            askew = np.abs(along) / np.maximum(np.linalg.norm(u, axis=1), 1e-12)
+            target = np.where(axial[:, None], u * askew[:, None], u_nom)
+            self._prob.update(q=-target.reshape(-1))
+            lo[self._axis] = np.where(axial, 0.0, -INF)
+            hi[self._axis] = np.where(axial, 0.0, INF)
+            u, status2, stopped = self._solve(lo, hi, rows, stopped, fresh=False)
+            status = status if status2.startswith("solved") else status2
+        u = np.where(stale[:, None], 0.0, u)
+        return FilterResult(u, status, stopped, float(np.abs(u - u_nom).max()), aim)
+
+    def _solve(
+        self,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        rows: tuple,
+        stopped: np.ndarray,
+        fresh: bool,
+    ) -> tuple[np.ndarray, str, np.ndarray]:
+        """Solve with bounds ``lo``/``hi``; relax squeezed rows, then stop the robots concerned
+        and solve for the others. Velocities (N, 2), status, robots stopped."""
+        lo_pair, lo_poly, squeezed = rows
+        n = self.n
+        if stopped.any():
+            return self._without(lo, hi, lo_pair, lo_poly, stopped, "infeasible")
+        if not fresh:
+            self._prob.update(l=lo, u=hi)
+        res = self._prob.solve(raise_error=False)
+        status = str(res.info.status)
+        if squeezed is not None and not _solved(res) and squeezed.any():
             # a robot already inside its margin to the object or an obstacle, squeezed (the
             # object pushing it against a wall): recovering at gamma is impossible, so those
             # rows only ask "no closer" and it slides out along the tangent. Robot-robot rows
             # are not relaxed (two robots inside each other's margin still stop).
             relaxed = lo.copy()
-            rows = relaxed[len(lo_pair) : len(lo_pair) + lo_poly.size].reshape(lo_poly.shape)
-            rows[squeezed] = 0.0
+            poly_rows = relaxed[len(lo_pair) : len(lo_pair) + lo_poly.size].reshape(lo_poly.shape)
+            poly_rows[squeezed] = 0.0
             self._prob.update(l=relaxed)
             res = self._prob.solve(raise_error=False)
             status = "relaxed" if _solved(res) else str(res.info.status)
+        if _solved(res):
+            return res.x.reshape(n, 2), status, np.zeros(n, bool)
+        # infeasible: the robots whose constraints are violated stop
+        return self._without(lo, hi, lo_pair, lo_poly, self._concerned(lo_pair, lo_poly), status)
+
+    def _without(
+        self,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        lo_pair: np.ndarray,
+        lo_poly: np.ndarray,
+        stopped: np.ndarray,
+        status: str,
+    ) -> tuple[np.ndarray, str, np.ndarray]:
+        """The robots ``stopped`` held at zero, the others filtered round them. Violated rows
+        ask "no closer", so standing still is always feasible; if osqp still fails, every
+        robot stops."""
+        n = self.n
+        lo2, hi2 = lo.copy(), hi.copy()
+        k = len(lo_pair) + lo_poly.size
+        lo2[:k] = np.minimum(lo2[:k], 0.0)
+        held = np.repeat(stopped, 2)
+        box = lo2[self._box]  # views: the box rows, then the diagonals
+        box_hi = hi2[self._box]
+        box[: 2 * n][held] = 0.0
+        box_hi[: 2 * n][held] = 0.0
+        box[2 * n :][held] = 0.0
+        box_hi[2 * n :][held] = 0.0
+        self._prob.update(l=lo2, u=hi2)
+        res = self._prob.solve(raise_error=False)
         if not _solved(res):
-            # infeasible: stop the robots whose constraints are violated by stopping less
-            stopped = self._concerned(lo_pair, lo_poly)
-            out = np.where(stopped[:, None], 0.0, u_nom)
-            out = self._scale_box(out)
-            return FilterResult(out, status, stopped, float(np.abs(out - u_nom).max()))
+            return np.zeros((n, 2)), status, np.ones(n, bool)
         u = res.x.reshape(n, 2)
-        u = np.where(stale[:, None], 0.0, u)
-        return FilterResult(u, status, stopped, float(np.abs(u - u_nom).max()))
+        return np.where(stopped[:, None], 0.0, u), status, stopped
 
     def _concerned(self, lo_pair: np.ndarray, lo_poly: np.ndarray) -> np.ndarray:
         bad = np.zeros(self.n, bool)
@@ -255,8 +331,3 @@ class SafetyFilter:
         if not bad.any():
             bad[:] = True
         return bad
-
-    def _scale_box(self, u: np.ndarray) -> np.ndarray:
-        s = np.linalg.norm(u, axis=1)
-        k = np.where(s > self.max_speed, self.max_speed / np.maximum(s, 1e-12), 1.0)
-        return u * k[:, None]
