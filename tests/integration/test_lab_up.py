@@ -55,7 +55,10 @@ def _env() -> dict[str, str]:
 
 
 def _port_free(port: int) -> bool:
+    """Nothing listens on ``port`` (a connection of an earlier run in TIME_WAIT is no obstacle:
+    zenoh binds with SO_REUSEADDR, as this does)."""
     with socket.socket() as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind(("127.0.0.1", port))
         except OSError:

@@ -81,3 +81,41 @@ def test_the_codes_architecture_citations_name_sections_of_the_page():
     assert cited
     for where, section in cited:
         assert section in sections, f"{where} cites {section!r}, not a section of the page"
+
+
+def test_the_results_pages_are_current_with_the_committed_rows():
+    """Every generated block of docs/results/ is what bench/pages.py writes from its row in
+    bench/rows/ (a row re-recorded without the pages regenerated fails here), and every block
+    has its row (no page keeps numbers nobody can trace)."""
+    from bench import pages
+
+    blocks = 0
+    for page in sorted(pages.PAGES.glob("*.md")):
+        text = page.read_text()
+        for m in pages.BLOCK.finditer(text):
+            blocks += 1
+            assert (pages.ROWS / f"{m.group('name')}.json").is_file(), (page.name, m["name"])
+        assert pages.rewrite(text) == text, f"{page.name}: run python bench/pages.py"
+    assert blocks >= 4
+
+
+def test_a_results_block_names_its_row_and_flags_a_missed_goal(tmp_path, monkeypatch):
+    from bench import pages
+
+    row = {
+        "bench": "approach", "command": "python bench/approach.py", "commit": "abc", "dirty": False,
+        "date": "2026-11-28", "machine": {"cores": 2, "python": "3.11", "loop_1e7_s": 0.6},
+        "load_before": [0.4], "load_after": [0.5],
+        "result": {"sizes": {"20": {
+            "planner": {"median_ms": 0.8}, "filter_warm": {"median_ms": 2.5},
+            "filter_warm_half_differential": {"median_ms": 3.0},
+            "filter_cold_rebuild": {"median_ms": 5.0}, "speedup_median": 2.0}},
+            "goal": "filter < 2 ms median at 20 robots", "goal_met": False},
+    }  # fmt: skip
+    (tmp_path / "approach.json").write_text(__import__("json").dumps(row))
+    monkeypatch.setattr(pages, "ROWS", tmp_path)
+    out = pages.rewrite("x\n<!-- rows: approach -->\nold 0.52 ms\n<!-- /rows -->\ny\n")
+    assert "old 0.52" not in out and "| 20 | 0.80 ms | 2.50 ms |" in out
+    assert "**not met**" in out and "`bench/rows/approach.json`" in out and "commit `abc`" in out
+    gone = pages.rewrite("<!-- rows: sim -->\n1 2 3\n<!-- /rows -->\n")
+    assert "No row yet" in gone and "1 2 3" not in gone

@@ -1,0 +1,104 @@
+"""Run one bench script and commit its figures as a row: ``bench/rows/<name>.json``.
+
+    python bench/record.py approach [-- --ticks 200]
+
+The row is the script's JSON (``result``) with where it came from: the command, the commit
+(and whether the tree had changes), the date, the machine (cores, Python, platform, and the
+seconds 10^7 pure-Python additions took just before: this shared machine's speed varies from
+day to day) and the load average before and after the run. ``bench/pages.py`` turns the rows
+into the results pages of the docs (``docs/results/``), so every figure there names its row; a
+test checks the pages are current with the rows. Progress goes to stderr; the row's path is
+printed last.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+ROWS = ROOT / "bench" / "rows"
+
+
+def _git(*args: str) -> str:
+    try:
+        out = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=True)
+    except (OSError, subprocess.CalledProcessError):
+        return ""
+    return out.stdout.strip()
+
+
+def machine() -> dict:
+    return {
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "platform": platform.platform(terse=True),
+    }
+
+
+def calibration() -> float:
+    """Seconds for 10^7 pure-Python additions (best of 3): the machine's speed at the time, so
+    rows from different machines (or one shared machine on different days) can be compared."""
+    best = float("inf")
+    for _ in range(3):
+        t0 = time.perf_counter()
+        acc = 0
+        for i in range(10_000_000):
+            acc += i
+        best = min(best, time.perf_counter() - t0)
+    return round(best, 3)
+
+
+def load() -> list[float]:
+    return [round(x, 2) for x in os.getloadavg()]
+
+
+def record(name: str, args: list[str]) -> Path:
+    script = ROOT / "bench" / f"{name}.py"
+    if not script.is_file():
+        raise SystemExit(f"record: no bench/{name}.py (the benches: ls bench/*.py)")
+    before = load()
+    speed = calibration()
+    cmd = [sys.executable, str(script), *args]
+    print(f"record: {' '.join(['python', f'bench/{name}.py', *args])}", file=sys.stderr)
+    proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    if proc.returncode != 0:
+        raise SystemExit(f"record: bench/{name}.py exited {proc.returncode}: no row written")
+    try:
+        result = json.loads(proc.stdout)
+    except json.JSONDecodeError as exc:
+        raise SystemExit(f"record: bench/{name}.py printed no JSON object ({exc})") from exc
+    row = {
+        "bench": name,
+        "command": " ".join(["python", f"bench/{name}.py", *args]),
+        "commit": _git("rev-parse", "--short=10", "HEAD"),
+        "dirty": bool(_git("status", "--porcelain", "--untracked-files=no")),
+        "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "machine": {**machine(), "loop_1e7_s": speed},
+        "load_before": before,
+        "load_after": load(),
+        "result": result,
+    }
+    ROWS.mkdir(parents=True, exist_ok=True)
+    path = ROWS / f"{name}.json"
+    path.write_text(json.dumps(row, indent=1) + "\n")
+    return path
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("name", help="the bench script's name (bench/<name>.py)")
+    ap.add_argument("args", nargs="*", help="its arguments, after --")
+    ns = ap.parse_args()
+    print(record(ns.name, ns.args))
+
+
+if __name__ == "__main__":
+    main()
