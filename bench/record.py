@@ -25,6 +25,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 ROWS = ROOT / "bench" / "rows"
+# the code a row's figures come from: the tree but the docs and the rows themselves
+CODE = (".", ":!docs", ":!bench/rows", ":!README.md", ":!CHANGELOG.md")
 
 
 def _git(*args: str) -> str:
@@ -79,7 +81,7 @@ def record(name: str, args: list[str]) -> Path:
         "bench": name,
         "command": " ".join(["python", f"bench/{name}.py", *args]),
         "commit": _git("rev-parse", "--short=10", "HEAD"),
-        "dirty": bool(_git("status", "--porcelain", "--untracked-files=no")),
+        "dirty": bool(_git("status", "--porcelain", "--untracked-files=no", "--", *CODE)),
         "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": {**machine(), "loop_1e7_s": speed},
         "load_before": before,
