@@ -39,11 +39,15 @@ from controller.io.bus import Bus, Inbox, Received, decode_payload  # noqa: E402
 FLEET = "bench"
 
 
+# the round trips run back to back, faster than a key's rate limit in an inbox (zenoh.key_rate_hz,
+# 1 kHz: a robot's poses come at 30-100 Hz): the limit off, so the codec is what is measured
+UNLIMITED = ZenohSection(key_rate_hz=0)
+
 def child(endpoint: str) -> None:
     """Echo peer: raw ping -> raw pong; codec cmd -> decoded, re-encoded pose; counts floods."""
     import zenoh
 
-    with Bus(ZenohSection(), FLEET, listen=[], connect=[endpoint]) as bus:
+    with Bus(UNLIMITED, FLEET, listen=[], connect=[endpoint]) as bus:
         s = bus.session
         raw_pong = s.declare_publisher("bench/raw/pong", express=True)
         pose_pub = bus.publisher("robot_pose", command=True, id="b1")
@@ -247,7 +251,7 @@ def main() -> None:
         flood_main(args.seconds)
         return
     ep = f"tcp/127.0.0.1:{free_port()}"
-    with Bus(ZenohSection(), FLEET, listen=[ep], connect=[]) as bus:
+    with Bus(UNLIMITED, FLEET, listen=[ep], connect=[]) as bus:
         s = bus.session
         present = threading.Event()
         s.liveliness().declare_subscriber("bench/alive", lambda smp: present.set(), history=True)

@@ -197,11 +197,106 @@ def sim(r: dict) -> str:
     )
 
 
+def bus(r: dict) -> str:
+    raw, codec = r["round_trip_raw"], r["round_trip_codec"]
+    rows = [
+        ["raw bytes", _ms(raw["median_ms"]), _ms(raw["p99_ms"]), "1.0×"],
+        [
+            "our codec (Twist2D out, Pose2D back)",
+            _ms(codec["median_ms"]),
+            _ms(codec["p99_ms"]),
+            f"{r['codec_over_raw_median']:.1f}×",
+        ],  # fmt: skip
+    ]
+    return (
+        f"A {r['payload_bytes']}-byte command's round trip between two processes on loopback "
+        f"over zenoh, {raw['n']} of each, interleaved:\n\n"
+        + _table(["round trip", "median", "p99", "vs raw"], rows)
+        + f"\n\nEncode and decode: {_us(r['codec_encode_decode_us'])}. One way, reliable "
+        f"and blocking: {r['throughput_msgs_per_s']:,.0f} messages/s "
+        f"({r['throughput_received']:,} of {r['throughput_sent']:,} received)."
+    )
+
+
+def mavlink(r: dict) -> str:
+    lat = r["latency_ms"]
+    rows = [
+        [
+            "our driver",
+            _ms(lat["adapter"]["median"]),
+            _ms(lat["adapter"]["p99"]),
+            f"{lat['ratio']:.2f}×",
+        ],  # fmt: skip
+        [
+            "raw pymavlink",
+            _ms(lat["raw_pymavlink"]["median"]),
+            _ms(lat["raw_pymavlink"]["p99"]),
+            "1.00×",
+        ],  # fmt: skip
+    ]
+    rates = [
+        [
+            n,
+            f"{v['median']:.1f} Hz",
+            f"{v['min']:.1f} Hz",
+            f"{v['requested']:.0f} Hz",
+            f"{v['healthy']} of {n}",
+        ]  # fmt: skip
+        for n, v in r["pose_rate_hz"].items()
+    ]
+    return (
+        "A velocity command from `MavlinkDriver.send` to the vehicle (an emulator on UDP "
+        f"loopback) having decoded it, {lat['adapter']['n']} samples, against pymavlink alone "
+        "in the same process:\n\n"
+        + _table(["path", "median", "p99", "vs raw"], rows)
+        + "\n\nThe pose stream each robot's vehicle is asked for:\n\n"
+        + _table(["robots", "median rate", "slowest", "asked for", "healthy"], rates)
+    )
+
+
+def logs(r: dict) -> str:
+    rec = {x["robots"]: x for x in r["recorder"]}
+    rows = []
+    for b in r["builder"]:
+        n = b["robots"]
+        x = rec.get(n, {})
+        rows.append(
+            [
+                str(n),
+                _us(b["us_per_bus_message"]),
+                f"{x.get('msgs_per_s_with_scene', 0):,}",
+                f"{x.get('msgs_per_s_without', 0):,}",
+                f"{x.get('time_ratio_with_over_without', 0):.2f}×",
+                f"{x.get('kb_per_sim_second_with_scene', 0):.1f} / "
+                f"{x.get('kb_per_sim_second_without', 0):.1f} kB",
+            ]  # fmt: skip
+        )
+    head = ["robots", "scene builder per bus message", "recorder msg/s, with the scene",
+            "without", "time, with over without", "per sim second, with / without"]  # fmt: skip
+    d, c, v = r["dry_run"], r["check"], r["live_view"]
+    return (
+        "The MCAP recorder with and without the Foxglove scene channels (built from the bus "
+        "messages it records):\n\n"
+        + _table(head, rows)
+        + f"\n\nA {d['robots']}-robot dry run of {d['sim_s']:.0f} sim s: "
+        f"{d['wall_s_with_scene']:.2f} s wall with the scene, {d['wall_s_without']:.2f} s "
+        f"without ({d['ratio']:.2f}×). The "
+        f"regression replay of the golden capture log ({c['ticks']} ticks): "
+        f"{c['sim_s_per_wall_s']:.1f} sim s per wall s, "
+        f"{'agreeing' if c['ok'] else 'NOT agreeing'}. "
+        f"The live view: {_us(v['us_per_offer'])} per offer, never blocking "
+        f"({v['dropped']:,} of {v['offers']:,} offers dropped by its full queue, as designed)."
+    )
+
+
 RENDER: dict[str, Callable[[dict], str]] = {
     "approach": approach,
     "contact_lp": contact_lp,
     "estimation": estimation,
     "sim": sim,
+    "bus": bus,
+    "mavlink": mavlink,
+    "logs": logs,
 }
 
 
