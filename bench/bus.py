@@ -43,6 +43,7 @@ FLEET = "bench"
 # 1 kHz: a robot's poses come at 30-100 Hz): the limit off, so the codec is what is measured
 UNLIMITED = ZenohSection(key_rate_hz=0)
 
+
 def child(endpoint: str) -> None:
     """Echo peer: raw ping -> raw pong; codec cmd -> decoded, re-encoded pose; counts floods."""
     import zenoh
