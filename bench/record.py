@@ -1,6 +1,9 @@
 """Run one bench script and commit its figures as a row: ``bench/rows/<name>.json``.
 
     python bench/record.py approach [-- --ticks 200]
+    python bench/record.py capture --as capture_fresh -- --suite-only --suite-seed 31337
+
+A bench run with other arguments is a row of its own (``--as``: its name in ``bench/rows/``).
 
 The row is the script's JSON (``result``) with where it came from: the command, the commit
 (and whether the tree had changes), the date, the machine (cores, Python, platform, and the
@@ -62,7 +65,7 @@ def load() -> list[float]:
     return [round(x, 2) for x in os.getloadavg()]
 
 
-def record(name: str, args: list[str]) -> Path:
+def record(name: str, args: list[str], row_name: str | None = None) -> Path:
     script = ROOT / "bench" / f"{name}.py"
     if not script.is_file():
         raise SystemExit(f"record: no bench/{name}.py (the benches: ls bench/*.py)")
@@ -79,6 +82,7 @@ def record(name: str, args: list[str]) -> Path:
         raise SystemExit(f"record: bench/{name}.py printed no JSON object ({exc})") from exc
     row = {
         "bench": name,
+        "row": row_name or name,
         "command": " ".join(["python", f"bench/{name}.py", *args]),
         "commit": _git("rev-parse", "--short=10", "HEAD"),
         "dirty": bool(_git("status", "--porcelain", "--untracked-files=no", "--", *CODE)),
@@ -89,7 +93,7 @@ def record(name: str, args: list[str]) -> Path:
         "result": result,
     }
     ROWS.mkdir(parents=True, exist_ok=True)
-    path = ROWS / f"{name}.json"
+    path = ROWS / f"{row_name or name}.json"
     path.write_text(json.dumps(row, indent=1) + "\n")
     return path
 
@@ -98,8 +102,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("name", help="the bench script's name (bench/<name>.py)")
     ap.add_argument("args", nargs="*", help="its arguments, after --")
+    ap.add_argument("--as", dest="row", help="the row's name (default: the bench's)")
     ns = ap.parse_args()
-    print(record(ns.name, ns.args))
+    print(record(ns.name, ns.args, ns.row))
 
 
 if __name__ == "__main__":
