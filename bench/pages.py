@@ -438,6 +438,74 @@ def capture_fresh(r: dict) -> str:
     )
 
 
+def _s(x: float) -> str:
+    return f"{x * 1e3:.0f} ms" if x < 1 else f"{x:.2f} s"
+
+
+def route(r: dict) -> str:
+    door = r["doorway"]
+    d = door.get("0.1 m") or next(iter(v for k, v in door.items() if isinstance(v, dict)))
+    obj = []
+    for n, v in r["object"].items():
+        if "error" in v:
+            obj.append([f"{n}²", "failed: " + " ".join(v["error"]), "", "", "", ""])
+            continue
+        g = v["goals"].values()
+        exp = [x["expanded"] for x in g]
+        tables = [x["table_seconds"] for x in g]
+        obj.append(
+            [
+                f"{n}² × {v['grid'][2]}",
+                _s(v["cspace_seconds"]),
+                f"{_s(min(tables))}–{_s(max(tables))}",
+                f"{_s(min(x['search_seconds'] for x in g))}–{_s(v['max_search_seconds'])}",
+                f"{min(exp):,}–{max(exp):,}",
+                _s(v["max_total_seconds"]),
+                f"{v['peak_rss_mb']:.0f} MB",
+            ]  # fmt: skip
+        )
+    opt = r["optimality_128"]
+    gaps = [x["default_gap_pct"] for x in opt.values()]
+    sk = [x["skeleton_gap_pct"] for x in opt.values()]
+    two = []
+    for k, v in r["two_d"].items():
+        two.append(
+            [
+                k.replace("_", " ") + "²",
+                f"{v['ours_search_seconds'] * 1e3:.1f} ms",
+                f"{v['pathfinding_search_seconds'] * 1e3:.1f} ms",
+                f"{v['speedup_search_vs_search']:.1f}×",
+                f"{v['speedup_with_builds']:.1f}×",
+                f"{v['speedup_octile_only_search_vs_search']:.1f}×",
+                "yes" if v["same_cost"] else "**no**",
+            ]  # fmt: skip
+        )
+    head = ["size", "C-space", "cost-to-go table, per goal", "search, per goal", "expansions",
+            "worst goal in all", "peak RSS"]  # fmt: skip
+    head2 = ["grid", "ours, search", "`pathfinding`, search", "speed-up", "with grid builds",
+             "octile heuristic alone", "same cost"]  # fmt: skip
+    ring = d.get("clearance_beyond_ring_m")
+    return (
+        f"The doorway case ({door['crate_m']:g} m L carried by {door['robot_radius_m']:g} m "
+        f"robots through a {door['doorway_m']:g} m door) at 0.1 m: {d['status']}, "
+        f"{d['expanded']:,} expansions, {_s(d['seconds'])}"
+        + (
+            f"; the footprint keeps {ring:.3f} m beyond the robot ring (checked exactly)."
+            if ring is not None
+            else "."
+        )  # fmt: skip
+        + "\n\nThe object's search on the shipped map, every goal, default `[route]` "
+        "(the `cost_to_go` heuristic), each size in its own process:\n\n"
+        + _table(head, obj)
+        + f"\n\nOptimality at 128²: the default's routes are {min(gaps):.1f}–"
+        f"{max(gaps):.1f} % above the optimum (A* with the admissible wavefront potential) "
+        f"on the {len(gaps)} goals; the skeleton potential's {min(sk):.1f}–{max(sk):.1f} %."
+        "\n\nRobot A* (`RobotRoadmap`, octile distance tightened by landmarks) against the "
+        "`pathfinding` package's A* on the same occupancy and moves, medians:\n\n"
+        + _table(head2, two)
+    )
+
+
 RENDER: dict[str, Callable[[dict], str]] = {
     "approach": approach,
     "contact_lp": contact_lp,
@@ -449,6 +517,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "route_tables": route_tables,
     "capture": capture,
     "capture_fresh": capture_fresh,
+    "route": route,
 }
 
 
