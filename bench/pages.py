@@ -360,7 +360,8 @@ def route_tables(r: dict) -> str:
         f"{max(v['N_open'] for v in d_bound.values()):,} states on the four goals "
         f"({min(v['N_open'] for v in d_raw.values()):,}–"
         f"{max(v['N_open'] for v in d_raw.values()):,} without the bound); its route on "
-        f"{goals[-1]} costs {d_opt:.2f}× Dijkstra's."
+        f"{goals[-1]} costs {d_opt:.2f}× Dijkstra's.\n\nThe set-ups differ, so magnitudes "
+        "need not match:\n\n" + "\n".join(f"- {x}" for x in r["differences"])
     )
 
 
