@@ -1,6 +1,7 @@
-"""How long a hub restart takes to heal: ``fleet hub`` and six sim agents (ideal backend, each its
-own ``fleet driver`` process) on 127.0.0.1, a watcher session in place of the daemon (a client
-of the hub, as the daemon is). The hub is killed (SIGKILL) and started again at once; measured
+"""How long a hub restart takes to heal: ``fleet hub``, ``fleet world`` (ideal backend) and six sim
+agents (each its own ``fleet driver`` process, its robot a body of that world: the lab's path,
+``sim.world = "process"``) on 127.0.0.1, a watcher session in place of the daemon (a client of
+the hub, as the daemon is). The hub is killed (SIGKILL) and started again at once; measured
 from the kill: ``back_s``, when every robot's liveliness token is seen again and a pose of each
 has arrived after it (what the daemon needs to take the robots back: ``fleet.outage_grace``
 must cover it). Repeated ``--tries`` times, for each ``zenoh.reconnect_s`` in ``--reconnect``
@@ -89,12 +90,17 @@ def one_setting(reconnect: float, tries: int) -> dict:
         port = free_port()
         cfg_path = lab_config(tmp, port, robots=ROBOTS)
         text = cfg_path.read_text().replace("[zenoh]\n", f"[zenoh]\nreconnect_s = {reconnect}\n")
+        # the lab's path: one world process, the agents drive its bodies over the bus (an agent
+        # with a world of its own steps the whole room: six of them outran 2 cores, and their
+        # poses fell seconds behind whatever the hub did)
+        text = text.replace("[sim]\n", '[sim]\nworld = "process"\n')
         cfg_path.write_text(text)
         cfg = load_config(str(cfg_path))
         c = str(cfg_path)
         hub = spawn(tmp / "hub0.txt", "hub", "--config", c)
         procs = [hub]
         wait_for(lambda: _listening(port), 30, "the hub")
+        procs.append(spawn(tmp / "world.txt", "world", "--config", c))
         procs += [spawn(tmp / f"{r}.txt", "driver", r, "--config", c) for r in cfg.robot_ids]
         back, up, tokens = [], [], []
         try:

@@ -67,14 +67,19 @@ class SimHub:
             self.robot_queues[rid].extend(sensor.sample(t, self.world.robot_pose(rid)))
         self.object_queue.extend(self.object_sensor.sample(t, self.world.object_pose()))
 
-    def advance_to(self, t_end: float) -> None:
+    def advance_to(self, t_end: float, max_steps: int | None = None) -> int:
         """Step physics until sim time reaches ``t_end``, sampling sensors and running the step
-        hooks (e.g. MAVLink vehicle emulators) after every step."""
-        while self.world.t + 0.5 * self.dt < t_end:
+        hooks (e.g. MAVLink vehicle emulators) after every step; at most ``max_steps`` steps
+        (a real-time loop with other duties, an agent's, stays responsive and lets the world
+        fall behind the clock rather than catch up in one long call). Returns the steps."""
+        steps = 0
+        while self.world.t + 0.5 * self.dt < t_end and (max_steps is None or steps < max_steps):
             self.world.step(self.dt)
             self._sample()
             for hook in self.step_hooks:
                 hook(self.world.t)
+            steps += 1
+        return steps
 
     def take_robot(self, robot_id: str) -> list[Measurement]:
         q = self.robot_queues[robot_id]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 
@@ -17,6 +18,7 @@ log = logging.getLogger(__name__)
 
 LATCH_WAIT = 2.0  # s an agent waits at start for a holder of the latched e-stop to answer
 LATCH_EVERY = 2.0  # s between the agent's later latch queries
+BEHIND_S = 1.0  # s: an agent's own world this far behind the clock is said to be (once)
 
 
 def robot_bus(cfg: FleetConfig, who: str) -> Bus:
@@ -176,7 +178,10 @@ def _serve(
         else ("ENGAGED" if state.engaged else "off"),
     )
     agent.announce(time.time())
-    rk = Ratekeeper(max(cfg.fleet.rate_hz, 20.0))
+    rate = max(cfg.fleet.rate_hz, 20.0)
+    rk = Ratekeeper(rate)
+    catch_up = None if hub is None else max(1, math.ceil(2.0 / (rate * hub.dt)))
+    behind_told = False
     next_latch = time.monotonic() + LATCH_EVERY
     while not stop.is_set():
         rk.keep_time()
@@ -185,7 +190,19 @@ def _serve(
             agent.request_latch()
             next_latch = time.monotonic() + LATCH_EVERY
         if hub is not None:
-            hub.advance_to(now - wall0)
+            # a world of the agent's own: two loop periods of physics at most per iteration,
+            # so the watchdog, the e-stop and the commands are served on time whatever the
+            # machine; a world that cannot keep up falls behind the clock (said once)
+            hub.advance_to(now - wall0, max_steps=catch_up)
+            if not behind_told and now - wall0 - hub.t > BEHIND_S:
+                behind_told = True
+                log.warning(
+                    "robot %s: its own world runs %.1f s behind the clock (this machine cannot "
+                    'step every agent\'s world in real time; sim.world = "process" steps one '
+                    "world for all)",
+                    robot.id,
+                    now - wall0 - hub.t,
+                )
         agent.step(now)
         if exit_on_loss and not agent.link_ok:
             return 1, "link lost: robot stopped"

@@ -92,3 +92,19 @@ def test_world_holds_only_sim_robots():
     cfg = dataclasses.replace(cfg, robots=(cfg.robots[0], real, *cfg.robots[2:]))
     ids = [r.id for r in world_config(cfg).robots]
     assert real.id not in ids and len(ids) == len(cfg.robots) - 1
+
+
+def test_a_capped_catch_up_steps_no_more_than_asked_and_the_world_falls_behind(rig):
+    """An agent with a world of its own steps at most two loop periods of physics per
+    iteration (its watchdog and e-stop come first): two seconds behind, one call does not
+    step them all; called again and again, the world gets there."""
+    _, _, hub = rig
+    assert hub.advance_to(2.0, max_steps=5) == 5
+    assert hub.t == pytest.approx(5 * hub.dt)
+    steps = 5
+    while hub.t + 0.5 * hub.dt < 2.0:
+        n = hub.advance_to(2.0, max_steps=5)
+        assert 1 <= n <= 5
+        steps += n
+    assert hub.t == pytest.approx(2.0, abs=hub.dt) and steps == round(2.0 / hub.dt)
+    assert hub.advance_to(2.0) == 0  # uncapped (the world process): already there
