@@ -101,10 +101,11 @@ def record(name: str, args: list[str], row_name: str | None = None) -> Path:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("name", help="the bench script's name (bench/<name>.py)")
-    ap.add_argument("args", nargs="*", help="its arguments, after --")
     ap.add_argument("--as", dest="row", help="the row's name (default: the bench's)")
-    ns = ap.parse_args()
-    print(record(ns.name, ns.args, ns.row))
+    argv = sys.argv[1:]
+    cut = argv.index("--") if "--" in argv else len(argv)
+    ns = ap.parse_args(argv[:cut])  # the bench's own arguments come after --
+    print(record(ns.name, argv[cut + 1 :], ns.row))
 
 
 if __name__ == "__main__":
