@@ -486,6 +486,19 @@ def route(r: dict) -> str:
     head2 = ["grid", "ours, search", "`pathfinding`, search", "speed-up", "with grid builds",
              "octile heuristic alone", "same cost"]  # fmt: skip
     ring = d.get("clearance_beyond_ring_m")
+    goals = []
+    o = r["object"]
+    if "max_total_seconds" in o.get("256", {}):
+        goals.append(f"256², worst goal under 2 s: {_met(o['256']['max_total_seconds'] < 2)}")
+    if "max_total_seconds" in o.get("512", {}):
+        ok = o["512"]["max_total_seconds"] < 10 and o["512"]["peak_rss_mb"] < 1024
+        goals.append(f"512², under 10 s and 1 GB: {_met(ok)}")
+    room = r["two_d"].get("room_256")
+    if room:
+        goals.append(
+            f"robot A* at least 4× `pathfinding`'s search on the room: "
+            f"{_met(room['speedup_search_vs_search'] >= 4)}"
+        )
     return (
         f"The doorway case ({door['crate_m']:g} m L carried by {door['robot_radius_m']:g} m "
         f"robots through a {door['doorway_m']:g} m door) at 0.1 m: {d['status']}, "
@@ -498,6 +511,7 @@ def route(r: dict) -> str:
         + "\n\nThe object's search on the shipped map, every goal, default `[route]` "
         "(the `cost_to_go` heuristic), each size in its own process:\n\n"
         + _table(head, obj)
+        + ("\n\nGoals: " + "; ".join(goals) + "." if goals else "")
         + f"\n\nOptimality at 128²: the default's routes are {min(gaps):.1f}–"
         f"{max(gaps):.1f} % above the optimum (A* with the admissible wavefront potential) "
         f"on the {len(gaps)} goals; the skeleton potential's {min(sk):.1f}–{max(sk):.1f} %."
