@@ -118,13 +118,15 @@ def test_the_replay_text_tells_the_runs_outcome(name, capsys):
     verdict = next(ln for ln in lines if ln.startswith(word))
     assert "of log" in verdict
     assert re.search(r"min_clearance_m\s+0\.0\d+ m \(margin 0\.05 m: ok\)", text), text
+    # the same outcome as the run's own verdict (read from the log, not the run's summary)
+    assert verdict.split(";")[0] == verdict_line(run).split(";")[0], (verdict, run)
     if name == "transport":
-        assert "0.115 m" in verdict and "3.4°" in verdict
-        assert re.search(r"goal_error_m\s+0\.115 m \(tolerance 0\.2 m: ok\)", text)
-        assert re.search(r"planned_force_mean_n\s+2\.44 N", text)
-        assert re.search(r"relocations\s+5", text)
+        got = re.search(r"goal_error_m\s+(\d+\.\d+) m \(tolerance 0\.2 m: ok\)", text)
+        assert got and abs(float(got.group(1)) - run["goal_error_m"]) < 0.005, text
+        assert re.search(r"planned_force_mean_n\s+\d+\.\d+ N", text), text
+        assert re.search(rf"relocations\s+{run['relocations']}\n", text), text
     else:
-        assert verdict.startswith("ARRESTED at 16.0 s (no goal set)")
+        assert "(no goal set)" in verdict
     assert "fleet log layout" in text and "--plots" in text
 
 
