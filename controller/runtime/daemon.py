@@ -172,22 +172,22 @@ class LatchWatch:
 
     def start(self, mono: float, give_up_after: float | None) -> None:
         self.give_up_at = None if give_up_after is None else mono + give_up_after
-        self.node.expect_latch(timeout=LATCH_RETRY)
+        self.node.estop_latch.expect(timeout=LATCH_RETRY)
         self.next_query = mono + LATCH_RETRY
 
     def poll(self, mono: float) -> None:
         if self.keeper is not None:
             self.keeper.poll()
-        if not self.node.latch_pending:
-            if not self.node.latch.known and mono >= self.next_query:
-                self.node.ask_latch(timeout=LATCH_RETRY)
+        if not self.node.estop_latch.pending:
+            if not self.node.estop_latch.latch.known and mono >= self.next_query:
+                self.node.estop_latch.ask(timeout=LATCH_RETRY)
                 self.next_query = mono + LATCH_UNKNOWN
             return
         if self.give_up_at is not None and mono >= self.give_up_at:
-            self.node.release_latch()
+            self.node.estop_latch.release()
             self.next_query = mono + LATCH_UNKNOWN
         elif mono >= self.next_query:
-            self.node.expect_latch(timeout=LATCH_RETRY)
+            self.node.estop_latch.expect(timeout=LATCH_RETRY)
             self.next_query = mono + LATCH_RETRY
 
 
@@ -200,7 +200,7 @@ class TickBudget:
         self.over = 0
 
     def check(self, node: ControllerNode) -> None:
-        took = node.last_tick_s
+        took = node.times.last_s
         if took is None or took <= self.budget:
             return
         self.over += 1
@@ -298,8 +298,9 @@ def run_daemon(
                 ident=claim.ident,
                 latch_at_start=file.load_kept("controller/main"),
             )
-            node.release_max_age = cfg.fleet.max_clock_skew  # the wall clock: see the latch
-            latch = LatchWatch(node, LatchKeeper(node.latch, file))
+            # the wall clock: see the latch
+            node.estop_latch.release_max_age = cfg.fleet.max_clock_skew
+            latch = LatchWatch(node, LatchKeeper(node.estop_latch.latch, file))
             latch.start(time.monotonic(), LATCH_WAIT_AT_START)
             print(
                 f"fleet daemon: fleet {cfg.fleet.name!r} on {list(cfg.zenoh.listen)} ({how}), "

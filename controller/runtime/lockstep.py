@@ -248,7 +248,7 @@ class ControllerLockstep:
     def _wait_inputs(self, tick: wire.SimTick) -> None:
         """Handshake: every measurement published before the tick has arrived (taken in or
         queued); measurements lost on the way are written off after ``wait_inputs`` seconds."""
-        cond = self.node.inputs_arrived
+        cond = self.node.inputs.arrived
         with cond:
             ok = cond.wait_for(lambda: self._have() >= tick.measurements, timeout=self.wait_inputs)
         if not ok:

@@ -221,6 +221,22 @@ def test_replay_metrics_are_pure():
     assert not top(names) & (FORBIDDEN_STDLIB | {"zenoh", "mcap"}), sorted(names)
 
 
+NODE_PARTS = sorted((ROOT / "controller" / "runtime").glob("node*.py"))
+
+
+def test_the_controller_node_is_split_by_job():
+    """The node is its tick pipeline and status (``node.py``); its latch, inputs, outputs and
+    stage timings are parts of their own (issue 35 item 5): each short, and no part imports the
+    node (nor reads a clock: the node injects its own)."""
+    names = {p.stem for p in NODE_PARTS}
+    assert {"node", "node_latch", "node_inputs", "node_outputs", "node_times"} <= names
+    for p in NODE_PARTS:
+        assert len(p.read_text().splitlines()) <= 230, rel(p)
+        if p.stem != "node":
+            assert "controller.runtime.node" not in imports_of(p), rel(p)
+            assert "time" not in top(imports_of(p)), rel(p)
+
+
 TEST_FILES = [p for p in files("tests") if "support" not in p.relative_to(ROOT / "tests").parts]
 
 

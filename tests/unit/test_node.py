@@ -71,7 +71,7 @@ def test_a_tick_takes_in_poses_and_publishes_one_command_per_robot(rig):
     assert done.step == 7 and done.commands == len(cfg.robots)
     assert out.phase == node.phase == "approach"
     # the stages were timed with the injected clock, one sample each
-    assert {k: len(v) for k, v in node.timings.items()} == dict.fromkeys(node.timings, 1)
+    assert {k: len(v) for k, v in node.times.stages.items()} == dict.fromkeys(node.times.stages, 1)
     assert node.timing_summary()["step_ms"]["calls"] == 1
 
 
@@ -104,7 +104,7 @@ def test_a_link_event_its_robots_token_does_not_bear_out_is_ignored(rig):
     """Issue 22: a spoofed ``link_lost`` (anyone may put on a robot's event key on the open
     default) while the robot's agent is alive, and a spoofed ``link_restored`` while it is gone,
     change nothing; each is counted after ``EVENT_GRACE`` s of ticks."""
-    from controller.runtime.node import EVENT_GRACE
+    from controller.runtime.node_inputs import EVENT_GRACE
 
     cfg, bus, mission, node = rig
     r1, r2 = cfg.robot_ids[:2]
@@ -236,26 +236,26 @@ def test_commands_are_zero_while_the_latch_is_unread_and_a_newer_latch_engages(r
     from controller.io.bus import Received
 
     cfg, bus, _, node = rig
-    node.expect_latch()
+    node.estop_latch.expect()
     ((key, replies),) = bus.queries
     assert key == "fleet/lab/estop/state/*/*"
     node.tick(1.0)
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.0 for r in cfg.robots)
     # the controller's own (stale) answer does not count; an agent's newer engaged one does
-    own = node.latch_state()
+    own = node.estop_latch.answer()
     replies.put(Received(0.0, "fleet/lab/estop/state/controller/main", own))
     node.tick(1.05)
-    assert node.latch_pending
+    assert node.estop_latch.pending
     # (at most one above the operator's epoch the node knows: issue 31, a robot's engage at a
     # greater epoch is refused)
     engaged = wire.EStop(t=5.0, engaged=True, source="op", epoch=1)
     replies.put(Received(0.0, "fleet/lab/estop/state/robot/r1", engaged))
     node.tick(1.1)
-    assert not node.latch_pending and node.estop and node.status().estop
+    assert not node.estop_latch.pending and node.estop and node.status().estop
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.0 for r in cfg.robots)
-    assert node.latch_state() == engaged
+    assert node.estop_latch.answer() == engaged
     # a released answer does not lift it, even at a newer epoch; only an operator's resume does
-    node.expect_latch()
+    node.estop_latch.expect()
     newer = wire.EStop(t=1.0, engaged=False, source="op", epoch=4)
     bus.queries[-1][1].put(Received(0.0, "fleet/lab/estop/state/hub/main", newer))
     node.tick(1.15)
