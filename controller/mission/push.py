@@ -15,7 +15,7 @@ from controller.mission.grip import Contact, Grip
 from controller.mission.planners import JobOwned, Planners, PlanSlot, spawn_rng
 from controller.mission.types import Event, FleetView
 from controller.planning.serpentine import passive_velocity
-from controller.planning.transport import TransportPlanner
+from controller.planning.transport import TransportPlanner, local_strategy
 from controller.planning.transport_model import ObjectModel
 from controller.planning.transport_types import (
     ATTACHED,
@@ -171,7 +171,7 @@ class Pusher:
             r = self.cfg.robots[i].radius
             centre = geometry.transform((c.point - r * c.inward)[None], pose)[0]
             vmax = self.cfg.robots[i].max_speed
-            if code == FOLLOW and plan.strategy == "serpentine":  # §4.3: passive, zero force
+            if code == FOLLOW and local_strategy(plan.strategy).passive_followers:
                 vel[i] = passive_velocity(
                     centre, view.poses[i, :2], rot @ c.inward, pose, view.object_velocity,
                     self.contact_gain, vmax,

@@ -15,6 +15,7 @@ import numpy as np
 from controller import geometry
 from controller.config import FleetConfig
 from controller.planning.contact_lp import GRAVITY, ContactForceLP, required_wrench
+from controller.planning.transport import local_strategy
 
 TURN_SHARE = 0.3  # a segment whose turn takes more than this share of the unit twist turns
 
@@ -83,7 +84,7 @@ def plan_arrangement(
     covers the need. ``strategy`` ``serpentine`` (Sharma §4.1 as published): Eq. 5 for every
     robot, nothing else."""
     d = twist[:2] if np.any(twist[:2]) else np.array([1.0, 0.0])
-    if strategy == "serpentine":  # Sharma §4.1: Eq. 5 for every robot, alone
+    if local_strategy(strategy).eq5_alone:  # serpentine, Sharma §4.1: Eq. 5 for every robot
         pts, nrm, value = pushing_set(cfg, d, robots, rng)
         return Arrangement(pts, nrm, value, robots, "eq5")
     lp = ContactForceLP(max(robots, 1), friction=model.contact_friction > 0)

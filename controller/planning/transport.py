@@ -37,12 +37,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from controller import geometry
-from controller.planning.contact_lp import ContactForceLP, twist_for_wrench
-from controller.planning.serpentine import split_groups
+from controller.planning.contact_lp import ContactForceLP
+from controller.planning.serpentine import serpentine
 from controller.planning.transport_model import Rollout, Trace, hold_matrix, lp_matrix
 from controller.planning.transport_types import (
     ACTIONS,
@@ -89,7 +91,7 @@ def initial_matrix(
     if (
         previous is not None
         and previous.matrix.shape == (n, k)
-        and previous.strategy != "serpentine"
+        and local_strategy(previous.strategy).warm_starts
     ):
         shift = min(max(int(shift), 0), n - 1)
         m = previous.matrix
@@ -130,101 +132,6 @@ def anneal(
             if e_cur < e_best:
                 best, e_best = cur, e_cur
     return best, accepted
-
-
-# --------------------------------------------------------------------------- serpentine
-
-
-def serpentine_groups(roll: Rollout) -> IntArray:
-    """Per robot: 0 (pushes toward the left of the route), 1 (toward the right), −1 (no
-    contact, or its push is not forward enough: it never pushes, it stays passive);
-    :func:`controller.planning.serpentine.split_groups` at the start pose."""
-    st, m = roll.start, roll.model
-    d = roll.route.tangent(roll._q(st.pose))
-    rot = geometry.rot(st.pose[2])
-    push = np.full((roll.k, 2), np.nan)
-    offset = np.zeros((roll.k, 2))
-    for i, node in enumerate(st.nodes):
-        if node >= 0:
-            push[i] = rot @ (-m.normals[node])
-            offset[i] = rot @ (m.nodes[node] - m.centroid)
-    return split_groups(push, offset, d)
-
-
-def serpentine_threshold(roll: Rollout, s: float, params: TransportParams) -> float:
-    """Switch distance (m): shrinks with the route left to the goal."""
-    remaining = max(roll.route.length - s, 0.0)
-    frac = remaining / roll.route.length if roll.route.length > 0 else 0.0
-    h = params.serpentine_deviation * min(1.0, frac)
-    return max(params.serpentine_min_deviation, h)
-
-
-def serpentine_switch(group: int | None, signed_dev: float, h: float, groups: IntArray) -> int:
-    """The active group after the deviation rule (signed_dev > 0: left of the route)."""
-    if group is None:
-        group = 1 if signed_dev > 0 else 0
-    elif group == 0 and signed_dev > h:
-        group = 1
-    elif group == 1 and signed_dev < -h:
-        group = 0
-    if not np.any(groups == group) and np.any(groups == 1 - group):
-        group = 1 - group  # one side has no pushers: the other pushes alone
-    return group
-
-
-def _group_twist(roll: Rollout, sim, members: IntArray) -> FloatArray:
-    """World twist direction the group's wrench (all at max_force) drives, at ``speed`` in
-    pose-arc metres per second, never past the subgoal."""
-    m, p = roll.model, roll.params
-    if len(members) == 0:
-        return np.zeros(3)
-    nodes = np.array([sim.nodes[i] for i in members])
-    rel = m.nodes[nodes] - m.centroid
-    push = -m.normals[nodes]
-    f = roll.fmax[members]
-    wrench = np.array(
-        [
-            f @ push[:, 0],
-            f @ push[:, 1],
-            f @ (rel[:, 0] * push[:, 1] - rel[:, 1] * push[:, 0]),
-        ]
-    )
-    t, _ = twist_for_wrench(wrench, m.mass, m.floor_friction, m.mean_radius)
-    v = geometry.rot(sim.pose[2]) @ t[:2]
-    w = np.array([v[0], v[1], t[2]])
-    norm = math.sqrt(v[0] ** 2 + v[1] ** 2 + (m.mean_radius * t[2]) ** 2)
-    if norm < 1e-12:
-        return np.zeros(3)
-    left = max(roll.route.s_subgoal - sim.s, 0.0)
-    return w / norm * min(p.speed, left / roll.dt)
-
-
-def serpentine(roll: Rollout, group: int | None) -> tuple[Trace, int | None]:
-    """Sharma's broken serpentine over the plan's intervals; returns the trace and the group
-    pushing in the first interval."""
-    p = roll.params
-    groups = serpentine_groups(roll)
-    sim = roll.start
-    rows, sims, eff, terms, tws, lps = [], [sim], [], [], [], []
-    first = None
-    for _ in range(p.intervals):
-        _, dev, side = roll.route.locate(roll._q(sim.pose))
-        group = serpentine_switch(group, dev * side, serpentine_threshold(roll, sim.s, p), groups)
-        first = group if first is None else first
-        row = np.array(
-            [
-                PUSH if groups[i] == group else (FOLLOW if sim.nodes[i] >= 0 else IDLE)
-                for i in range(roll.k)
-            ],
-            np.int64,
-        )
-        members = np.flatnonzero((groups == group) & (np.array(sim.nodes) >= 0))
-        sim, e, t, w, lp = roll.step(sim, row, _group_twist(roll, sim, members))
-        for lst, v in ((rows, row), (sims, sim), (eff, e), (terms, t), (tws, w), (lps, lp)):
-            lst.append(v)
-    matrix = np.array(rows, np.int64).reshape(p.intervals, roll.k)
-    trace = Trace(matrix, tuple(sims), tuple(eff), tuple(terms), tuple(tws), tuple(lps))
-    return trace, (first if np.any(groups >= 0) else None)
 
 
 # --------------------------------------------------------------------------- the plan
@@ -315,7 +222,14 @@ def plan_local(
         row = [IDLE if r.contact is None else FOLLOW for r in state.robots]
         trace = roll.run(np.tile(np.array(row, np.int64), (params.intervals, 1)))
         return make_plan(roll, trace, roll.energy(trace), "at_subgoal")
-    return LOCAL_PLANNERS[params.strategy](roll, state, params, rng, previous, shift)
+    return local_strategy(params.strategy).plan(roll, state, params, rng, previous, shift)
+
+
+#: a local planner: (roll, state, params, rng, previous, shift) -> LocalPlan
+LocalPlanner = Callable[
+    [Rollout, TransportState, TransportParams, np.random.Generator, "LocalPlan | None", int],
+    LocalPlan,
+]
 
 
 def _plan_serpentine(
@@ -326,39 +240,75 @@ def _plan_serpentine(
     previous: LocalPlan | None,
     shift: int,
 ) -> LocalPlan:
-    """``serpentine``: Sharma's two groups (module doc)."""
+    """``serpentine``: Sharma's two groups (:mod:`controller.planning.serpentine`)."""
     trace, group = serpentine(roll, state.serpentine_group)
     e = roll.energy(trace)
     return make_plan(roll, trace, e, "ok", group=group)
 
 
-def _plan_annealed(
-    roll: Rollout,
-    state: TransportState,
-    params: TransportParams,
-    rng: np.random.Generator,
-    previous: LocalPlan | None,
-    shift: int,
-) -> LocalPlan:
-    """``sa`` and ``downhill`` (only ΔE <= 0 accepted): annealing over the action matrix."""
-    start = roll.run(initial_matrix(roll, rng, previous, shift))
-    if previous is not None and params.initial_actions == "lp":
-        # the previous plan shifted, or the least-force pushing set now: the better start
-        fresh = roll.run(lp_matrix(roll, params.intervals))
-        if roll.energy(fresh).total < roll.energy(start).total:
-            start = fresh
-    best, accepted = anneal(roll, start, params, rng, downhill=params.strategy == "downhill")
-    return make_plan(roll, best, roll.energy(start), "ok", params.iterations, accepted)
+def _annealer(downhill: bool) -> LocalPlanner:
+    """``sa``, or ``downhill`` (only ΔE <= 0 accepted): annealing over the action matrix."""
+
+    def plan(
+        roll: Rollout,
+        state: TransportState,
+        params: TransportParams,
+        rng: np.random.Generator,
+        previous: LocalPlan | None,
+        shift: int,
+    ) -> LocalPlan:
+        start = roll.run(initial_matrix(roll, rng, previous, shift))
+        if previous is not None and params.initial_actions == "lp":
+            # the previous plan shifted, or the least-force pushing set now: the better start
+            fresh = roll.run(lp_matrix(roll, params.intervals))
+            if roll.energy(fresh).total < roll.energy(start).total:
+                start = fresh
+        best, accepted = anneal(roll, start, params, rng, downhill=downhill)
+        return make_plan(roll, best, roll.energy(start), "ok", params.iterations, accepted)
+
+    return plan
 
 
-#: ``transport.strategy`` name -> local planner (roll, state, params, rng, previous, shift).
-#: The valid names are ``controller.config.TRANSPORT_STRATEGIES`` (checked at config load;
-#: tests/unit/test_transport.py checks both name the same strategies).
-LOCAL_PLANNERS = {
-    "sa": _plan_annealed,
-    "downhill": _plan_annealed,
-    "serpentine": _plan_serpentine,
+@dataclass(frozen=True)
+class LocalStrategy:
+    """A ``transport.strategy``: its planner and what the rest of the transport asks of it
+    (the annealer's warm start, the mission's followers, the arrangement), so no call site
+    compares names."""
+
+    name: str
+    plan: LocalPlanner
+    # its plan's action matrix may start the next annealing (shifted by the intervals elapsed)
+    warm_starts: bool
+    # a FOLLOW robot keeps its contact with zero force, moving with the measured object
+    # (Sharma §4.3); else it follows the plan's velocity like every attached robot
+    passive_followers: bool
+    # the pushing set: Eq. 5 for every robot, alone (Sharma §4.1); else Eq. 5 confirmed by
+    # the contact-force LP, or the LP's least-force set (``planning.arrangement``)
+    eq5_alone: bool
+
+
+#: ``transport.strategy`` name -> its strategy. The valid names are
+#: ``controller.config.TRANSPORT_STRATEGIES`` (checked at config load; tests/unit/test_config.py
+#: checks both name the same strategies).
+LOCAL_STRATEGIES = {
+    s.name: s
+    for s in (
+        LocalStrategy("sa", _annealer(downhill=False), True, False, False),
+        LocalStrategy("downhill", _annealer(downhill=True), True, False, False),
+        LocalStrategy("serpentine", _plan_serpentine, False, True, True),
+    )
 }
+#: name -> planner (as before the registry)
+LOCAL_PLANNERS = {name: s.plan for name, s in LOCAL_STRATEGIES.items()}
+
+
+def local_strategy(name: str) -> LocalStrategy:
+    """The registered strategy ``name`` (a ValueError naming the known ones)."""
+    try:
+        return LOCAL_STRATEGIES[name]
+    except KeyError:
+        known = ", ".join(sorted(LOCAL_STRATEGIES))
+        raise ValueError(f"unknown transport strategy {name!r}; expected one of {known}") from None
 
 
 class TransportPlanner:

@@ -36,8 +36,8 @@ ACTIONS = ("push", "follow", "slide_left", "slide_right", "relocate", "idle")
 PUSH, FOLLOW, SLIDE_LEFT, SLIDE_RIGHT, RELOCATE, IDLE = range(len(ACTIONS))
 ATTACHED = (PUSH, FOLLOW, SLIDE_LEFT, SLIDE_RIGHT)  # actions that keep a contact
 
-# the transport.strategy names (one registry: controller.config; their planners:
-# controller.planning.transport.LOCAL_PLANNERS)
+# the transport.strategy names (one registry: controller.config; their strategies:
+# controller.planning.transport.LOCAL_STRATEGIES)
 STRATEGIES = TRANSPORT_STRATEGIES
 SCHEDULES = ("geometric", "logarithmic")
 

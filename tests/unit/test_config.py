@@ -296,6 +296,30 @@ def test_transport_strategy_names_are_one_registry():
     assert "expected one of 'sa', 'serpentine', 'downhill', got 'greedy'" in str(err.value)
 
 
+def test_no_call_site_compares_a_strategy_name():
+    """The annealer's warm start, the mission's followers and the arrangement ask the strategy
+    object (``planning.transport.LOCAL_STRATEGIES``), never its name (issue 35 item 4): no
+    comparison of anything named ``strategy`` with a string outside the config."""
+    import ast
+
+    from tests.support.config import ROOT
+
+    found = []
+    for path in sorted((ROOT / "controller").rglob("*.py")):
+        if "config" in path.parts:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if not isinstance(node, ast.Compare):
+                continue
+            sides = [node.left, *node.comparators]
+            named = any("strategy" in ast.unparse(x) for x in sides)
+            if named and any(
+                isinstance(x, ast.Constant) and isinstance(x.value, str) for x in sides
+            ):
+                found.append(f"{path.relative_to(ROOT)}:{node.lineno}: {ast.unparse(node)}")
+    assert found == []
+
+
 @pytest.mark.parametrize("strategy", ["sa", "downhill", "serpentine"])
 def test_each_strategy_plans_through_the_registry(strategy):
     from controller.planning.transport import plan_local

@@ -13,14 +13,16 @@ import pytest
 from controller import geometry
 from controller.config import ConfigError
 from controller.planning.contact_lp import GRAVITY, solve_reference
+from controller.planning.serpentine import (
+    serpentine_groups,
+    serpentine_switch,
+    serpentine_threshold,
+)
 from controller.planning.transport import (
     TransportPlanner,
     accept,
     initial_matrix,
     plan_local,
-    serpentine_groups,
-    serpentine_switch,
-    serpentine_threshold,
     temperature,
 )
 from controller.planning.transport_model import (
