@@ -69,7 +69,7 @@ def plan_arrangement(
     robots: int,
     turn_margin: float,
     rng: np.random.Generator,
-    strategy: str = "",
+    strategy: str = "sa",
 ) -> Arrangement:
     """The contact set for a segment whose unit twist is ``twist`` (object frame), pushed at
     ``speed`` m/s by ``robots`` robots whose weakest pushes ``weakest`` N: Sharma's Eq. 5 along
