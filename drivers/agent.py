@@ -158,10 +158,14 @@ class Agent:
         params: AgentParams,
         commands_arrived: threading.Condition | None = None,
         latch_at_start: wire.EStop | None = FRESH_WORLD,
+        estop_bus=None,
     ) -> None:
         """``commands_arrived`` is notified when a command arrives (the lockstep waits on it).
         ``latch_at_start``: the e-stop latch the agent starts with - a fresh world's release (the
-        dry run, tests: the default) or None: unknown, the robot stopped (``fleet driver``)."""
+        dry run, tests: the default) or None: unknown, the robot stopped (``fleet driver``).
+        ``estop_bus``: the e-stop's second path (a session to the daemon's own listener): the
+        operators' e-stops are taken from it too and the latch answered there, so an e-stop
+        reaches the robot with the hub hung or dead."""
         self.bus = bus
         self.driver = driver
         self.params = params
@@ -175,10 +179,15 @@ class Agent:
         # lossless: the lockstep handshake counts every command, and no e-stop may be lost
         self._cmds = bus.subscribe_topic("robot_cmd", waker=commands_arrived, lossless=True, id=rid)
         self._estops = bus.subscribe_topic("estop", lossless=True)
+        self._second_estops = (
+            None if estop_bus is None else estop_bus.subscribe_topic("estop", lossless=True)
+        )
         self._latch_replies = _Replies()
         self._pose_pub = bus.publisher("robot_pose", id=rid)
         self._event_pub = bus.publisher("robot_event", id=rid)
         self._latch_key = bus.serve_estop("robot", rid, self.latch_state)
+        if estop_bus is not None:
+            estop_bus.serve_estop("robot", rid, self.latch_state)
         self._token = bus.declare_alive("robot", rid)
         self.link_ok = True
         self.latch_answered = False  # some other holder answered a latch query
@@ -259,8 +268,9 @@ class Agent:
         if replies:
             self.latch_answered = True
             self._apply_answers(replies)
-        for item in self._estops.drain():
-            self._apply_operator(item.msg, now)
+        for inbox in (self._estops, self._second_estops):  # a repeat is harmless (its epoch)
+            for item in [] if inbox is None else inbox.drain():
+                self._apply_operator(item.msg, now)
         latest = None
         for item in self._cmds.drain():
             skewed = self.core.counters.skewed

@@ -55,7 +55,8 @@ def run(args) -> int:
     from controller import wire
     from controller.cli import emit_json
     from controller.config import load_config, operator_identity
-    from controller.io.bus import Bus, BusError
+    from controller.io.bus import BusError
+    from controller.runtime.estop import open_tool_session
 
     cfg = load_config(args.config)
     identity = operator_identity(cfg, args.user, args.password_file)
@@ -63,14 +64,8 @@ def run(args) -> int:
     connect = args.connect or list(cfg.zenoh.listen)
     source = f"{getpass.getuser()}@{socket.gethostname()}"
     try:
-        bus = Bus(
-            cfg.zenoh,
-            cfg.fleet.name,
-            mode="client",
-            listen=[],
-            connect=connect,
-            identity=identity,
-        )
+        # estop/resume with zenoh.estop_listen: the hub's path and the daemon's second at once
+        session, bus = open_tool_session(cfg, identity, connect, word in ("estop", "resume"))
     except BusError as exc:
         if args.json:
             extra = {}
@@ -87,7 +82,7 @@ def run(args) -> int:
             f"fleet {word}: no daemon of fleet {cfg.fleet.name!r} answered: {exc}", file=sys.stderr
         )
         return 1
-    with bus:
+    with session:
         if word in ("estop", "resume"):
             from controller.runtime.estop import describe_put, exit_status, put_estop
 

@@ -150,6 +150,10 @@ class ZenohSection:
     listen: tuple[str, ...] = _rule(("tcp/127.0.0.1:7447",))
     connect: tuple[str, ...] = _rule(())
     multicast_scouting: bool = _rule(False)
+    # the e-stop's second path (docs/lab/safety.md): endpoints the daemon also listens on, a
+    # router of its own for the e-stop alone; every agent and fleet estop/resume connect there
+    # too, so an e-stop reaches every robot with the hub hung or dead. Empty: the hub only
+    estop_listen: tuple[str, ...] = _rule(())
     # s: the longest a session waits between attempts to reach a lost ``connect`` endpoint
     # (the hub restarted): it retries after 0.25 s, then doubling up to this; 0: zenoh's own
     # back-off (1 s, doubling up to 4 s), which let a hub restart take seconds longer to heal

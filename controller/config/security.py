@@ -87,9 +87,11 @@ def _host_error(host: str) -> str | None:
 
 
 def _check_zenoh(section: ZenohSection, src: str) -> None:
-    for key in ("listen", "connect"):
+    for key in ("listen", "connect", "estop_listen"):
         for i, endpoint in enumerate(getattr(section, key)):
-            problem = endpoint_error(endpoint, listen=key == "listen")
+            problem = endpoint_error(endpoint, listen=key != "connect")
+            if not problem and key == "estop_listen" and endpoint in section.listen:
+                problem = f"{endpoint!r} is zenoh.listen's too: the second path needs its own"
             if problem:
                 found(ConfigError(src, f"zenoh.{key}[{i}]", problem))
 
@@ -248,10 +250,10 @@ def _check_tls_endpoints_need_tls(z: ZenohSection, src: str) -> None:
     """A tls/ endpoint needs the TLS files: zenoh.tls (a listening hub its certificate and key,
     everyone the root CA), or, for an endpoint that carries its own TLS settings after '#',
     those (zenoh's per-endpoint config)."""
-    for key in ("listen", "connect"):
+    for key in ("listen", "connect", "estop_listen"):
         for j, ep in enumerate(getattr(z, key)):
             if ep.startswith("tls/") and "#" not in ep:
-                need = "certificate, private_key, root_ca" if key == "listen" else "root_ca"
+                need = "root_ca" if key == "connect" else "certificate, private_key, root_ca"
                 raise ConfigError(
                     src,
                     f"zenoh.{key}[{j}]",
@@ -271,7 +273,7 @@ def _zenoh_tls(z: ZenohSection, src: str) -> TlsSection | None:
         raise ConfigError(src, "zenoh.tls.private_key", "certificate and private_key go together")
     if z.listen and not tls.certificate:
         raise ConfigError(src, "zenoh.tls.certificate", "missing: the listening hub's certificate")
-    for key in ("listen", "connect"):
+    for key in ("listen", "connect", "estop_listen"):
         for j, ep in enumerate(getattr(z, key)):
             if not ep.startswith("tls/"):
                 raise ConfigError(

@@ -137,9 +137,11 @@ def zenoh_config(
     connect: Sequence[str] | None = None,
     lease_s: float | None = None,
     identity: ZenohIdentity | None = None,
+    open_timeout_s: float | None = None,
 ) -> zenoh.Config:
     """A zenoh Config from the ``[zenoh]`` section, with per-role overrides: every session of
-    every role is built here.
+    every role is built here. ``open_timeout_s``: how long a link's handshake may take (zenoh:
+    10 s; a tool that must not wait on a hung hub sets less).
 
     ``zenoh.config_file`` (JSON5) is the base, our settings go over it. Multicast and gossip
     scouting follow the section (off by default): endpoints are explicit. ``identity`` is who
@@ -169,6 +171,8 @@ def zenoh_config(
         conf.insert_json5("connect/retry", json.dumps(retry | {"period_increase_factor": 2}))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(section.multicast_scouting))
     conf.insert_json5("scouting/gossip/enabled", json.dumps(section.gossip_scouting))
+    if open_timeout_s is not None:
+        conf.insert_json5("transport/unicast/open_timeout", json.dumps(int(open_timeout_s * 1000)))
     if lease_s is not None:
         conf.insert_json5("transport/link/tx/lease", json.dumps(int(lease_s * 1000)))
         conf.insert_json5("transport/link/tx/keep_alive", json.dumps(4))
@@ -514,6 +518,7 @@ class Bus:
         connect: Sequence[str] | None = None,
         lease_s: float | None = None,
         identity: ZenohIdentity | None = None,
+        open_timeout_s: float | None = None,
     ) -> None:
         self.fleet = fleet
         self.stats = DecodeStats()
@@ -524,7 +529,13 @@ class Bus:
         self._decoder_thread: Decoder | None = None
         self._handles: list[Any] = []
         conf = zenoh_config(
-            section, mode=mode, listen=listen, connect=connect, lease_s=lease_s, identity=identity
+            section,
+            mode=mode,
+            listen=listen,
+            connect=connect,
+            lease_s=lease_s,
+            identity=identity,
+            open_timeout_s=open_timeout_s,
         )
         try:
             self.session = zenoh.open(conf)
@@ -854,3 +865,90 @@ class Bus:
             if reply.ok is not None:
                 out.append(str(reply.ok.key_expr)[len(prefix) :])
         return sorted(set(out))
+
+
+class Paths:
+    """Several sessions of one fleet used as one for the e-stop (``zenoh.estop_listen``: the
+    hub's, and the daemon's second listener's): a put goes out on each, a query asks on each
+    and yields every reply; a session that opens late (a hung hub's) joins when it opens
+    (``add``). Quacks like the ``Bus`` the e-stop tool uses."""
+
+    def __init__(self, fleet: str, buses: Sequence[Bus] = ()) -> None:
+        self.fleet = fleet
+        self._buses = list(buses)
+        self._lock = threading.Lock()
+
+    def add(self, bus: Bus) -> None:
+        with self._lock:
+            self._buses.append(bus)
+
+    def buses(self) -> list[Bus]:
+        with self._lock:
+            return list(self._buses)
+
+    def key(self, topic: str, **parts: str) -> str:
+        return wire.key(topic, self.fleet, **parts)
+
+    def estop_wildcard(self) -> str:
+        return wire.TOPICS["estop_state"].wildcard(self.fleet)
+
+    def publisher(self, topic: str, **parts: str) -> _Fanout:
+        return _Fanout(self, topic, parts)
+
+    def alive_ids_async(self, role: str, sink: list[str], timeout: float = 1.0) -> None:
+        for bus in self.buses():
+            bus.alive_ids_async(role, sink, timeout)
+
+    def query_replies(
+        self, key_expr: str, msg_type: type[wire.Message], timeout: float
+    ) -> Iterator[tuple[str, wire.Message]]:
+        """Every path's replies as they come, until every path's query is answered by all or
+        ``timeout`` (the caller may stop early; a hung path then costs nothing more)."""
+        import queue
+
+        buses = self.buses()
+        out: queue.Queue = queue.Queue()
+
+        def ask(bus: Bus) -> None:
+            try:
+                for reply in bus.query_replies(key_expr, msg_type, timeout):
+                    out.put(reply)
+            except Exception as exc:  # noqa: BLE001 - a closing session: that path is done
+                log.debug("a path's query ended: %s", exc)
+            out.put(None)  # this path is done
+
+        for bus in buses:
+            threading.Thread(target=ask, args=(bus,), daemon=True).start()
+        deadline = time.monotonic() + max(float(timeout), _MIN_QUERY_S)
+        pending = len(buses)
+        while pending and (left := deadline - time.monotonic()) > 0:
+            try:
+                item = out.get(timeout=left)
+            except queue.Empty:
+                return
+            if item is None:
+                pending -= 1
+            else:
+                yield item
+
+
+class _Fanout:
+    """One topic's publisher on every path of a ``Paths``, a late path's declared at its first
+    put."""
+
+    def __init__(self, paths: Paths, topic: str, parts: dict[str, str]) -> None:
+        self._paths, self._topic, self._parts = paths, topic, parts
+        self._pubs: dict[int, Publisher] = {}
+
+    def _each(self) -> list[Publisher]:
+        for bus in self._paths.buses():
+            if id(bus) not in self._pubs:
+                self._pubs[id(bus)] = bus.publisher(self._topic, **self._parts)
+        return list(self._pubs.values())
+
+    def put(self, msg: wire.Message) -> None:
+        for pub in self._each():
+            pub.put(msg)
+
+    def matching(self) -> bool:
+        return any(pub.matching() for pub in self._each())

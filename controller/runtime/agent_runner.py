@@ -6,6 +6,7 @@ import logging
 import math
 import threading
 import time
+from contextlib import AbstractContextManager, nullcontext
 
 from controller.config import FleetConfig
 from controller.io.bus import Bus
@@ -33,6 +34,30 @@ def robot_bus(cfg: FleetConfig, who: str) -> Bus:
         lease_s=cfg.fleet.liveliness_lease,
         identity=cfg.zenoh_identity(who),
     )
+
+
+def robot_estop_path(cfg: FleetConfig, who: str) -> AbstractContextManager[Bus | None]:
+    """Robot ``who``'s session on the e-stop's second path (``zenoh.estop_listen``, the
+    daemon's own listener), or None (as a context) when there is none. A peer that listens
+    nowhere and gossips with nobody: it opens while the daemon is down and reaches it when it
+    comes (no link around the hub's ACL: only to the daemon's router, under the same rules)."""
+    from controller.io.bus import BusError
+
+    if not cfg.zenoh.estop_listen:
+        return nullcontext(None)
+    try:
+        return Bus(
+            cfg.zenoh,
+            cfg.fleet.name,
+            mode="peer",
+            listen=[],
+            connect=list(cfg.zenoh.estop_listen),
+            lease_s=cfg.fleet.liveliness_lease,
+            identity=cfg.zenoh_identity(who),
+        )
+    except BusError as exc:
+        log.error("%s: the e-stop's second path cannot open (%s): the hub's only", who, exc)
+        return nullcontext(None)
 
 
 def _open_until(stop: threading.Event, cfg: FleetConfig, who: str) -> Bus | None:
@@ -95,11 +120,12 @@ def run_agent(
         bus = _open_until(stop, cfg, robot_id)
         if bus is None:
             return 0, ""
-        with bus:
+        with bus, robot_estop_path(cfg, robot_id) as second:
             hold = driver_class(robot).holds_on_loss
             return _serve(
-                cfg, robot, bus, driver, stop, duration, wall0, hub, exit_on_loss=not hold
-            )
+                cfg, robot, bus, driver, stop, duration, wall0, hub, exit_on_loss=not hold,
+                estop_bus=second,
+            )  # fmt: skip
     finally:
         driver.close()
         if hub is not None:
@@ -123,7 +149,7 @@ def _run_remote(
     bus = _open_until(stop, cfg, robot.id)
     if bus is None:
         return 0, ""
-    with bus:
+    with bus, robot_estop_path(cfg, robot.id) as second:
         driver = remote(bus, cfg, robot)
         try:
             driver.connect(timeout=connect_timeout)
@@ -132,7 +158,10 @@ def _run_remote(
         try:
             # the world going silent (restarted, or starved of CPU) is not the end of the agent:
             # it reports link_lost, holds the robot stopped, and link_restored when it is back
-            return _serve(cfg, robot, bus, driver, stop, duration, wall0, None, exit_on_loss=False)
+            return _serve(
+                cfg, robot, bus, driver, stop, duration, wall0, None, exit_on_loss=False,
+                estop_bus=second,
+            )  # fmt: skip
         finally:
             driver.close()
 
@@ -148,9 +177,10 @@ def _serve(
     hub: SimHub | None,
     *,
     exit_on_loss: bool = True,
+    estop_bus: Bus | None = None,
 ) -> tuple[int, str]:
     """The agent's wall-clock loop until ``stop``, ``duration`` or (``exit_on_loss``) a lost
-    link."""
+    link. ``estop_bus``: the e-stop's second path (``robot_estop_path``)."""
     from controller.io.ratekeeper import Ratekeeper
 
     if already_served(bus, "robot", robot.id, cfg.fleet.liveliness_lease, stop):
@@ -164,7 +194,7 @@ def _serve(
     params = AgentParams(robot.id, cfg.fleet.name, cfg.fleet.cmd_ttl, skew, release_max_age=skew)
     # the latched e-stop first: a fresh agent is stopped ("fail closed") until it learns the
     # latch (an engaged answer, or the hub's or the controller's) or an operator releases it
-    agent = Agent(bus, driver, params, latch_at_start=None)
+    agent = Agent(bus, driver, params, latch_at_start=None, estop_bus=estop_bus)
     if not agent.sync_latch(LATCH_WAIT):  # a fresh lab: nobody knows the latch yet (normal)
         log.info("robot %s: no holder knows the e-stop yet (a fresh lab)", robot.id)
     state = agent.core.latch.state()
@@ -178,6 +208,11 @@ def _serve(
         else ("ENGAGED" if state.engaged else "off"),
     )
     agent.announce(time.time())
+    if hub is not None:
+        # its own world ran nothing while the agent waited for the bus (the daemon's start):
+        # brought to the clock at once, before any command (else its poses came stamped in
+        # the past, dropped as skewed, while the capped catch-up below slowly made it good)
+        hub.advance_to(time.time() - wall0)
     rate = max(cfg.fleet.rate_hz, 20.0)
     rk = Ratekeeper(rate)
     catch_up = None if hub is None else max(1, math.ceil(2.0 / (rate * hub.dt)))

@@ -238,6 +238,34 @@ def open_daemon_session(cfg: FleetConfig) -> tuple[Bus, str, subprocess.Popen | 
     return bus, how, None
 
 
+def open_estop_path(cfg: FleetConfig) -> Bus | None:
+    """The e-stop's second path: a router of the daemon's own on ``zenoh.estop_listen`` (the
+    hub's security applied: password dictionary, TLS, ACL), which every agent and ``fleet
+    estop`` also connect to. None when not configured, or when it cannot listen there (said
+    loudly: the hub is then the e-stop's only path)."""
+    if not cfg.zenoh.estop_listen:
+        return None
+    where = list(cfg.zenoh.estop_listen)
+    try:
+        return Bus(cfg.zenoh, cfg.fleet.name, mode="router", listen=where, connect=[])
+    except BusError as exc:
+        log.error(
+            "zenoh.estop_listen %s: cannot listen (%s): the e-stop's only path is the hub",
+            where,
+            exc,
+        )
+        return None
+
+
+def _second_text(cfg: FleetConfig, second: Bus | None) -> str:
+    return "" if second is None else f"; e-stop also on {list(cfg.zenoh.estop_listen)}"
+
+
+def _close(bus: Bus | None) -> None:
+    if bus is not None:
+        bus.close()
+
+
 def _client_of_hub(cfg: FleetConfig) -> Bus:
     return Bus(
         cfg.zenoh,
@@ -270,6 +298,7 @@ def run_daemon(
             planners.close()
         return claimed
     bus, how, claim, own_hub = claimed
+    second = open_estop_path(cfg)  # after the claim: a second daemon never listens there
     recorder = open_recorder(cfg, out, f"daemon/{mission_kind}", viz=viz, who="fleet daemon")
     status = 0
     health = ""
@@ -297,13 +326,15 @@ def run_daemon(
                 planners=planners,
                 ident=claim.ident,
                 latch_at_start=file.load_kept("controller/main"),
+                estop_bus=second,
             )
             # the wall clock: see the latch
             node.estop_latch.release_max_age = cfg.fleet.max_clock_skew
             latch = LatchWatch(node, LatchKeeper(node.estop_latch.latch, file))
             latch.start(time.monotonic(), LATCH_WAIT_AT_START)
             print(
-                f"fleet daemon: fleet {cfg.fleet.name!r} on {list(cfg.zenoh.listen)} ({how}), "
+                f"fleet daemon: fleet {cfg.fleet.name!r} on {list(cfg.zenoh.listen)} ({how}"
+                f"{_second_text(cfg, second)}), "
                 f"{cfg.fleet.rate_hz} Hz, log {recorder.location}, controller {claim.ident}",
                 file=sys.stderr,
             )
@@ -369,6 +400,7 @@ def run_daemon(
             )
     finally:
         recorder.close()
+        _close(second)
         stop_hub_process(own_hub)
         if planners is not None:
             planners.close()

@@ -117,6 +117,80 @@ def put_estop(
     }
 
 
+# s: the hub's handshake ``fleet estop`` waits for on its own (zenoh's default is 10 s: a hung
+# hub cost the tool that much before it put anything); the second path does not wait for it
+TOOL_OPEN_S = 2.0
+
+
+class ToolPaths:
+    """``fleet estop|resume``'s sessions with ``zenoh.estop_listen`` set: the hub's (a client of
+    ``connect``) and the daemon's second listener's (a client too: a router passes a peer's
+    queries on to other peers only when they are linked, so the agents, peers there, would not
+    answer a peer tool), opened at once, each in a thread. Entering returns as soon as one is
+    open (a ``controller.io.bus.Paths``; the other joins when it opens); BusError when none
+    does. Leaving closes both (a hung hub's handshake fails after ``TOOL_OPEN_S``)."""
+
+    def __init__(self, cfg: FleetConfig, identity, connect: list[str]) -> None:
+        import threading
+
+        from controller.io.bus import Bus, Paths
+
+        self.paths = Paths(cfg.fleet.name)
+        self._errors: list[Exception] = []
+        self._cond = threading.Condition()
+        self._opened: list[Bus] = []
+        ways = [
+            dict(mode="client", connect=connect, open_timeout_s=TOOL_OPEN_S),
+            dict(mode="client", connect=list(cfg.zenoh.estop_listen), open_timeout_s=1.0),
+        ]
+
+        def open_one(way: dict) -> None:
+            try:
+                bus = Bus(cfg.zenoh, cfg.fleet.name, listen=[], identity=identity, **way)
+            except Exception as exc:  # noqa: BLE001 - said by __enter__ when none opens
+                with self._cond:
+                    self._errors.append(exc)
+                    self._cond.notify_all()
+                return
+            with self._cond:
+                self._opened.append(bus)
+                self.paths.add(bus)
+                self._cond.notify_all()
+
+        self._threads = [threading.Thread(target=open_one, args=(w,), daemon=True) for w in ways]
+        for t in self._threads:
+            t.start()
+
+    def __enter__(self):
+        from controller.io.bus import BusError
+
+        with self._cond:
+            self._cond.wait_for(lambda: self._opened or len(self._errors) == len(self._threads))
+            if not self._opened:
+                raise BusError("; ".join(str(e) for e in self._errors))
+        return self.paths
+
+    def __exit__(self, *exc: object) -> None:
+        for t in self._threads:
+            t.join()
+        for bus in self._opened:
+            bus.close()
+
+
+def open_tool_session(cfg: FleetConfig, identity, connect: list[str], estop: bool):
+    """A command-line tool's session and the bus it talks through: for an e-stop or a resume
+    with ``zenoh.estop_listen`` set, both paths (``ToolPaths``); else a client of ``connect``.
+    Raises BusError when nothing opens."""
+    from controller.io.bus import Bus
+
+    if estop and cfg.zenoh.estop_listen:
+        session = ToolPaths(cfg, identity, connect)
+        return session, session.__enter__()
+    z = cfg.zenoh
+    bus = Bus(z, cfg.fleet.name, mode="client", listen=[], connect=connect, identity=identity)
+    return bus, bus
+
+
 def describe_put(word: str, result: dict[str, Any]) -> str:
     """``fleet estop|resume``'s text: confirmed or not, and whether every holder keeps it."""
     missing = result["agents_missing"]

@@ -61,6 +61,7 @@ class ControllerNode:
         planners: Any = None,
         ident: str = "main",
         latch_at_start: wire.EStop | None = FRESH_WORLD,
+        estop_bus=None,
     ) -> None:
         """``clock`` (s, monotonic) only times the stages; ``extra_drops`` adds drop counters
         of other parts (the recorder) to ``fleet status``; ``planners`` (the planner worker)
@@ -69,7 +70,8 @@ class ControllerNode:
         e-stop latch this node starts with - a fresh world's release (the dry run, replay,
         tests: the default), the latch's file, or None: unknown, commanding zero until it
         learns the latch or an operator releases it (the lab daemon).
-        ``lossless_commands``: the lockstep dry run (no inbox or command ever dropped)."""
+        ``lossless_commands``: the lockstep dry run (no inbox or command ever dropped).
+        ``estop_bus``: the e-stop's second path (the daemon's, ``zenoh.estop_listen``)."""
         self.ident = ident
         self.clock = clock
         self.planners = planners
@@ -88,7 +90,7 @@ class ControllerNode:
         self.last_output: MissionOutput | None = None
         lossless = lossless_commands
         self.inputs = NodeInputs(cfg, bus, self.counters, lossless, lambda: self.job_over)
-        self.estop_latch = NodeLatch(bus, cfg.fleet.name, latch_at_start)
+        self.estop_latch = NodeLatch(bus, cfg.fleet.name, latch_at_start, estop_bus)
         self.outputs = NodeOutputs(cfg, bus, self.counters, lossless)
         bus.serve("status", self.status)
         bus.declare_alive("controller", ident)

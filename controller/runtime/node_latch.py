@@ -20,7 +20,10 @@ log = logging.getLogger("controller.runtime.node")  # the node's own log, whiche
 class NodeLatch:
     """The latched e-stop as the controller holds it, and the bus plumbing that keeps it."""
 
-    def __init__(self, bus, fleet: str, at_start: wire.EStop | None) -> None:
+    def __init__(self, bus, fleet: str, at_start: wire.EStop | None, second=None) -> None:
+        """``second``: the e-stop's second path (the daemon's own listener,
+        ``zenoh.estop_listen``): the operators' e-stops are taken from it too, and the latch
+        answered there (a hung hub then delays neither)."""
         self.bus = bus
         self.fleet = fleet
         self.latch = Latch("controller/main", at_start)
@@ -29,9 +32,14 @@ class NodeLatch:
         # s: an operator's release stamped further than this from the tick's time is refused
         # (a replayed old resume); the daemon sets fleet.max_clock_skew, the dry run none
         self.release_max_age = math.inf
-        self._estops = bus.subscribe_topic("estop", lossless=True)  # never drop an e-stop
+        # never drop an e-stop, whichever path it comes by
+        self._estops = [
+            b.subscribe_topic("estop", lossless=True) for b in (bus, second) if b is not None
+        ]
         self._replies = Inbox()
         self._key = bus.serve_estop("controller", "main", self.answer)
+        if second is not None:
+            second.serve_estop("controller", "main", self.answer)
 
     @property
     def stopped(self) -> bool:
@@ -76,9 +84,10 @@ class NodeLatch:
             self.pending = False
             note_latch("controller", self.latch.answers(replies))
         age = self.release_max_age  # the lab's wall clock only (see drivers.agent.AgentParams)
-        for item in self._estops.drain():
-            stamp = now if math.isfinite(age) else None
-            note_latch("controller", self.latch.operator(item.msg, stamp, age))
+        for inbox in self._estops:
+            for item in inbox.drain():
+                stamp = now if math.isfinite(age) else None
+                note_latch("controller", self.latch.operator(item.msg, stamp, age))
 
     def counters(self) -> dict[str, int]:
         """The latch in ``fleet status``: its epoch, 1 while unknown, refusals so far."""

@@ -84,11 +84,19 @@ def tail(p: subprocess.Popen, n: int = 2000) -> str:
     return Path(p.log_path).read_text()[-n:]  # type: ignore[attr-defined]
 
 
-def lab_config(tmp_path: Path, port: int, robots: int = 2, **fleet_keys: Any) -> Path:
-    """The shipped config cut to ``robots`` robots, on the ideal backend, zenoh on ``port``."""
+def lab_config(
+    tmp_path: Path,
+    port: int,
+    robots: int = 2,
+    zenoh: dict[str, Any] | None = None,
+    **fleet_keys: Any,
+) -> Path:
+    """The shipped config cut to ``robots`` robots, on the ideal backend, zenoh on ``port``
+    (``zenoh``: more keys of that section)."""
     cfg = base_config_dict()
     cfg["robots"] = cfg["robots"][:robots]
     cfg["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
+    cfg["zenoh"].update(zenoh or {})
     cfg["sim"]["backend"] = "ideal"
     cfg["log"] = {"dir": str(tmp_path / "runs")}
     cfg["fleet"].update(fleet_keys)
