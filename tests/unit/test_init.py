@@ -61,15 +61,20 @@ def test_every_example_passes_fleet_check(kind, tmp_path, monkeypatch, capsys):
 @pytest.mark.parametrize("kind", LAB_KINDS)
 def test_every_lab_example_is_the_dry_runs_job_on_the_lab_bus(kind):
     """The same room, object, planners and robots (ids, kinds, sizes, starts) as fleet.toml;
-    the fleet's bus listening on 127.0.0.1:7447, logs in runs/, sim robots in the shared
-    world process."""
+    the fleet's bus listening on 127.0.0.1:7447 (the e-stop's second path on 7449), logs in
+    runs/, sim robots in the shared world process."""
     dry, lab = _data(DEFAULT_KIND), _data(kind)
     for section in JOB_SECTIONS:
         assert lab[section] == dry[section], section
     assert [{k: r[k] for k in ROBOT_BODY} for r in lab["robots"]] == [
         {k: r[k] for k in ROBOT_BODY} for r in dry["robots"]
     ]
-    assert lab["zenoh"] == {"mode": "peer", "listen": ["tcp/127.0.0.1:7447"], "connect": []}
+    assert lab["zenoh"] == {
+        "mode": "peer",
+        "listen": ["tcp/127.0.0.1:7447"],
+        "connect": [],
+        "estop_listen": ["tcp/127.0.0.1:7449"],  # the e-stop's second path (the daemon's)
+    }
     assert lab["log"] == {"dir": "runs"}
     assert lab["sim"] == {**dry["sim"], "world": "process"}
 
