@@ -82,6 +82,13 @@ class SafetyStage:
         if intent.touch is not None:
             exempt[:, -1] = intent.touch
         stale = view.stale | ~view.present
+        # robots commanded exactly zero after the filter (``hold``) are fixed in it too, as a
+        # stale robot is: the others keep every barrier to them alone (filtered as movable, a
+        # held robot was given the avoiding to do, which it never did - a differential robot
+        # drove into a caging one in the README lab's close-in)
+        fixed = stale.copy()
+        if intent.hold is not None:
+            fixed[intent.hold] = True
         motion = [None] * len(self.obstacles) + [view.object_velocity]
         overlap = np.full(self.n, intent.overlap)
         res = self.filter.filter(
@@ -89,7 +96,7 @@ class SafetyStage:
             vel,
             polys,
             exempt=exempt,
-            stale=stale,
+            stale=fixed,
             motion=motion,
             overlap=overlap,
             hold=intent.touch if intent.cage else None,
