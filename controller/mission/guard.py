@@ -82,13 +82,7 @@ class SafetyStage:
         if intent.touch is not None:
             exempt[:, -1] = intent.touch
         stale = view.stale | ~view.present
-        # robots commanded exactly zero after the filter (``hold``) are fixed in it too, as a
-        # stale robot is: the others keep every barrier to them alone (filtered as movable, a
-        # held robot was given the avoiding to do, which it never did - a differential robot
-        # drove into a caging one in the README lab's close-in)
-        fixed = stale.copy()
-        if intent.hold is not None:
-            fixed[intent.hold] = True
+        fixed = _fixed(stale, intent.hold)
         motion = [None] * len(self.obstacles) + [view.object_velocity]
         overlap = np.full(self.n, intent.overlap)
         res = self.filter.filter(
@@ -121,3 +115,14 @@ class SafetyStage:
         cmds[stale] = 0.0
         out.commands = cmds
         return out
+
+
+def _fixed(stale: np.ndarray, hold: np.ndarray | None) -> np.ndarray:
+    """The robots the filter takes as fixed: the stale ones, and those commanded exactly zero
+    after it (``hold``): the others keep every barrier to them alone (filtered as movable, a
+    held robot was given half of the avoiding, which it never did: a differential robot drove
+    into a caging one in the README lab's close-in)."""
+    fixed = stale.copy()
+    if hold is not None:
+        fixed[hold] = True
+    return fixed

@@ -237,6 +237,19 @@ def test_the_controller_node_is_split_by_job():
             assert "time" not in top(imports_of(p)), rel(p)
 
 
+def test_no_function_of_the_mission_layer_is_over_60_lines():
+    """The mission's stages stay readable (issue 35): no function or method in
+    ``controller/mission/`` over 60 lines."""
+    long = []
+    for path in files("controller/mission"):
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                n = node.end_lineno - node.lineno + 1
+                if n > 60:
+                    long.append(f"{rel(path)}:{node.lineno} {node.name} ({n} lines)")
+    assert long == []
+
+
 TEST_FILES = [p for p in files("tests") if "support" not in p.relative_to(ROOT / "tests").parts]
 
 
