@@ -157,7 +157,6 @@ def test_differential_robots_keep_the_margin_in_seeded_encounters():
         assert _encounter(pa, nom_a, nom_b, axis=True) > 0.04, (pa, nom_a, nom_b)
 
 
-
 def _held_barrier(tell_the_filter: bool, gap: float, speed: float) -> float:
     """One guard tick: r1 (omni) caging the crate, held (commanded zero after the filter); r4
     (differential, facing r1) ``gap`` m from it, driving at it at ``speed`` m/s the tick before
