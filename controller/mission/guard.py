@@ -82,7 +82,6 @@ class SafetyStage:
         if intent.touch is not None:
             exempt[:, -1] = intent.touch
         stale = view.stale | ~view.present
-        fixed = _fixed(stale, intent.hold)
         motion = [None] * len(self.obstacles) + [view.object_velocity]
         overlap = np.full(self.n, intent.overlap)
         res = self.filter.filter(
@@ -90,7 +89,7 @@ class SafetyStage:
             vel,
             polys,
             exempt=exempt,
-            stale=fixed,
+            stale=stale,
             motion=motion,
             overlap=overlap,
             hold=intent.touch if intent.cage else None,
@@ -115,14 +114,3 @@ class SafetyStage:
         cmds[stale] = 0.0
         out.commands = cmds
         return out
-
-
-def _fixed(stale: np.ndarray, hold: np.ndarray | None) -> np.ndarray:
-    """The robots the filter takes as fixed: the stale ones, and those commanded exactly zero
-    after it (``hold``): the others keep every barrier to them alone (filtered as movable, a
-    held robot was given half of the avoiding, which it never did: a differential robot drove
-    into a caging one in the README lab's close-in)."""
-    fixed = stale.copy()
-    if hold is not None:
-        fixed[hold] = True
-    return fixed
