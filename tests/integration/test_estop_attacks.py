@@ -255,6 +255,10 @@ def test_an_old_resume_replayed_after_the_latch_files_are_lost_releases_nobody(t
         with connect_client(port, "the hub after the restart") as bus:
             wait_for(lambda: status(cfg).get("ok"), 40, "the daemon after the restart")
             wait_for(lambda: _states(bus, 0.5) == {}, 20, "every holder fresh (unknown)")
+            # a fresh holder answers nothing, so {} held before the agents were up too: their
+            # liveliness tokens come after their e-stop subscriptions (the replay reaches them)
+            up = lambda: sorted(bus.alive_ids("robot", 0.5)) == ["r1", "r2"]  # noqa: E731
+            wait_for(up, 30, "both agents up")
             # the recording is older than the clocks' skew by now (the restart took longer)
             assert time.time() - release.msg.t > load_config(c).fleet.max_clock_skew
             bus.publisher("estop").put(release.msg)  # the replay
