@@ -49,6 +49,7 @@ class SafetyStage:
             len(self.obstacles) + 1,
             margin=ap.safety_margin,
             axial=~self.limits.holonomic,
+            close_margin=cfg.capture.clearance,
         )
         self.v_prev = np.zeros((self.n, 2))
         self.counters = GuardCounters()
@@ -82,6 +83,7 @@ class SafetyStage:
         if intent.touch is not None:
             exempt[:, -1] = intent.touch
         stale = view.stale | ~view.present
+        fixed = _fixed(stale, intent.hold)
         motion = [None] * len(self.obstacles) + [view.object_velocity]
         overlap = np.full(self.n, intent.overlap)
         res = self.filter.filter(
@@ -89,7 +91,7 @@ class SafetyStage:
             vel,
             polys,
             exempt=exempt,
-            stale=stale,
+            stale=fixed,
             motion=motion,
             overlap=overlap,
             hold=intent.touch if intent.cage else None,
@@ -98,6 +100,7 @@ class SafetyStage:
             # pushes are deliberate contacts)
             relax=intent.phase in RELAX_PHASES,
             headings=view.poses[:, 2],
+            close=intent.touch,
         )
         if res.stopped.any():
             self.counters.infeasible += 1
@@ -114,3 +117,14 @@ class SafetyStage:
         cmds[stale] = 0.0
         out.commands = cmds
         return out
+
+
+def _fixed(stale: np.ndarray, hold: np.ndarray | None) -> np.ndarray:
+    """The robots the filter takes as fixed: the stale ones, and those commanded exactly zero
+    after it (``hold``): the others keep every barrier to them alone (filtered as movable, a
+    held robot was given half of the avoiding, which it never did: a differential robot drove
+    into a caging one in the README lab's close-in)."""
+    fixed = stale.copy()
+    if hold is not None:
+        fixed[hold] = True
+    return fixed

@@ -3,6 +3,8 @@
 Decision variable u (2N,), world-frame velocities (m/s). Minimise |u - u_nom|^2 subject to:
 
 - robot-robot: 2 d_ij . (u_i - u_j) >= -gamma * h_ij, h_ij = |d_ij|^2 - (r_i + r_j + margin)^2;
+  two robots both at the object (``close``) keep ``close_margin`` instead (the capture plan's
+  spacing of contact robots: contacts in a concave notch are nearer each other than ``margin``);
 - robot-polygon (obstacles, the object, stale robots as discs): n . u_i >= -gamma * (dist - r -
   margin), n the outward direction from the polygon's closest point;
 - world bounds and speed: a box on each component (the walls and ``max_speed``) and the two
@@ -66,6 +68,7 @@ class SafetyFilter:
     gamma: float = 4.0
     warm: bool = True
     axial: np.ndarray | None = None  # (N,) bool: differential robots (they move along their axis)
+    close_margin: float | None = None  # m between two ``close`` robots (None: ``margin``)
     _prob: osqp.OSQP | None = field(default=None, repr=False)
     _perm: np.ndarray | None = field(default=None, repr=False)
 
@@ -142,6 +145,7 @@ class SafetyFilter:
         hold: np.ndarray | None = None,
         relax: bool = True,
         headings: np.ndarray | None = None,
+        close: np.ndarray | None = None,
     ) -> FilterResult:
         """Filter nominal world velocities (N, 2) at robot centres (N, 2).
 
@@ -157,7 +161,8 @@ class SafetyFilter:
         polygon's motion (a robot caging the object must not yield to its push). ``headings``
         (N,) rad: with them, the ``axial`` (differential) robots' velocities come out along
         their axes (``aim`` holds the free solution they turn toward); without, every robot
-        is filtered as a point that moves any way.
+        is filtered as a point that moves any way. ``close`` (N,) robots at the object: a pair
+        of them keeps ``close_margin`` (when smaller than ``margin``) between their discs.
         """
         n, npoly = self.n, self.n_polygons
         stale = np.zeros(n, bool) if stale is None else np.asarray(stale, bool)
@@ -165,7 +170,7 @@ class SafetyFilter:
         p = positions
         # robot pairs
         d = p[self.pi] - p[self.pj]
-        rs = self.radii[self.pi] + self.radii[self.pj] + self.margin
+        rs = self.radii[self.pi] + self.radii[self.pj] + self._pair_margin(close)
         h = np.sum(d * d, axis=1) - rs**2
         vals = [2 * d[:, 0], -2 * d[:, 0], 2 * d[:, 1], -2 * d[:, 1]]
         lo_pair = -self.gamma * h
@@ -257,6 +262,13 @@ class SafetyFilter:
             status = status if status2.startswith("solved") else status2
         u = np.where(stale[:, None], 0.0, u)
         return FilterResult(u, status, stopped, float(np.abs(u - u_nom).max()), aim)
+
+    def _pair_margin(self, close: np.ndarray | None) -> np.ndarray | float:
+        """Each pair's margin: ``close_margin`` for two ``close`` robots, else ``margin``."""
+        if close is None or self.close_margin is None:
+            return self.margin
+        both = np.asarray(close, bool)[self.pi] & np.asarray(close, bool)[self.pj]
+        return np.where(both, min(self.margin, self.close_margin), self.margin)
 
     def _solve(
         self,

@@ -155,3 +155,74 @@ def test_differential_robots_keep_the_margin_in_seeded_encounters():
         pa = (d * np.cos(ang), d * np.sin(ang), rng.uniform(-np.pi, np.pi))
         nom_a, nom_b = rng.uniform(-0.4, 0.4, 2), rng.uniform(-0.4, 0.4, 2)
         assert _encounter(pa, nom_a, nom_b, axis=True) > 0.04, (pa, nom_a, nom_b)
+
+
+def _held_barrier(tell_the_filter: bool, gap: float, speed: float) -> float:
+    """One guard tick: r1 (omni) caging the crate, held (commanded zero after the filter); r4
+    (differential, facing r1) ``gap`` m from it, driving at it at ``speed`` m/s the tick before
+    and still asked to. Returns how far r4's own command keeps the pair's barrier,
+    2 d.u4 + gamma h (m^2/s): >= 0 kept by r4 alone, < 0 only if r1 moved away, which it will
+    not. ``tell_the_filter`` False is the pipeline before: hold applied only after the filter."""
+    from controller.config import parse_config
+    from controller.mission.guard import SafetyStage
+    from controller.mission.types import FleetView, Intent
+    from tests.support.config import base_config_dict
+
+    data = base_config_dict()
+    data["robots"] = [data["robots"][0], data["robots"][3]]  # r1 omni, r4 differential
+    assert [r["kind"] for r in data["robots"]] == ["omni", "diff"]
+    cfg = parse_config(data, "<held>")
+    stage = SafetyStage(cfg)
+    d = 0.2 + gap
+    poses = np.array([[5.0, 5.0, 0.0], [5.0 + d, 5.0, np.pi]])  # r4 east of r1, facing it
+    stage.v_prev = np.array([[0.0, 0.0], [-speed, 0.0]])
+    held = np.array([True, False])
+    view = FleetView(0.0, cfg.robot_ids, poses, np.zeros((2, 3)), np.zeros(2, bool),
+                     np.ones(2, bool), None, None, None, False)  # fmt: skip
+    intent = Intent(np.array([[0.0, 0.0], [-speed, 0.0]]), "close_in",
+                    hold=held if tell_the_filter else None)  # fmt: skip
+    cmd = stage.apply(view, intent).commands
+    u4 = np.array([-cmd[1, 0], 0.0])  # facing west: forward is -x
+    rel = poses[1, :2] - poses[0, :2]
+    h = rel @ rel - (0.2 + cfg.approach.safety_margin) ** 2
+    return float(2 * rel @ u4 + stage.filter.gamma * h)
+
+
+def test_a_held_robot_is_fixed_in_the_filter_so_the_other_keeps_the_barrier_alone():
+    """The README lab's second collision: r6 (differential) drove into r2, which was caging the
+    crate. A held robot is commanded zero after the filter; the filter did not know it, gave it
+    half of the avoiding, and the other robot kept only its half: inside the margin it still
+    closed in. Told, the filter leaves every barrier to a held robot to the other one."""
+    for gap in (0.04, 0.02, 0.01):
+        for speed in (0.1, 0.2, 0.3):
+            assert _held_barrier(False, gap, speed) < -1e-3, (gap, speed)  # r4 closes in
+            assert _held_barrier(True, gap, speed) >= -1e-6, (gap, speed)
+
+
+def _pass_by(close: bool) -> tuple[float, float]:
+    """r1 fixed (a caging robot), r2 driven at 0.2 m/s past it on a line 3 cm from touching,
+    along a wall that leaves no wider way (a robot closing in on its contact in a concave notch,
+    the next contact along). Returns the least gap and how far r2 got along its line (m)."""
+    r = np.full(2, 0.1)
+    flt = SafetyFilter(r, np.full(2, 0.4), BOUNDS, 1, margin=0.05, close_margin=0.02)
+    wall = np.array([[3.0, 5.38], [7.0, 5.38], [7.0, 6.0], [3.0, 6.0]])  # r2 keeps y <= 5.23
+    p = np.array([[5.0, 5.0], [4.0, 5.23]])
+    both = np.ones(2, bool) if close else None
+    least = np.inf
+    for _ in range(150):  # 6 s at 25 Hz
+        res = flt.filter(p, np.array([[0.0, 0.0], [0.2, 0.0]]), [wall],
+                         stale=np.array([True, False]), close=both)  # fmt: skip
+        p = p + 0.04 * res.velocities
+        least = min(least, float(np.linalg.norm(p[1] - p[0]) - 0.2))
+    return least, float(p[1, 0] - 4.0)
+
+
+def test_two_robots_at_the_object_keep_the_capture_clearance_between_them():
+    """Contacts in a concave notch lie nearer each other than the safety margin (the arrest
+    scenario evade-L: r2 had to pass r5, caging at the notch's inner edge, with the wall 37 cm
+    beyond): two robots both at the object keep ``capture.clearance`` (2 cm) between them, so
+    the second gets by; any other pair keeps the 5 cm margin and the robot stays behind."""
+    least, went = _pass_by(close=True)
+    assert 0.02 - 1e-3 <= least < 0.05 and went > 1.1, (least, went)
+    least, went = _pass_by(close=False)
+    assert least >= 0.05 - 1e-3 and went < 1.0, (least, went)
