@@ -6,13 +6,16 @@
 
 ``--flood``: the daemon's tick (``ControllerNode.tick`` with a 20 Hz rate keeper, hold mission,
 4 robots) while another process puts poses on the robots' keys: the normal rate (30 Hz per
-robot), 10x that, as fast as it can, and the normal rate plus 4 MiB payloads (10 Hz per key).
-Each case runs twice in this process, interleaved: ``before`` is the bus as it was (decoding on
-zenoh's thread into unbounded inboxes, 4 MiB limit), ``after`` today's (size checked first,
-decoder thread, inboxes bounded per key). Tick p50/p99/max (ms), late ticks, poses taken in,
-drops, the p99 ratio, and the load average.
+robot), 10x that, as fast as it can, the normal rate plus 4 MiB payloads (10 Hz per key), and
+one robot as fast as it can (``one_robot_max``, the others at the normal rate). Each case runs
+three times in this process, interleaved, each with the daemon's recorder tap (a no-op):
+``before`` is the bus before issue 22 (decoding on zenoh's thread into unbounded inboxes, 4 MiB
+limit), ``after`` a callback per sample (size checked first, a rate limit per key, decoder
+thread, inboxes bounded per key), ``rings`` the daemon today (issue 31 5c: the poses in a zenoh
+ring per key, read at each tick, never a Python callback). Tick p50/p99/max (ms), late ticks,
+poses taken in, drops, the p99 ratios, and the load average.
 
-Usage: python bench/bus.py [--n 2000] | python bench/bus.py --flood [--seconds 4]
+Usage: python bench/bus.py [--n 2000] | python bench/bus.py --flood [--seconds 4] [--cases A,B]
 """
 
 from __future__ import annotations
@@ -104,6 +107,7 @@ CASES = {  # name: (pose rate multiplier, 0 = as fast as possible; big payloads 
     "poses_10x": (10.0, 0.0),
     "poses_max": (0.0, 0.0),
     "big_4mib": (1.0, 10.0),
+    "one_robot_max": (0.0, 0.0),  # r1 alone, as fast as it can (the others at the normal rate)
 }
 
 
@@ -147,29 +151,41 @@ def flood_child(endpoint: str, case: str, seconds: float) -> None:
         ]
         for r in ids:
             bus.declare_alive("robot", r)
+        one = case == "one_robot_max"
         rk = Ratekeeper(POSE_HZ * mult) if mult else None
         every = int(round(POSE_HZ * mult / big_hz)) if big_hz else 0
         end = time.monotonic() + seconds
         k = 0
+        next_normal = time.monotonic()
+        seqs = [0] * len(pubs)  # each robot's own sequence
         while time.monotonic() < end:
             if rk is not None:
                 rk.keep_time()
             k += 1
             now = time.time()
+            normal = time.monotonic() >= next_normal
+            if normal:
+                next_normal += 1.0 / POSE_HZ
             for i, pub in enumerate(pubs):
-                m = wire.PoseMeasurement(t=now, seq=k, x=1.0 + i, y=1.0, theta=0.0)
+                if one and i > 0 and not normal:
+                    continue  # the others at their normal rate
+                seqs[i] += 1
+                m = wire.PoseMeasurement(t=now, seq=seqs[i], x=1.0 + i, y=1.0, theta=0.0)
                 pub.put(wire.encode(m))
                 if every and k % every == 0:
                     pub.put(big)
 
 
-def flood_run(bus_cls, case: str, seconds: float) -> dict:
-    """One case against one bus: the node's ticks while the child floods."""
+def flood_run(bus_cls, case: str, seconds: float, rings: bool = False) -> dict:
+    """One case against one bus: the node's ticks while the child floods, with the daemon's
+    recorder tap (a no-op here): over the fleet's every key, or (``rings``, the daemon today)
+    the poses read from zenoh rings at each tick and the tap over the other topics."""
     import tomllib
 
     from controller.config import parse_config
     from controller.io.ratekeeper import Ratekeeper
     from controller.mission.basic import HoldMission
+    from controller.runtime.daemon import RING_TOPICS
     from controller.runtime.node import ControllerNode
     from controller.runtime.wiring import make_estimator
 
@@ -183,7 +199,16 @@ def flood_run(bus_cls, case: str, seconds: float) -> dict:
     data["zenoh"] = {"mode": "peer", "listen": [ep], "connect": []}
     cfg = parse_config(data, "bench")
     with bus_cls(cfg.zenoh, FLEET) as bus:
-        node = ControllerNode(cfg, bus, HoldMission(ROBOTS), make_estimator(cfg))
+
+        def tap(key: str, payload: bytes, t: float) -> None:
+            pass
+
+        if rings:
+            bus.subscribe_raw_topics(tap, limit=True, skip=RING_TOPICS)
+        else:
+            bus.subscribe_raw(wire.fleet_prefix(FLEET), tap, limit=True)
+        node = ControllerNode(cfg, bus, HoldMission(ROBOTS), make_estimator(cfg), rings=rings,
+                              pose_tap=tap if rings else None)  # fmt: skip
         proc = subprocess.Popen(
             [sys.executable, __file__, "--flood-child", ep, case, str(seconds + 3.0)],
             env=dict(os.environ, PYTHONPATH=str(ROOT)),
@@ -220,15 +245,17 @@ def flood_run(bus_cls, case: str, seconds: float) -> dict:
     return out
 
 
-def flood_main(seconds: float) -> None:
+def flood_main(seconds: float, cases: list[str]) -> None:
     out: dict = {"robots": ROBOTS, "pose_hz": POSE_HZ, "seconds": seconds, "cases": {}}
-    for case in CASES:
+    for case in cases:
         res = {
             "before": flood_run(BeforeBus, case, seconds),
             "after": flood_run(Bus, case, seconds),
+            "rings": flood_run(Bus, case, seconds, rings=True),
         }
-        b, a = res["before"]["tick_p99_ms"], res["after"]["tick_p99_ms"]
+        b, a, r = (res[k]["tick_p99_ms"] for k in ("before", "after", "rings"))
         res["tick_p99_after_over_before"] = round(a / b, 3) if b else None
+        res["tick_p99_rings_over_after"] = round(r / a, 3) if a else None
         out["cases"][case] = res
     out["loadavg"] = [round(v, 2) for v in os.getloadavg()]
     print(json.dumps(out))
@@ -239,6 +266,7 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=2000)
     ap.add_argument("--flood", action="store_true", help="the daemon's tick under floods")
     ap.add_argument("--seconds", type=float, default=4.0, help="per --flood case and bus")
+    ap.add_argument("--cases", default=",".join(CASES), help="--flood cases, comma-separated")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--flood-child", nargs=3, help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -249,7 +277,7 @@ def main() -> None:
         flood_child(args.flood_child[0], args.flood_child[1], float(args.flood_child[2]))
         return
     if args.flood:
-        flood_main(args.seconds)
+        flood_main(args.seconds, args.cases.split(","))
         return
     ep = f"tcp/127.0.0.1:{free_port()}"
     with Bus(UNLIMITED, FLEET, listen=[ep], connect=[]) as bus:

@@ -248,6 +248,14 @@ class DecodeStats:
         """A full inbox dropped the oldest sample of ``key``."""
         self._count(self.overflow, "the oldest queued sample (inbox full)", key, "a flood?")
 
+    def overwritten(self, key: str, n: int) -> None:
+        """``n`` samples of ``key`` a ring overwrote before they were read (a flood)."""
+        if n <= 0:
+            return
+        self._count(self.overflow, "samples overwritten unread (ring full)", key, "a flood?")
+        with self._lock:
+            self.overflow[key] += n - 1
+
     def too_fast(self, key: str, rate_hz: float) -> None:
         """A sample of ``key`` over its rate limit, dropped unread."""
         self._count(self.rate_limited, "a sample over the key's rate", key, f"> {rate_hz:g} Hz")
@@ -399,6 +407,85 @@ class Inbox:
         return iter(self.drain())
 
 
+class RingInbox:
+    """Samples of a few keys, each key a zenoh ring of ``capacity`` (the newest kept): zenoh's
+    threads write into the rings without Python, so a key flooded at tens of kHz costs the loop
+    nothing but the ``capacity`` newest samples it reads at each ``drain`` (issue 31 5c: one
+    Python callback per sample, rate-limited or not, cost a flooded daemon 10-15 late ticks
+    of 100). Read by the consumer's own thread (the tick), decoded there. What a ring
+    overwrote is counted (``overflow``) from the gaps in the messages' ``seq``, only when the
+    ring was found full (nothing is overwritten otherwise): exact for one sender counting up,
+    an estimate for a sender that jumps. ``on_raw(key, payload, recv_time)`` sees every sample
+    read (the daemon's recorder)."""
+
+    #: a gap in a key's ``seq`` counted at most this much per drain (a forged jump)
+    MAX_GAP = 1_000_000
+
+    def __init__(
+        self,
+        bus: Bus,
+        keys: Sequence[str],
+        msg_type: type[wire.Message],
+        capacity: int,
+        on_raw: Callable[[str, bytes, float], None] | None = None,
+    ) -> None:
+        self._bus = bus
+        self._type = msg_type
+        self.on_raw = on_raw
+        self.capacity = capacity
+        self.overflow = 0
+        self._seq: dict[str, int] = {}
+        self._subs = [
+            (k, bus.session.declare_subscriber(k, zenoh.handlers.RingChannel(capacity)))
+            for k in keys
+        ]
+
+    def _count(self, key: str, seqs: list[int]) -> None:
+        """The samples a full ring overwrote: the gaps before and between ``seqs`` read."""
+        last = self._seq.get(key)
+        if seqs:
+            self._seq[key] = seqs[-1]
+        if last is None:
+            return
+        gaps = sum(max(0, b - a - 1) for a, b in zip([last, *seqs[:-1]], seqs, strict=True))
+        n = min(gaps, self.MAX_GAP)
+        if n:
+            self.overflow += n
+            self._bus.stats.overwritten(key, n)
+
+    def drain(self) -> list[Received]:
+        """Every sample the rings hold, key by key, oldest first within a key; never blocks."""
+        bus, out = self._bus, []
+        now = time.time()
+        for key, sub in self._subs:
+            read: list[int] = []
+            while (sample := sub.try_recv()) is not None:
+                read.append(-1)  # a sample read, whatever it holds (the ring's fill)
+                payload = bus._payload(sample, key)
+                if payload is None:
+                    continue
+                if self.on_raw is not None:
+                    try:
+                        self.on_raw(key, payload, now)
+                    except Exception:  # noqa: BLE001 - the recorder never stops the loop
+                        log.exception("raw reader failed on %s", key)
+                msg = decode_payload(bus.fleet, key, payload, self._type, bus.stats,
+                                     bus.max_payload)  # fmt: skip
+                if msg is None:
+                    continue
+                read[-1] = int(msg.seq)
+                out.append(Received(now, key, msg))
+            if len(read) >= self.capacity:
+                self._count(key, [q for q in read if q >= 0])
+            elif read and read[-1] >= 0:
+                self._seq[key] = read[-1]
+        return out
+
+    def undeclare(self) -> None:
+        for _, sub in self._subs:
+            sub.undeclare()
+
+
 @dataclass(frozen=True)
 class _Raw:
     """A sample as it arrived, for the decoder thread: decoded into ``box``."""
@@ -525,7 +612,7 @@ class Bus:
         self.max_payload = section.max_payload  # bytes: larger samples are dropped unread
         self.inbox_depth = section.inbox_depth  # samples per key in a bounded inbox
         self.key_rate_hz = section.key_rate_hz  # samples/s per key into a bounded inbox (0: any)
-        self._inboxes: list[Inbox] = []
+        self._inboxes: list[Inbox | RingInbox] = []
         self._decoder_thread: Decoder | None = None
         self._handles: list[Any] = []
         conf = zenoh_config(
@@ -698,6 +785,22 @@ class Bus:
         self._handles.append(sub)
         return box
 
+    def subscribe_rings(
+        self,
+        topic: str,
+        ids: Sequence[str],
+        on_raw: Callable[[str, bytes, float], None] | None = None,
+    ) -> RingInbox:
+        """A registered topic's keys for ``ids`` (one ``id`` part each; no ids: its one key),
+        each a ring of ``zenoh.inbox_depth`` samples read by the consumer (``RingInbox``): for
+        the keys a robot may flood (its poses), which must cost the loop nothing."""
+        t = wire.TOPICS[topic]
+        keys = [t.key(self.fleet, id=i) for i in ids] if ids else [t.key(self.fleet)]
+        box = RingInbox(self, keys, t.msg, self.inbox_depth, on_raw)
+        self._inboxes.append(box)
+        self._handles.append(box)
+        return box
+
     def subscribe_topic(
         self,
         topic: str,
@@ -739,6 +842,20 @@ class Bus:
         self._handles.append(self.session.declare_subscriber(key_expr, cb))
 
     # -- liveliness
+    def subscribe_raw_topics(
+        self,
+        callback: Callable[[str, bytes, float], None],
+        *,
+        limit: bool = False,
+        skip: Sequence[str] = (),
+    ) -> None:
+        """``subscribe_raw`` on every logged topic of the registry but ``skip`` (the daemon's
+        recorder: the pose keys it skips reach it from the loop's rings, a flood unread).
+        Keys of the fleet outside the registry are not taken."""
+        for t in wire.TOPICS.values():
+            if t.logged and t.name not in skip:
+                self.subscribe_raw(t.wildcard(self.fleet), callback, limit=limit)
+
     def declare_alive(self, role: str, ident: str) -> Any:
         token = self.session.liveliness().declare_token(wire.alive_key(self.fleet, role, ident))
         self._handles.append(token)

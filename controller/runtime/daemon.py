@@ -31,7 +31,6 @@ import threading
 import time
 from pathlib import Path
 
-from controller import wire
 from controller.config import FleetConfig
 from controller.io.bus import Bus, BusError
 from controller.io.ratekeeper import Ratekeeper
@@ -50,6 +49,7 @@ log = logging.getLogger(__name__)
 
 # s: nobody answers the latch query at start → stop waiting: the latch stays what it is (from
 # the file, or unknown: stopped until an operator's release), asked again every LATCH_UNKNOWN
+RING_TOPICS = ("robot_pose", "object_pose")  # read by the loop from zenoh rings (NodeInputs)
 LATCH_WAIT_AT_START = 2.0
 LATCH_RETRY = 0.5  # s between latch queries while one is pending
 LATCH_UNKNOWN = 2.0  # s between latch queries while the latch is unknown
@@ -306,7 +306,8 @@ def run_daemon(
     try:
         with bus:
             claim.watch(bus)
-            bus.subscribe_raw(wire.fleet_prefix(cfg.fleet.name), recorder.on_sample, limit=True)
+            # the poses reach the recorder from the loop's rings (a robot's flood unread)
+            bus.subscribe_raw_topics(recorder.on_sample, limit=True, skip=RING_TOPICS)
             record_ros2(bus, cfg, recorder)  # ROS 2 robots' own topics too
             rk = Ratekeeper(cfg.fleet.rate_hz)
             # the latch it left (without a hub it is the keeper; with one it learns from it too)
@@ -327,6 +328,8 @@ def run_daemon(
                 ident=claim.ident,
                 latch_at_start=file.load_kept("controller/main"),
                 estop_bus=second,
+                rings=True,
+                pose_tap=recorder.on_sample,
             )
             # the wall clock: see the latch
             node.estop_latch.release_max_age = cfg.fleet.max_clock_skew

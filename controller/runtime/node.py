@@ -62,6 +62,8 @@ class ControllerNode:
         ident: str = "main",
         latch_at_start: wire.EStop | None = FRESH_WORLD,
         estop_bus=None,
+        rings: bool = False,
+        pose_tap: Callable[[str, bytes, float], None] | None = None,
     ) -> None:
         """``clock`` (s, monotonic) only times the stages; ``extra_drops`` adds drop counters
         of other parts (the recorder) to ``fleet status``; ``planners`` (the planner worker)
@@ -71,7 +73,8 @@ class ControllerNode:
         tests: the default), the latch's file, or None: unknown, commanding zero until it
         learns the latch or an operator releases it (the lab daemon).
         ``lossless_commands``: the lockstep dry run (no inbox or command ever dropped).
-        ``estop_bus``: the e-stop's second path (the daemon's, ``zenoh.estop_listen``)."""
+        ``estop_bus``: the e-stop's second path (the daemon's, ``zenoh.estop_listen``).
+        ``rings``, ``pose_tap``: poses read from zenoh rings at each tick (``NodeInputs``)."""
         self.ident = ident
         self.clock = clock
         self.planners = planners
@@ -88,10 +91,10 @@ class ControllerNode:
         # set by the runner when the process is stopping: robots leaving then are no news
         self.winding_down = False
         self.last_output: MissionOutput | None = None
-        lossless = lossless_commands
-        self.inputs = NodeInputs(cfg, bus, self.counters, lossless, lambda: self.job_over)
+        over = lambda: self.job_over  # noqa: E731
+        self.inputs = NodeInputs(cfg, bus, self.counters, lossless_commands, over, rings, pose_tap)
         self.estop_latch = NodeLatch(bus, cfg.fleet.name, latch_at_start, estop_bus)
-        self.outputs = NodeOutputs(cfg, bus, self.counters, lossless)
+        self.outputs = NodeOutputs(cfg, bus, self.counters, lossless_commands)
         bus.serve("status", self.status)
         bus.declare_alive("controller", ident)
 

@@ -75,9 +75,14 @@ class NodeInputs:
         counters: NodeCounters,
         lossless: bool,
         news_over: Callable[[], bool],
+        rings: bool = False,
+        pose_tap: Callable[[str, bytes, float], None] | None = None,
     ) -> None:
         """``lossless``: the lockstep dry run's inboxes (nothing dropped); ``news_over``: whether
-        a robot leaving is the expected end (the job over, the process stopping)."""
+        a robot leaving is the expected end (the job over, the process stopping). ``rings``
+        (the lab daemon): the robots' and the object's poses are read from one zenoh ring per
+        key at each tick (``Bus.subscribe_rings``), so a robot flooding its pose key costs the
+        loop nothing; ``pose_tap`` gets every pose read (the recorder)."""
         self.cfg = cfg
         self.ids = cfg.robot_ids
         self.index = {rid: i for i, rid in enumerate(self.ids)}
@@ -91,8 +96,12 @@ class NodeInputs:
         self._events_pending: dict[str, tuple[LinkLostEvent | LinkRestoredEvent, int]] = {}
         self.arrived = threading.Condition()  # notified on every pose (lockstep waits)
         # bounded per robot (a flood drops the oldest), lossless in the lockstep dry run
-        self._poses = bus.subscribe_topic("robot_pose", waker=self.arrived, lossless=lossless)
-        self._object = bus.subscribe_topic("object_pose", waker=self.arrived, lossless=lossless)
+        if rings:
+            self._poses = bus.subscribe_rings("robot_pose", self.ids, pose_tap)
+            self._object = bus.subscribe_rings("object_pose", (), pose_tap)
+        else:
+            self._poses = bus.subscribe_topic("robot_pose", waker=self.arrived, lossless=lossless)
+            self._object = bus.subscribe_topic("object_pose", waker=self.arrived, lossless=lossless)
         self._robot_events = bus.subscribe_topic("robot_event")
         bus.watch_alive("robot", self._on_alive)
 

@@ -135,3 +135,50 @@ def test_oversized_payloads_are_dropped_unread_and_a_flood_keeps_the_newest(port
         assert drops["inbox_overflow"] == n - 8
         assert [r.msg.seq for r in poses.drain()] == list(range(n - 8, n))  # the newest
         assert ctl.drops_by_key()["overflow"] == {key: n - 8}
+
+
+def test_a_flooded_key_in_a_ring_keeps_its_newest_counts_the_rest_and_spares_the_others(port):
+    """The lab daemon's poses (issue 31 5c): each robot's key a zenoh ring the tick reads, no
+    Python callback per sample. r1 flooded: what the rings give and what they count as
+    overwritten add up to every sample sent, r2's own samples all arrive, a bad payload is
+    counted and dropped, and the recorder's tap sees every sample read."""
+    ep = f"tcp/127.0.0.1:{port}"
+    with (
+        Bus(ZenohSection(inbox_depth=8), "f", listen=[ep], connect=[]) as ctl,
+        Bus(ZenohSection(), "f", listen=[], connect=[ep]) as rob,
+    ):
+        tapped: list[str] = []
+        box = ctl.subscribe_rings("robot_pose", ["r1", "r2"], lambda k, p, t: tapped.append(k))
+        pubs = {
+            r: rob.session.declare_publisher(
+                rob.key("robot_pose", id=r), congestion_control=zenoh.CongestionControl.BLOCK
+            )
+            for r in ("r1", "r2")
+        }
+        wait_for(lambda: all(p.matching_status.matching for p in pubs.values()), 10.0, "matched")
+
+        def pose(seq: int) -> bytes:
+            return wire.encode(wire.PoseMeasurement(t=1.0, seq=seq, x=0.0, y=0.0, theta=0.0))
+
+        got: list = []
+        pubs["r1"].put(pose(1))
+        wait_for(lambda: got.extend(box.drain()) or got, 10.0, "the first pose")
+        n = 5000
+        for i in range(2, n + 1):
+            pubs["r1"].put(pose(i))
+            if i % 1000 == 0:
+                pubs["r2"].put(pose(i // 1000))
+        pubs["r1"].put(b"not json")
+        pubs["r1"].put(pose(n + 1))
+        last = lambda: got and max(r.msg.seq for r in got if r.key.endswith("r1/pose")) == n + 1  # noqa: E731
+        wait_for(lambda: got.extend(box.drain()) or last(), 10.0, "r1's last pose")
+        r1 = [r.msg.seq for r in got if r.key.endswith("r1/pose")]
+        assert r1 == sorted(r1) and r1[-1] == n + 1
+        assert len(r1) < n // 10  # the flood was not read
+        assert len(r1) + box.overflow == n + 1  # read or counted: every one sent
+        assert ctl.drops_by_key()["overflow"] == {rob.key("robot_pose", id="r1"): box.overflow}
+        wait_for(lambda: got.extend(box.drain()) or len([r for r in got if "r2" in r.key]) == 5,
+                 10.0, "r2's poses")  # fmt: skip
+        assert [r.msg.seq for r in got if "r2" in r.key] == [1, 2, 3, 4, 5]
+        assert ctl.drops()["bad_payloads"] <= 1  # the bad one, if the ring kept it
+        assert len(tapped) == len(got) + ctl.drops()["bad_payloads"]

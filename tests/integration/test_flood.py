@@ -133,24 +133,25 @@ def test_the_daemon_keeps_its_rate_under_a_pose_flood_and_4_mib_payloads(tmp_pat
         assert stops_flood <= stops_quiet + 1, (stops_flood, stops_quiet)
 
         # one robot floods its own pose key as fast as a process can put (tens of kHz): the
-        # key brings in at most zenoh.key_rate_hz, the rest dropped unread and counted, and
-        # the other robot's watchdog never fires. (The loop's rate is not asserted here: each
-        # sample still costs a Python callback, and 10-15 of ~100 ticks came late in this
-        # window on the 2-core CI machine - issue 31 item 5c, left open)
+        # daemon reads each robot's poses from a zenoh ring at each tick (no Python callback
+        # per sample), at most zenoh.inbox_depth a tick; the rest is overwritten unread and
+        # counted; the loop keeps its rate and the other robot's watchdog never fires
+        # (issue 31 5c: with a callback per sample 10-15 of ~100 ticks came late here on the
+        # loaded 2-core CI machine)
         r1 = cfg.robots[0]
         before = _status(path)
         sent = _flood(port, cfg, "poses", 1e6, [r1])  # as fast as it can put
         after = _status(path)
-        limit = cfg.zenoh.key_rate_hz * SECONDS
-        assert sent["sent"] > 2 * limit, sent  # a flood beyond the limit
-        limited = _delta(before, after, "rate_limited")
+        read = cfg.zenoh.inbox_depth * cfg.fleet.rate_hz * SECONDS  # the most r1's ring gives
+        assert sent["sent"] > 10 * read, sent  # a flood beyond it
+        dropped = _delta(before, after, "inbox_overflow")
         taken = _delta(before, after, "poses")
-        # taken in: r1's limit (a burst of 0.25 s' worth on top) and both robots' own poses
-        # over the window (the flooder's start-up included)
-        assert taken <= 1.2 * limit + 0.25 * cfg.zenoh.key_rate_hz + 2 * rate * (SECONDS + 5)
-        assert limited > 0.5 * (sent["sent"] - limit), (limited, taken, sent)
-        ticks, _late = _window(before, after)
-        assert ticks >= 0.9 * expected_ticks, (ticks, expected_ticks)  # it never stalled
+        # taken in: r1's ring at every tick (the flooder's start-up included) and both robots'
+        # own poses over the window
+        most = read + cfg.zenoh.inbox_depth * 5 * cfg.fleet.rate_hz + 2 * rate * (SECONDS + 5)
+        assert taken <= most, (taken, most)
+        assert dropped > 0.5 * (sent["sent"] - read), (dropped, taken, sent)
+        _kept_its_rate(_window(before, after), quiet, expected_ticks)
         marks.append(_log_sizes(agents))
         others = agents[1:]
         assert _stops(others, marks[2][1:], marks[3][1:]) == 0, [tail(a) for a in others]
