@@ -225,6 +225,48 @@ def bus(r: dict) -> str:
     )
 
 
+FLOOD_CASES = {
+    "normal": "normal rate (30 Hz a robot)",
+    "poses_10x": "10× the pose rate, every robot",
+    "poses_max": "every robot as fast as a process can put",
+    "big_4mib": "normal rate + 4 MiB payloads (10 Hz a key)",
+    "one_robot_max": "one robot as fast as it can, the others normal",
+}
+FLOOD_BUSES = {
+    "before": "a callback decoding on zenoh's thread (before issue 22)",
+    "after": "a callback per sample, rate-limited, decoder thread (issue 22)",
+    "rings": "a zenoh ring per key, read at the tick (today)",
+}
+
+
+def bus_flood(r: dict) -> str:
+    rows = []
+    for case, what in FLOOD_CASES.items():
+        res = r["cases"].get(case)
+        if res is None:
+            continue
+        for bus, how in FLOOD_BUSES.items():
+            x = res[bus]
+            dropped = sum(x["drops"].get(k, 0) for k in ("inbox_overflow", "rate_limited"))
+            rows.append([what if bus == "before" else "", how, _ms(x["tick_p50_ms"]),
+                         _ms(x["tick_p99_ms"]), f"{x['late_ticks'] + x['skipped_ticks']}",
+                         f"{x['poses_taken']:,}", f"{dropped:,}"])  # fmt: skip
+    ratios = "; ".join(
+        f"{FLOOD_CASES[c]}: {res['tick_p99_rings_over_after']:.2f}×"
+        for c, res in r["cases"].items()
+        if res.get("tick_p99_rings_over_after") is not None
+    )
+    head = ["flood", "how the daemon reads poses", "tick p50", "p99", "late or skipped",
+            "poses read", "dropped, counted"]  # fmt: skip
+    return (
+        f"The daemon's tick (`ControllerNode.tick`, hold mission, {r['robots']} robots, 20 Hz, "
+        f"with the recorder's tap) for {r['seconds']:g} s while another process floods the "
+        "robots' pose keys; the three ways of reading them run in one process, interleaved:\n\n"
+        + _table(head, rows)
+        + f"\n\nTick p99, rings over a callback per sample: {ratios}."
+    )
+
+
 def mavlink(r: dict) -> str:
     lat = r["latency_ms"]
     rows = [
@@ -527,6 +569,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "estimation": estimation,
     "sim": sim,
     "bus": bus,
+    "bus_flood": bus_flood,
     "mavlink": mavlink,
     "logs": logs,
     "route_tables": route_tables,
