@@ -312,6 +312,35 @@ def _validate_ros2(cfg: FleetConfig, i: int, src: str) -> None:
             )  # fmt: skip
 
 
+def validate_ros2_graph(cfg: FleetConfig, src: str) -> None:
+    """``[ros2_graph]``: ROS names rmw_zenoh can key, and a router that is not the fleet's own
+    hub (the ROS graph has its own, rmw_zenohd)."""
+    g = cfg.ros2_graph
+    if not (g.namespace.startswith("/") and _ros_name(g.namespace, True)):
+        raise ConfigError(
+            src, "ros2_graph.namespace", f"expected an absolute ROS namespace (e.g. '/fleet'), "
+            f"got {g.namespace!r}",
+        )  # fmt: skip
+    if not _ROS_TOKEN.match(g.node_name):
+        raise ConfigError(src, "ros2_graph.node_name", f"not a ROS node name: {g.node_name!r}")
+    if not _ros_name(g.frame_id, False):
+        raise ConfigError(src, "ros2_graph.frame_id", f"not a ROS frame name: {g.frame_id!r}")
+    if not g.connect:
+        raise ConfigError(src, "ros2_graph.connect", "expected at least one zenoh endpoint")
+    for k, ep in enumerate(g.connect):
+        if not _ENDPOINT.match(ep):
+            raise ConfigError(
+                src, f"ros2_graph.connect[{k}]", f"expected a zenoh endpoint like "
+                f"{ROS2_ROUTER!r}, got {ep!r}",
+            )  # fmt: skip
+        if g.enabled and ep in cfg.zenoh.listen:
+            raise ConfigError(
+                src, f"ros2_graph.connect[{k}]", f"{ep} is the fleet's own hub (zenoh.listen): "
+                "give the ROS graph's router, rmw_zenohd (the ROS 2 examples put it on "
+                "tcp/127.0.0.1:7448)",
+            )  # fmt: skip
+
+
 def _ros2_notes(cfg: FleetConfig, i: int) -> tuple[str, ...]:
     """An odometry left at the world origin while the robot starts elsewhere: its odometry
     starts at zero where it powers up, so its poses would land at the origin."""

@@ -223,6 +223,26 @@ class VizSection:
 
 
 @dataclass(frozen=True, kw_only=True)
+class Ros2GraphSection:
+    """``[ros2_graph]``: the lab daemon shows the fleet to a ROS 2 graph over rmw_zenoh, no
+    bridge: ``/tf`` (``tf2_msgs/TFMessage``, a frame ``<robot id>/base_link`` per robot and
+    ``object`` under ``frame_id``, REP 105), each robot's and the object's estimated pose
+    (``geometry_msgs/PoseStamped`` on ``<namespace>/<robot id>/pose``, ``<namespace>/object/
+    pose``) and the job's phase (``std_msgs/String`` on ``<namespace>/phase``), at ``rate_hz``,
+    with rmw_zenoh's liveliness tokens, so ``ros2 topic list``, RViz and rosbag2 see them."""
+
+    enabled: bool = _rule(False)
+    domain_id: int = _rule(0, min=0, max=232)  # ROS_DOMAIN_ID
+    namespace: str = _rule("/fleet")
+    node_name: str = _rule("fleet_controller")
+    frame_id: str = _rule("map")  # the world frame's name on the graph
+    rate_hz: float = _rule(10.0, gt=0, max=100)
+    # the ROS graph's zenoh router (rmw_zenohd) and how the daemon joins it
+    connect: tuple[str, ...] = _rule(("tcp/127.0.0.1:7447",))
+    mode: str = _rule("client", choices=("client", "peer"))
+
+
+@dataclass(frozen=True, kw_only=True)
 class WorldSection:
     bounds: tuple[Point, Point] = _rule(((0.0, 0.0), (12.8, 12.8)))
     walls: bool = _rule(True)
@@ -505,6 +525,7 @@ class FleetConfig:
     zenoh: ZenohSection = ZenohSection()
     log: LogSection = LogSection()
     viz: VizSection = VizSection()
+    ros2_graph: Ros2GraphSection = Ros2GraphSection()
     world: WorldSection = WorldSection()
     obstacles: tuple[Obstacle, ...] = ()
     capture: CaptureSection = CaptureSection()

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from controller import geometry
-from controller.config.driver_sections import DRIVER_SPECS
+from controller.config.driver_sections import DRIVER_SPECS, validate_ros2_graph
 from controller.config.load import (
     FAILED,
     ConfigError,
@@ -245,6 +245,7 @@ def _validate(cfg: FleetConfig, src: str) -> FleetConfig:
     attempt(_check_timestep, cfg, src)
     attempt(_check_zenoh, cfg.zenoh, src)
     attempt(_validate_robots, cfg, obstacles, src)
+    attempt(validate_ros2_graph, cfg, src)
     if obstacles is not FAILED and merged is not FAILED:
         attempt(_check_object_poses, merged[0], obstacles, cfg.world.bounds, src)
     if bounds is not FAILED:

@@ -43,6 +43,7 @@ from controller.runtime.job_record import JobRecord
 from controller.runtime.node import ControllerNode
 from controller.runtime.planner import PlannerWorker
 from controller.runtime.recording import open_recorder, record_ros2
+from controller.runtime.ros2_graph import Ros2Graph, open_ros2_graph, publish_graph
 from controller.runtime.wiring import make_estimator
 
 log = logging.getLogger(__name__)
@@ -261,9 +262,9 @@ def _second_text(cfg: FleetConfig, second: Bus | None) -> str:
     return "" if second is None else f"; e-stop also on {list(cfg.zenoh.estop_listen)}"
 
 
-def _close(bus: Bus | None) -> None:
-    if bus is not None:
-        bus.close()
+def _close(part: Bus | Ros2Graph | None) -> None:
+    if part is not None:
+        part.close()
 
 
 def _client_of_hub(cfg: FleetConfig) -> Bus:
@@ -300,6 +301,7 @@ def run_daemon(
     bus, how, claim, own_hub = claimed
     second = open_estop_path(cfg)  # after the claim: a second daemon never listens there
     recorder = open_recorder(cfg, out, f"daemon/{mission_kind}", viz=viz, who="fleet daemon")
+    graph = open_ros2_graph(cfg)
     status = 0
     health = ""
     outcome: dict | None = None
@@ -367,6 +369,7 @@ def run_daemon(
                 latch.poll(mono)
                 now = time.time()  # wall clock: pose stamps come from other computers
                 result = node.tick(now)
+                publish_graph(graph, now, node)  # the fleet on the ROS graph, if configured
                 job.tick(now, result)
                 budget.check(node)
                 if rk.lagged > lag_reported:
@@ -403,6 +406,7 @@ def run_daemon(
             )
     finally:
         recorder.close()
+        _close(graph)
         _close(second)
         stop_hub_process(own_hub)
         if planners is not None:

@@ -25,7 +25,8 @@ from typing import Any
 
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 
-# (field name, type): a primitive, a nested type's full name, or "float64[36]" (fixed array)
+# (field name, type): a primitive, a nested type's full name, "float64[36]" (a fixed array) or
+# "pkg/msg/T[]" (an unbounded sequence)
 DEFINITIONS: dict[str, tuple[tuple[str, str], ...]] = {
     "builtin_interfaces/msg/Time": (("sec", "int32"), ("nanosec", "uint32")),
     "std_msgs/msg/Header": (("stamp", "builtin_interfaces/msg/Time"), ("frame_id", "string")),
@@ -61,6 +62,17 @@ DEFINITIONS: dict[str, tuple[tuple[str, str], ...]] = {
         ("twist", "geometry_msgs/msg/Twist"),
         ("covariance", "float64[36]"),
     ),
+    "geometry_msgs/msg/Transform": (
+        ("translation", "geometry_msgs/msg/Vector3"),
+        ("rotation", "geometry_msgs/msg/Quaternion"),
+    ),
+    "geometry_msgs/msg/TransformStamped": (
+        ("header", "std_msgs/msg/Header"),
+        ("child_frame_id", "string"),
+        ("transform", "geometry_msgs/msg/Transform"),
+    ),
+    "tf2_msgs/msg/TFMessage": (("transforms", "geometry_msgs/msg/TransformStamped[]"),),
+    "std_msgs/msg/String": (("data", "string"),),
     "nav_msgs/msg/Odometry": (
         ("header", "std_msgs/msg/Header"),
         ("child_frame_id", "string"),
@@ -76,13 +88,16 @@ POSE_TYPES = {"odometry": "nav_msgs/msg/Odometry", "pose_stamped": "geometry_msg
 # type_description_interfaces/msg/FieldType ids of the types above
 _TYPE_IDS = {"int32": 6, "uint32": 7, "float64": 11, "string": 17}
 _NESTED, _ARRAY_OFFSET = 1, 48  # FIELD_TYPE_NESTED_TYPE; a fixed array adds 48 (double[] = 59)
+_SEQUENCE_OFFSET = 144  # an unbounded sequence adds 144 (NESTED_TYPE_UNBOUNDED_SEQUENCE = 145)
+UNBOUNDED = -1  # ``_split_array``'s size of an unbounded sequence
 _SEPARATOR = "=" * 80
 
 
 def _split_array(ftype: str) -> tuple[str, int]:
+    """(base type, size): 0 for a single value, ``UNBOUNDED`` for ``T[]``."""
     if ftype.endswith("]"):
         base, n = ftype[:-1].split("[")
-        return base, int(n)
+        return base, int(n) if n else UNBOUNDED
     return ftype, 0
 
 
@@ -90,13 +105,15 @@ def _field_description(name: str, ftype: str) -> dict[str, Any]:
     base, n = _split_array(ftype)
     nested = base if base in DEFINITIONS else ""
     type_id = _NESTED if nested else _TYPE_IDS[base]
-    if n:
+    if n == UNBOUNDED:
+        type_id += _SEQUENCE_OFFSET
+    elif n:
         type_id += _ARRAY_OFFSET
     return {
         "name": name,
         "type": {
             "type_id": type_id,
-            "capacity": n,
+            "capacity": max(n, 0),
             "string_capacity": 0,
             "nested_type_name": nested,
         },
@@ -149,7 +166,8 @@ def _msg_line(name: str, ftype: str) -> str:
     if base in DEFINITIONS:
         pkg, _, short = base.split("/")
         base = f"{pkg}/{short}"
-    return f"{base}{f'[{n}]' if n else ''} {name}"
+    size = "[]" if n == UNBOUNDED else f"[{n}]" if n else ""
+    return f"{base}{size} {name}"
 
 
 @cache

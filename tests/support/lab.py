@@ -89,10 +89,11 @@ def lab_config(
     port: int,
     robots: int = 2,
     zenoh: dict[str, Any] | None = None,
+    sections: dict[str, dict[str, Any]] | None = None,
     **fleet_keys: Any,
 ) -> Path:
     """The shipped config cut to ``robots`` robots, on the ideal backend, zenoh on ``port``
-    (``zenoh``: more keys of that section)."""
+    (``zenoh``: more keys of that section; ``sections``: more sections, by name)."""
     cfg = base_config_dict()
     cfg["robots"] = cfg["robots"][:robots]
     cfg["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
@@ -100,6 +101,7 @@ def lab_config(
     cfg["sim"]["backend"] = "ideal"
     cfg["log"] = {"dir": str(tmp_path / "runs")}
     cfg["fleet"].update(fleet_keys)
+    cfg.update(sections or {})
     return write_toml(tmp_path / "lab.toml", cfg)
 
 

@@ -27,6 +27,14 @@ PUBLISHED_HASHES = {
     "nav_msgs/msg/Odometry": (
         "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0"
     ),
+    # what [ros2_graph] publishes: /tf (an unbounded sequence of a nested type) and the phase
+    # (rmw_zenoh's README shows this key for demo_nodes_cpp's chatter)
+    "tf2_msgs/msg/TFMessage": (
+        "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"
+    ),
+    "std_msgs/msg/String": (
+        "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
+    ),
 }
 # liveliness tokens of `ros2 topic echo /cmd_vel` on a Jazzy graph (rmw_zenoh 0.2.x)
 JAZZY_NODE = "@ros2_lv/0/943f9ebc32acd3e072bfda12ce8c7ed2/0/0/NN/%/%/_ros2cli_31"
@@ -227,3 +235,26 @@ def test_quaternion_yaw_round_trip(yaw):
         0.0, abs=1e-9
     )
     assert np.isclose(sum(v * v for v in q.values()), 1.0)
+
+
+def test_the_graph_messages_encode_as_rosbags_decodes_them():
+    """/tf with two frames (an unbounded sequence of nested messages) and the phase, encoded by
+    the driver's codec, decoded by rosbags (the independent one) to the same values."""
+    from controller.runtime.ros2_graph import graph_messages
+
+    poses = np.array([[1.0, 2.0, 0.5], [3.0, -1.0, -2.0]])
+    tf, pose_msgs = graph_messages(12.25, "map", ["r1", "r2"], poses, np.array([True, True]),
+                                   (4.0, 5.0, 1.0))  # fmt: skip
+    got = rosbags_decode("tf2_msgs/msg/TFMessage", msgs.encode("tf2_msgs/msg/TFMessage", tf))
+    assert [t.child_frame_id for t in got.transforms] == ["r1/base_link", "r2/base_link", "object"]
+    t = got.transforms[1]
+    assert (t.header.frame_id, t.header.stamp.sec, t.header.stamp.nanosec) == ("map", 12, 250000000)
+    assert (t.transform.translation.x, t.transform.translation.y) == (3.0, -1.0)
+    assert msgs.quaternion_yaw(t.transform.rotation) == pytest.approx(-2.0)
+    stamped = "geometry_msgs/msg/PoseStamped"
+    pose = rosbags_decode(stamped, msgs.encode(stamped, pose_msgs["object"]))
+    assert (pose.pose.position.x, pose.pose.position.y) == (4.0, 5.0)
+    text = rosbags_decode(
+        "std_msgs/msg/String", msgs.encode("std_msgs/msg/String", {"data": "hold"})
+    )
+    assert text.data == "hold"
