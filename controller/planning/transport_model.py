@@ -492,13 +492,6 @@ class Rollout:
             b = np.asarray(state.bounds, float)
             self._bounds = (b[0] + self.radii[:, None], b[1] - self.radii[:, None])
         self._vmax_list = self.vmax.tolist()
-        # broad phase of the obstacle test: each obstacle's box, and how far the object's
-        # vertices reach from its centroid (a step far from every obstacle skips the exact test)
-        self._obstacle_boxes = [
-            (np.asarray(o, float).min(0), np.asarray(o, float).max(0)) for o in state.obstacles
-        ]
-        self._object_reach = float(np.linalg.norm(m.polygon - m.centroid, axis=1).max())
-        self._rmax = float(self.radii.max()) if self.k else 0.0
         pose = np.asarray(state.pose, float)
         cw = geometry.transform(m.centroid[None], pose)[0]
         self.route = RoutePath(state.route.waypoints, state.route.subgoal, m)

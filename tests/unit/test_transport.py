@@ -522,38 +522,3 @@ def test_the_lp_start_pushes_with_the_least_force_set_and_escapes_the_trap():
     plan = plan_local(st, p, np.random.default_rng(0))
     assert plan.first_actions == ("push", "push")
     assert plan.lp_status[0] == "optimal" and plan.energy.progress > 0
-
-
-def test_the_obstacle_broad_phase_answers_as_the_exact_test():
-    """The rollout skips the exact obstacle test for a step whose robots and object are far from
-    every obstacle (their boxes apart): over seeded steps near, on and far from four obstacles,
-    its answer is the exact test's every time, and both answers occur."""
-    from controller.planning.transport_model import _Sim
-
-    rng = np.random.default_rng(2024)
-    obstacles = tuple(
-        geometry.transform(np.array([[0, 0], [0.6, 0], [0.6, 0.3], [0, 0.3]], float), p)
-        for p in ([3.0, 1.0, 0.3], [0.5, 3.5, 0.0], [5.0, 5.0, 1.0], [1.5, -1.5, -0.5])
-    )
-    st = dataclasses.replace(push_case(8, max_force=10.0), obstacles=obstacles)
-    roll = Rollout(st, TransportParams())
-
-    def exact(sim) -> bool:
-        poly = geometry.transform(roll.model.polygon, roll.object_pose(sim))
-        return any(
-            np.any(geometry.discs_hit_polygon(sim.pos, roll.radii, obs))
-            or geometry.points_in_polygon(poly, obs).any()
-            or geometry.points_in_polygon(obs, poly).any()
-            for obs in obstacles
-        )
-
-    seen = set()
-    for _ in range(400):
-        c = rng.uniform(-1.0, 6.0, 2)
-        pose = (float(c[0]), float(c[1]), float(rng.uniform(-np.pi, np.pi)))
-        pos = c + rng.normal(0.0, 0.8, (roll.k, 2))
-        sim = _Sim(pose, roll.start.nodes, pos, roll.start.transit, 0.0, 0.0)
-        want = exact(sim)
-        assert roll._hits_obstacles(sim) == want, (pose, pos)
-        seen.add(want)
-    assert seen == {True, False}
