@@ -42,7 +42,7 @@ from controller.runtime.hub import HUB_START, start_hub_process, stop_hub_proces
 from controller.runtime.job_record import JobRecord
 from controller.runtime.node import ControllerNode
 from controller.runtime.planner import PlannerWorker
-from controller.runtime.recording import open_recorder, record_ros2
+from controller.runtime.recording import open_recorder, record_paths, record_ros2
 from controller.runtime.ros2_graph import Ros2Graph, open_ros2_graph, publish_graph
 from controller.runtime.wiring import make_estimator
 
@@ -308,8 +308,9 @@ def run_daemon(
     try:
         with bus:
             claim.watch(bus)
-            # the poses reach the recorder from the loop's rings (a robot's flood unread)
-            bus.subscribe_raw_topics(recorder.on_sample, limit=True, skip=RING_TOPICS)
+            # the poses reach the recorder from the loop's rings (a robot's flood unread); the
+            # e-stops from both paths, once each
+            record_paths(bus, second, recorder, RING_TOPICS)
             record_ros2(bus, cfg, recorder)  # ROS 2 robots' own topics too
             rk = Ratekeeper(cfg.fleet.rate_hz)
             # the latch it left (without a hub it is the keeper; with one it learns from it too)

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import logging
 import sys
+import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -76,3 +78,41 @@ def record_ros2(bus: Any, cfg: FleetConfig, recorder: McapRecorder) -> list[str]
             bus.subscribe_raw(key, recorder.on_native)
             subscribed.append(key)
     return subscribed
+
+
+class TwoPathTap:
+    """The daemon recorder's tap when the e-stop has a second path (``zenoh.estop_listen``): an
+    e-stop that comes by both paths is recorded once, from the path it came by first; one that
+    comes only by the second (the hub hung) is recorded too. A repeat on one path is recorded
+    as it comes; other keys pass through."""
+
+    KEEP = 256  # e-stop payloads remembered (the newest)
+
+    def __init__(self, tap: Callable[[str, bytes, float], None], estop_key: str) -> None:
+        self.tap = tap
+        self.key = estop_key
+        self._seen: dict[bytes, str] = {}
+        self._lock = threading.Lock()
+
+    def path(self, name: str) -> Callable[[str, bytes, float], None]:
+        """The tap of the path ``name``."""
+        return lambda key, payload, t: self._on(name, key, payload, t)
+
+    def _on(self, name: str, key: str, payload: bytes, t: float) -> None:
+        if key == self.key:
+            with self._lock:
+                first = self._seen.setdefault(payload, name)
+                if len(self._seen) > self.KEEP:
+                    del self._seen[next(iter(self._seen))]
+            if first != name:
+                return  # the other path brought it first
+        self.tap(key, payload, t)
+
+
+def record_paths(bus: Any, second: Any, recorder: McapRecorder, skip: tuple[str, ...]) -> None:
+    """The daemon's recorder taps: every logged topic of the hub's session but ``skip`` (the
+    poses, read from the loop's rings) and, with a second path, the e-stops that come by it."""
+    tap = TwoPathTap(recorder.on_sample, bus.key("estop"))
+    bus.subscribe_raw_topics(tap.path("hub"), limit=True, skip=skip)
+    if second is not None:
+        second.subscribe_raw(second.key("estop"), tap.path("second"), limit=True)

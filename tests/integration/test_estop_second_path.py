@@ -40,7 +40,9 @@ def test_estop_reaches_every_agent_through_the_daemon_with_the_hub_hung(tmp_path
     procs = [hub]
     try:
         with connect_client(port, "the hub"):
-            daemon = spawn(tmp_path / "daemon.txt", "daemon", "--config", c, "--mission", "hold")
+            log = tmp_path / "daemon.mcap"
+            daemon = spawn(tmp_path / "daemon.txt", "daemon", "--config", c, "--mission", "hold",
+                           "--out", str(log))  # fmt: skip
             agents = [
                 spawn(tmp_path / f"{r}.txt", "driver", r, "--config", c) for r in ("r1", "r2")
             ]
@@ -78,4 +80,15 @@ def test_estop_reaches_every_agent_through_the_daemon_with_the_hub_hung(tmp_path
             assert out["agents_confirmed"] == ["r1", "r2"], out
             wait_for(lambda: _holders(path) == wanted, 10, "every holder released")
     finally:
-        stop_all(procs)
+        codes = stop_all(procs)
+    assert codes[1] == 0, codes  # the daemon stopped cleanly: its log is whole
+    # the e-stop that came by the second path alone is in the daemon's log, once per put
+    reasons = [json.loads(m.data).get("reason") for m in _messages(log, "fleet/lab/estop")]
+    assert 1 <= reasons.count("hub hung") <= 3, reasons  # the tool repeats until confirmed
+
+
+def _messages(path, topic: str) -> list:
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        return [m for _, ch, m in make_reader(f).iter_messages() if ch.topic == topic]
