@@ -64,8 +64,8 @@ def run(args) -> int:
     connect = args.connect or list(cfg.zenoh.listen)
     source = f"{getpass.getuser()}@{socket.gethostname()}"
     try:
-        # estop/resume with zenoh.estop_listen: the hub's path and the daemon's second at once
-        session, bus = open_tool_session(cfg, identity, connect, word in ("estop", "resume"))
+        # with zenoh.estop_listen: the hub's path and the daemon's second at once
+        session, bus = open_tool_session(cfg, identity, connect, two_paths=True)
     except BusError as exc:
         if args.json:
             extra = {}

@@ -1016,6 +1016,10 @@ class Paths:
         for bus in self.buses():
             bus.alive_ids_async(role, sink, timeout)
 
+    def query(self, topic: str, msg_type: type[wire.Message], timeout: float) -> list[wire.Message]:
+        """Every path's replies on a topic's key (a replier on two paths answers twice)."""
+        return [msg for _, msg in self.query_replies(self.key(topic), msg_type, timeout)]
+
     def query_replies(
         self, key_expr: str, msg_type: type[wire.Message], timeout: float
     ) -> Iterator[tuple[str, wire.Message]]:

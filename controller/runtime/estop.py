@@ -177,13 +177,13 @@ class ToolPaths:
             bus.close()
 
 
-def open_tool_session(cfg: FleetConfig, identity, connect: list[str], estop: bool):
-    """A command-line tool's session and the bus it talks through: for an e-stop or a resume
-    with ``zenoh.estop_listen`` set, both paths (``ToolPaths``); else a client of ``connect``.
-    Raises BusError when nothing opens."""
+def open_tool_session(cfg: FleetConfig, identity, connect: list[str], two_paths: bool):
+    """A command-line tool's session and the bus it talks through (``fleet estop|resume|
+    status``): with ``two_paths`` and ``zenoh.estop_listen`` set, both paths (``ToolPaths``);
+    else a client of ``connect``. Raises BusError when nothing opens."""
     from controller.io.bus import Bus
 
-    if estop and cfg.zenoh.estop_listen:
+    if two_paths and cfg.zenoh.estop_listen:
         session = ToolPaths(cfg, identity, connect)
         return session, session.__enter__()
     z = cfg.zenoh

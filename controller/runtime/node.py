@@ -95,7 +95,7 @@ class ControllerNode:
         self.inputs = NodeInputs(cfg, bus, self.counters, lossless_commands, over, rings, pose_tap)
         self.estop_latch = NodeLatch(bus, cfg.fleet.name, latch_at_start, estop_bus)
         self.outputs = NodeOutputs(cfg, bus, self.counters, lossless_commands)
-        bus.serve("status", self.status)
+        self.estop_latch.serve_status(self.status)
         bus.declare_alive("controller", ident)
 
     # -- what the runners and tests read of the parts

@@ -37,9 +37,16 @@ class NodeLatch:
             b.subscribe_topic("estop", lossless=True) for b in (bus, second) if b is not None
         ]
         self._replies = Inbox()
+        self.paths = [b for b in (bus, second) if b is not None]
         self._key = bus.serve_estop("controller", "main", self.answer)
         if second is not None:
             second.serve_estop("controller", "main", self.answer)
+
+    def serve_status(self, responder) -> None:
+        """``fleet status`` answered on every path the latch is answered on (with the hub hung
+        an operator still sees the fleet, by the second path)."""
+        for b in self.paths:
+            b.serve("status", responder)
 
     @property
     def stopped(self) -> bool:

@@ -1,8 +1,9 @@
 """The e-stop's second path (issue 31 item 3), as separate processes on 127.0.0.1: with
 ``zenoh.estop_listen`` the daemon also listens there, a router of its own for the e-stop alone;
-every agent and ``fleet estop|resume`` connect there too. With the hub hung (SIGSTOP) ``fleet
-estop`` still reaches every agent, confirmed within a second; without the second path the same
-e-stop reached no robot (the tool waited 10 s for the hub's handshake, then exit 1)."""
+every agent and ``fleet estop|resume|status`` connect there too. With the hub hung (SIGSTOP)
+``fleet estop`` still reaches every agent, confirmed within a second, ``fleet status`` still
+answers, and the daemon's log keeps the e-stop; without the second path the same e-stop reached
+no robot (the tool waited 10 s for the hub's handshake, then exit 1)."""
 
 from __future__ import annotations
 
@@ -71,6 +72,10 @@ def test_estop_reaches_every_agent_through_the_daemon_with_the_hub_hung(tmp_path
             assert took < 10.0, took  # the old tool waited 10 s for the hub, then exit 1
             engaged = {k: True for k in wanted}
             assert _holders(path) == engaged  # the latch held, answered on the second path
+            # the operator still sees the fleet: fleet status answers by the second path
+            st = _status(cfg)
+            assert st.get("ok") and st["estop"] is True, st
+            assert all(r["present"] for r in st["robots"]), st
 
             # the hub back: it learns the engaged latch from the holders, and a resume releases
             hub.send_signal(signal.SIGCONT)
