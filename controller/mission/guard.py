@@ -21,6 +21,10 @@ from controller.planning.approach import limit_accel
 from controller.planning.safety import SafetyFilter
 
 RELAX_PHASES = (Phase.PLAN, Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD)
+# the capture closing on the object: two robots both at it keep capture.clearance between them
+# (contacts in a concave notch lie nearer each other than the safety margin); in transport
+# every pair keeps the margin (the pushers move with the object, and the lab's estimates lag)
+CLOSING_PHASES = (Phase.CLOSE_IN, Phase.HOLD, Phase.ARRESTED)
 
 FAR = 1.0e3  # m: an unknown object's barrier is parked this far away (the pattern is fixed)
 
@@ -100,7 +104,7 @@ class SafetyStage:
             # pushes are deliberate contacts)
             relax=intent.phase in RELAX_PHASES,
             headings=view.poses[:, 2],
-            close=intent.touch,
+            close=intent.touch if intent.phase in CLOSING_PHASES else None,
         )
         if res.stopped.any():
             self.counters.infeasible += 1

@@ -38,6 +38,7 @@ from controller.mission.types import Mission
 from controller.outcome import report
 from controller.runtime.claim import ROLE, Claim, far_ahead, make_ident, wait_until_alone
 from controller.runtime.estop import LatchFile, LatchKeeper
+from controller.runtime.gcpause import freeze_for_real_time, release
 from controller.runtime.hub import HUB_START, start_hub_process, stop_hub_process
 from controller.runtime.job_record import JobRecord
 from controller.runtime.node import ControllerNode
@@ -344,6 +345,7 @@ def run_daemon(
                 f"{cfg.fleet.rate_hz} Hz, log {recorder.location}, controller {claim.ident}",
                 file=sys.stderr,
             )
+            gc_watch = freeze_for_real_time()  # start-up's objects never walked again
             t0 = time.time()
             job = JobRecord(cfg, t0)  # its outcome, printed at the end
             stopped = "interrupted"
@@ -385,6 +387,7 @@ def run_daemon(
                 if duration and now - t0 >= duration:
                     stopped = f"--duration {duration:g} s"
                     break
+            release(gc_watch)
             node.winding_down = True  # robots leaving from now on are the end, not news
             if not claim.yielded.is_set():
                 node.hold(time.time())
