@@ -87,9 +87,11 @@ def test_estop_reaches_every_agent_through_the_daemon_with_the_hub_hung(tmp_path
     finally:
         codes = stop_all(procs)
     assert codes[1] == 0, codes  # the daemon stopped cleanly: its log is whole
-    # the e-stop that came by the second path alone is in the daemon's log, once per put
+    # the e-stop that came by the second path alone is in the daemon's log (once per put: the
+    # tool repeats it until confirmed; one put by both paths is logged once, tests/unit/
+    # test_two_path_tap.py)
     reasons = [json.loads(m.data).get("reason") for m in _messages(log, "fleet/lab/estop")]
-    assert 1 <= reasons.count("hub hung") <= 3, reasons  # the tool repeats until confirmed
+    assert reasons.count("hub hung") >= 1, reasons
 
 
 def _messages(path, topic: str) -> list:
