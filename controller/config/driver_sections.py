@@ -270,6 +270,17 @@ def _ros2_topic(ns: str, topic: str) -> str:
     return f"/{ns.strip('/')}/{topic}" if ns.strip("/") else f"/{topic}"
 
 
+def _check_router(connect: tuple[str, ...], path: str, src: str) -> None:
+    """A ROS graph's router endpoints: at least one, each a zenoh endpoint."""
+    if not connect:
+        raise ConfigError(src, path, "expected at least one zenoh endpoint")
+    for k, ep in enumerate(connect):
+        if not _ENDPOINT.match(ep):
+            raise ConfigError(
+                src, f"{path}[{k}]", f"expected a zenoh endpoint like {ROS2_ROUTER!r}, got {ep!r}"
+            )
+
+
 def _validate_ros2(cfg: FleetConfig, i: int, src: str) -> None:
     """ROS names that rmw_zenoh can key, router endpoints, and no two robots commanded on the
     same topic of the same domain."""
@@ -289,14 +300,7 @@ def _validate_ros2(cfg: FleetConfig, i: int, src: str) -> None:
         value = getattr(s, key)
         if not _ros_name(value, key != "cmd_frame_id"):
             raise ConfigError(src, f"{path}.{key}", f"not a ROS name: {value!r}")
-    if not s.connect:
-        raise ConfigError(src, f"{path}.connect", "expected at least one zenoh endpoint")
-    for k, ep in enumerate(s.connect):
-        if not _ENDPOINT.match(ep):
-            raise ConfigError(
-                src, f"{path}.connect[{k}]", f"expected a zenoh endpoint like {ROS2_ROUTER!r}, "
-                f"got {ep!r}",
-            )  # fmt: skip
+    _check_router(s.connect, f"{path}.connect", src)
     problem = rmw_zenoh_problem(s.rmw_zenoh)
     if problem is not None:
         raise ConfigError(src, f"{path}.rmw_zenoh", problem)
@@ -325,14 +329,8 @@ def validate_ros2_graph(cfg: FleetConfig, src: str) -> None:
         raise ConfigError(src, "ros2_graph.node_name", f"not a ROS node name: {g.node_name!r}")
     if not _ros_name(g.frame_id, False):
         raise ConfigError(src, "ros2_graph.frame_id", f"not a ROS frame name: {g.frame_id!r}")
-    if not g.connect:
-        raise ConfigError(src, "ros2_graph.connect", "expected at least one zenoh endpoint")
+    _check_router(g.connect, "ros2_graph.connect", src)
     for k, ep in enumerate(g.connect):
-        if not _ENDPOINT.match(ep):
-            raise ConfigError(
-                src, f"ros2_graph.connect[{k}]", f"expected a zenoh endpoint like "
-                f"{ROS2_ROUTER!r}, got {ep!r}",
-            )  # fmt: skip
         if g.enabled and ep in cfg.zenoh.listen:
             raise ConfigError(
                 src, f"ros2_graph.connect[{k}]", f"{ep} is the fleet's own hub (zenoh.listen): "
