@@ -25,9 +25,9 @@ under their ROS topic names, so ROS tools (ros2 bag, Foxglove, mcap-ros2-support
 from __future__ import annotations
 
 import collections
+import heapq
 import json
 import logging
-import queue
 import struct
 import threading
 import time
@@ -56,12 +56,18 @@ CLOCK_SKEW = 60.0  # s: a stamp further than this from the run's clock is from a
 # samples waiting for the writer thread: ≈ 10-20 s of a 50-robot lab (poses, commands, states)
 QUEUE_MAX = 100_000
 HELD_MAX = 10_000  # events held while no segment can be written
+BATCH_S = 0.05  # s: the writer takes what is queued at least this often (unless kicked)
 RETRY_S = 1.0  # s between attempts at a new segment after a write error; also the log's pace
 
 
 class _Queue:
     """The recorder's queue: FIFO, bounded to ``maxsize`` droppable items (the oldest dropped
-    first when full); items put with ``keep`` (events, metadata, the end) are never dropped."""
+    first when full); items put with ``keep`` (events, metadata, the end) are never dropped.
+
+    The writer takes everything queued at once (``take``), woken by ``kick`` (the lab daemon's,
+    once per tick), by an item put with ``keep``, or after its timeout, never by each sample: a
+    wake-up per sample handed the GIL to the writer thread after every ``put`` of the daemon's
+    tick (the daemon's own puts reach the recorder at once, through zenoh's local delivery)."""
 
     def __init__(self, maxsize: int) -> None:
         self.maxsize = maxsize
@@ -69,6 +75,7 @@ class _Queue:
         self._drop: collections.deque[tuple[int, Any]] = collections.deque()
         self._n = 0
         self._cv = threading.Condition()
+        self._kicked = False
         self.dropped = 0
 
     def put(self, item: Any, keep: bool = False) -> None:
@@ -76,21 +83,32 @@ class _Queue:
             self._n += 1
             if keep:
                 self._keep.append((self._n, item))
+                self._kicked = True
+                self._cv.notify()
             else:
                 if len(self._drop) >= self.maxsize:
                     self._drop.popleft()
                     self.dropped += 1
                 self._drop.append((self._n, item))
+
+    def kick(self) -> None:
+        """Wake the writer now (it takes what is queued)."""
+        with self._cv:
+            self._kicked = True
             self._cv.notify()
 
-    def get(self, timeout: float) -> Any:
-        """The oldest item (raises queue.Empty after ``timeout`` s)."""
+    def take(self, timeout: float) -> list[Any]:
+        """Every item queued, oldest first, once kicked or after ``timeout`` s (maybe none)."""
         with self._cv:
-            if not self._cv.wait_for(lambda: self._keep or self._drop, timeout=timeout):
-                raise queue.Empty
-            if self._keep and (not self._drop or self._keep[0][0] < self._drop[0][0]):
-                return self._keep.popleft()[1]
-            return self._drop.popleft()[1]
+            self._cv.wait_for(lambda: self._kicked, timeout=timeout)
+            self._kicked = False
+            keep, drop = self._keep, self._drop
+            self._keep, self._drop = collections.deque(), collections.deque()
+        if not keep:
+            return [item for _, item in drop]
+        if not drop:
+            return [item for _, item in keep]
+        return [item for _, item in heapq.merge(keep, drop, key=lambda e: e[0])]
 
     def qsize(self) -> int:
         with self._cv:
@@ -416,27 +434,34 @@ class McapRecorder:
 
     def _run(self) -> None:
         last_flush = time.monotonic()
-        while True:
-            timeout = max(0.0, self.flush_interval - (time.monotonic() - last_flush))
-            try:
-                item = self._q.get(timeout=timeout)
-            except queue.Empty:
-                item = ()  # type: ignore[assignment]
-            if item is None:
-                break
+        end = False
+        while not end:
+            since = time.monotonic() - last_flush
+            for item in self._q.take(max(0.0, min(BATCH_S, self.flush_interval - since))):
+                if item is None:
+                    end = True
+                    break
+                if self._broken and time.monotonic() >= self._retry_at:
+                    self._reopen()
+                if self._broken:
+                    self._hold(item)
+                else:
+                    try:
+                        self._handle(item)
+                    except OSError as exc:
+                        self._failed(exc, lost=1)
             if self._broken and time.monotonic() >= self._retry_at:
-                self._reopen()
-            if self._broken:
-                self._hold(item)
-            else:
-                try:
-                    self._handle(item)
-                except OSError as exc:
-                    self._failed(exc, lost=1)
+                self._reopen()  # nothing queued meanwhile: still a new segment, on time
             if time.monotonic() - last_flush >= self.flush_interval:
                 self._flush()
                 last_flush = time.monotonic()
         self._finish()
+
+    def kick(self) -> None:
+        """Have the writer take what is queued now (the lab daemon: once per tick, after the
+        tick's puts, so the writer works while the loop sleeps); else it wakes every
+        ``BATCH_S``."""
+        self._q.kick()
 
     def _flush(self) -> None:
         if self._broken:

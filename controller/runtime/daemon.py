@@ -373,6 +373,7 @@ def run_daemon(
                 now = time.time()  # wall clock: pose stamps come from other computers
                 result = node.tick(now)
                 publish_graph(graph, now, node)  # the fleet on the ROS graph, if configured
+                recorder.kick()  # the tick's samples written while the loop sleeps
                 job.tick(now, result)
                 budget.check(node)
                 if rk.lagged > lag_reported:

@@ -144,6 +144,25 @@ def test_the_queue_drops_the_oldest_samples_never_an_event():
         q.put(("pose", i))
         if i == 1:
             q.put(("estop", i), keep=True)
-    got = [q.get(0.0) for _ in range(q.qsize())]
+    got = q.take(0.0)  # all at once, in the order put
     assert got == [("estop", 1), ("pose", 2), ("pose", 3), ("pose", 4)]
     assert q.dropped == 2
+    assert q.qsize() == 0
+
+
+def test_the_writer_takes_its_samples_in_batches_on_a_kick_and_events_at_once():
+    """Samples wake nobody (the daemon's tick kicks the writer once); an event does."""
+    q = rec_mod._Queue(maxsize=100)
+    for i in range(3):
+        q.put(("pose", i))
+    waker = threading.Timer(0.05, q.kick)
+    waker.start()
+    t0 = time.monotonic()
+    assert q.take(10.0) == [("pose", 0), ("pose", 1), ("pose", 2)]
+    assert time.monotonic() - t0 < 5.0  # the kick, not the timeout
+    q.put(("pose", 3))
+    assert q.take(0.05) == [("pose", 3)]  # no kick: the timeout takes them
+    q.put(("estop", 4), keep=True)
+    t0 = time.monotonic()
+    assert q.take(10.0) == [("estop", 4)]
+    assert time.monotonic() - t0 < 5.0
