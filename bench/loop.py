@@ -218,8 +218,14 @@ def run_size(
         out["planner"] = "thread" if thread else "process"
     mission, planners = _mission(kind, cfg, thread)
     with Bus(cfg.zenoh, cfg.fleet.name) as bus:
-        node = Node(
-            cfg, bus, mission, make_estimator(cfg), clock=time.perf_counter, planners=planners
+        node = Node(  # as fleet daemon wires it: poses read from a zenoh ring per key
+            cfg,
+            bus,
+            mission,
+            make_estimator(cfg),
+            clock=time.perf_counter,
+            planners=planners,
+            rings=True,
         )
         mocap = _object_pose(bus, cfg)
         try:

@@ -287,6 +287,30 @@ def command_burst(r: dict) -> str:
     )
 
 
+def loop(r: dict) -> str:
+    rows = []
+    for x in r["sizes"]:
+        t, c = x["tick_ms"], x["command_latency_ms"]
+        plans = ", ".join(
+            f"{k} {v['p50']:.2f} / {v['p99']:.2f} s"
+            for k, v in sorted((x.get("plan_latency_s") or {}).items())
+            if isinstance(v, dict) and v.get("p50") is not None
+        )
+        rows.append([x["mission"], x["robots"], _ms(t["p50"]), _ms(t["p99"]),
+                     f"{x['late_ticks']}", _ms(c["p50"]), _ms(c["p99"]),
+                     "" if x.get("kill9_to_not_present_ms") is None
+                     else f"{x['kill9_to_not_present_ms'] / 1e3:.2f} s", plans or "-"])  # fmt: skip
+    head = ["mission", "robots", "tick p50", "p99", "late ticks", "command latency p50",
+            "p99", "kill -9 to not present", "plans off the tick, p50 / p99"]  # fmt: skip
+    load = r["load_avg_1_5_15_start"][0], r["load_avg_1_5_15_end"][0]
+    return (
+        f"The daemon's tick at {r['rate_hz']:g} Hz (sample → estimate → plan → safety → "
+        f"publish, as `fleet daemon` wires it; {r['backend']} backend), the agents in processes "
+        f"of their own ({r['agents']}); command latency: {r['latency']}. Load average "
+        f"{load[0]:.1f} at the start, {load[1]:.1f} at the end.\n\n" + _table(head, rows)
+    )
+
+
 def mavlink(r: dict) -> str:
     lat = r["latency_ms"]
     rows = [
@@ -591,6 +615,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "bus": bus,
     "bus_flood": bus_flood,
     "command_burst": command_burst,
+    "loop": loop,
     "mavlink": mavlink,
     "logs": logs,
     "route_tables": route_tables,
