@@ -203,12 +203,6 @@ def run_size(
     cfg: FleetConfig = parse_config(data, str(data_path))
     gone_at: dict[str, float] = {}
 
-    class Node(ControllerNode):
-        def _on_alive(self, rid: str, alive: bool) -> None:
-            if not alive:
-                gone_at.setdefault(rid, time.time())
-            super()._on_alive(rid, alive)
-
     ids = list(cfg.robot_ids)
     groups = [ids[:1]] + [ids[i : i + per_host] for i in range(1, n, per_host)]
     procs: list[tuple[subprocess.Popen, Path]] = []
@@ -218,7 +212,9 @@ def run_size(
         out["planner"] = "thread" if thread else "process"
     mission, planners = _mission(kind, cfg, thread)
     with Bus(cfg.zenoh, cfg.fleet.name) as bus:
-        node = Node(  # as fleet daemon wires it: poses read from a zenoh ring per key
+        # a robot's liveliness token withdrawn: when (the kill -9 below)
+        bus.watch_alive("robot", lambda rid, alive: alive or gone_at.setdefault(rid, time.time()))
+        node = ControllerNode(  # as fleet daemon wires it: poses read from a zenoh ring per key
             cfg,
             bus,
             mission,
