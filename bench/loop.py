@@ -305,6 +305,7 @@ def main() -> None:
     ap.add_argument("--per-host", type=int, default=10, help="agents per agent process")
     ap.add_argument("--host", nargs=2, metavar=("CONFIG_JSON", "IDS"), help=argparse.SUPPRESS)
     ap.add_argument("--out", help=argparse.SUPPRESS)
+    ap.add_argument("--one", help=argparse.SUPPRESS)  # KIND,N,THREAD: one case, JSON out
     ap.add_argument("--limit", type=float, default=120.0, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.host:
@@ -314,13 +315,26 @@ def main() -> None:
 
     load0 = os.getloadavg()
     results = []
-    with tempfile.TemporaryDirectory(prefix="bench-loop-") as tmp:
-        for kind in args.missions.split(","):
-            for n in (int(s) for s in args.sizes.split(",")):
-                log(f"{kind} at {n} robots")
-                results.append(run_size(n, args.seconds, args.per_host, Path(tmp), kind))
-                if kind == "transport" and args.thread_too:
-                    results.append(run_size(n, args.seconds, args.per_host, Path(tmp), kind, True))
+    if args.one:  # one case, in this fresh process (see below)
+        kind, n, thread = args.one.split(",")
+        with tempfile.TemporaryDirectory(prefix="bench-loop-") as tmp:
+            res = run_size(int(n), args.seconds, args.per_host, Path(tmp), kind, thread == "1")
+        print(json.dumps(res))
+        return
+    # each case in a process of its own: in one process the cases after the first ran 3-4x
+    # slower (20 robots, hold: tick p50 59-90 ms after the 6-robot case, 16 ms alone)
+    for kind in args.missions.split(","):
+        for n in (int(s) for s in args.sizes.split(",")):
+            for thread in [0, 1] if kind == "transport" and args.thread_too else [0]:
+                log(f"{kind} at {n} robots" + (" (planner thread)" if thread else ""))
+                one = f"{kind},{n},{thread}"
+                cmd = [sys.executable, __file__, "--one", one, "--seconds", str(args.seconds)]
+                out = subprocess.run(
+                    cmd + ["--per-host", str(args.per_host)], cwd=ROOT, stdout=subprocess.PIPE
+                )  # fmt: skip
+                if out.returncode != 0:
+                    raise SystemExit(f"bench/loop.py --one {one} failed ({out.returncode})")
+                results.append(json.loads(out.stdout))
     print(
         json.dumps(
             {
