@@ -296,7 +296,7 @@ def loop(r: dict) -> str:
             for k, v in sorted((x.get("plan_latency_s") or {}).items())
             if isinstance(v, dict) and v.get("p50") is not None
         )
-        rows.append([x["mission"], x["robots"], _ms(t["p50"]), _ms(t["p99"]),
+        rows.append([x["mission"], str(x["robots"]), _ms(t["p50"]), _ms(t["p99"]),
                      f"{x['late_ticks']}", _ms(c["p50"]), _ms(c["p99"]),
                      "" if x.get("kill9_to_not_present_ms") is None
                      else f"{x['kill9_to_not_present_ms'] / 1e3:.2f} s", plans or "-"])  # fmt: skip
