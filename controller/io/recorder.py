@@ -104,10 +104,6 @@ class _Queue:
             self._kicked = False
             keep, drop = self._keep, self._drop
             self._keep, self._drop = collections.deque(), collections.deque()
-        if not keep:
-            return [item for _, item in drop]
-        if not drop:
-            return [item for _, item in keep]
         return [item for _, item in heapq.merge(keep, drop, key=lambda e: e[0])]
 
     def qsize(self) -> int:
