@@ -204,21 +204,34 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
 # --------------------------------------------------------------------------- codec
 
 
+@functools.cache
+def _omittable(cls: type) -> tuple[tuple[str, bool, Any], ...]:
+    """A message type's fields as (name, omitted while default, default), computed once."""
+    return tuple(
+        (f.name, bool(f.metadata.get("omit_default")), f.default) for f in dataclasses.fields(cls)
+    )
+
+
 def to_dict(msg: Message) -> dict[str, Any]:
     """The message as plain JSON-ready data. A field marked ``omit_default`` (added to a type
     after receivers were deployed) is left out while it holds its default, so a receiver that
     predates it still decodes every message that does not use it."""
-    return {
-        f.name: getattr(msg, f.name)
-        for f in dataclasses.fields(msg)
-        if not (f.metadata.get("omit_default") and getattr(msg, f.name) == f.default)
-    }
+    out = {}
+    for name, omit, default in _omittable(type(msg)):
+        v = getattr(msg, name)
+        if not (omit and v == default):
+            out[name] = v
+    return out
+
+
+# one encoder and one decoder for every message (json.dumps/loads with options build one a call)
+_ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 
 
 def encode(msg: Message) -> bytes:
     """Compact JSON bytes of a message (NaN/inf are refused)."""
     try:
-        return json.dumps(to_dict(msg), separators=(",", ":"), allow_nan=False).encode()
+        return _ENCODER.encode(to_dict(msg)).encode()
     except ValueError as exc:
         raise WireError(f"{type(msg).__name__}: not encodable: {exc}") from exc
 
@@ -287,31 +300,57 @@ def _check_field(
     return value
 
 
+@functools.cache
+def _spec(cls: type) -> tuple[frozenset[str], tuple[tuple[str, Any, Any, bool, float | None], ...]]:
+    """A message type's field names, and per field (name, type, metadata, required, the
+    number's limit or None), computed once."""
+    hints = _hints(cls)
+    fields = dataclasses.fields(cls)
+    return frozenset(f.name for f in fields), tuple(
+        (
+            f.name,
+            hints[f.name],
+            f.metadata,
+            f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING,
+            f.metadata.get("limit", MAX_ABS_POSITION) if hints[f.name] is float else None,
+        )
+        for f in fields
+    )
+
+
 def from_dict(cls: type[Message], obj: Any) -> Message:
     """Validate plain data into a message of type ``cls`` (raises WireError)."""
     name = cls.__name__
     if not isinstance(obj, dict):
         raise WireError(f"{name}: expected a JSON object, got {type(obj).__name__}")
-    hints = _hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = set(obj) - set(fields)
-    if unknown:
-        raise WireError(f"{name}: unknown field(s) {sorted(unknown)}")
+    names, spec = _spec(cls)
+    if not names.issuperset(obj):
+        raise WireError(f"{name}: unknown field(s) {sorted(set(obj) - names)}")
     kwargs: dict[str, Any] = {}
-    for fname, f in fields.items():
+    for fname, tp, meta, required, limit in spec:
         if fname not in obj:
-            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            if required:
                 raise WireError(f"{name}.{fname}: missing")
             continue
-        kwargs[fname] = _check_field(name, fname, hints[fname], obj[fname], f.metadata)
+        v = obj[fname]
+        # a number within its limit (NaN fails the comparison) and no minimum: the common case;
+        # anything else takes the full check, which names what is wrong
+        if limit is not None and type(v) in (float, int) and abs(v) <= limit and "min" not in meta:
+            kwargs[fname] = float(v)
+        else:
+            kwargs[fname] = _check_field(name, fname, tp, v, meta)
     return cls(**kwargs)
 
 
 def decode(cls: type[Message], payload: bytes | bytearray | memoryview | str) -> Message:
     """Decode JSON bytes into a message of type ``cls`` (raises WireError on anything wrong)."""
     try:
-        raw = bytes(payload) if not isinstance(payload, str) else payload.encode()
-        obj = json.loads(raw, parse_constant=_refuse_constant)
+        if isinstance(payload, str):
+            text = payload
+        else:
+            raw = bytes(payload)
+            text = raw.decode(json.detect_encoding(raw), "surrogatepass")  # as json.loads does
+        obj = _DECODER.decode(text)
     except WireError:
         raise
     except (ValueError, UnicodeDecodeError, RecursionError) as exc:
@@ -321,6 +360,9 @@ def decode(cls: type[Message], payload: bytes | bytearray | memoryview | str) ->
 
 def _refuse_constant(name: str) -> Any:
     raise WireError(f"non-finite constant {name} in payload")
+
+
+_DECODER = json.JSONDecoder(parse_constant=_refuse_constant)
 
 
 def json_schema(cls: type[Message]) -> dict[str, Any]:
