@@ -15,6 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from controller.config import EstimationSection
+from controller.estimation import batch
+from controller.estimation.kalman import mahalanobis2
 from controller.estimation.models import ROBOT_MODELS, THETA, world_velocity
 from controller.estimation.track import STATUS_OUT_OF_ORDER, STATUS_REJECTED, TrackFilter
 
@@ -153,6 +155,68 @@ class FleetEstimator:
         self._note_gate(robot_id, tr, status)
         return status
 
+    def measure_robots(self, items: Sequence[tuple[str, float, float, float, float]]) -> list[str]:
+        """Feed many robots' pose measurements, ``(robot_id, t, x, y, theta)`` each; returns
+        their statuses in order. Each robot's measurements are taken in the order given, as by
+        ``measure_robot``; the EKF's predict, gate and update run for all robots of one model
+        at once (``estimation.batch``): a round per measurement a robot has in ``items``."""
+        out = [""] * len(items)
+        rounds: list[list[int]] = []
+        seen: dict[str, int] = {}
+        for k, (rid, *_rest) in enumerate(items):
+            self._track(rid)  # an unknown id raises as measure_robot does
+            r = seen.get(rid, 0)
+            seen[rid] = r + 1
+            if r == len(rounds):
+                rounds.append([])
+            rounds[r].append(k)
+        for ks in rounds:
+            pending: dict[tuple, list[tuple[int, TrackFilter, float, FloatArray]]] = {}
+            for k in ks:
+                rid, t, x, y, theta = items[k]
+                tr = self._tracks[rid]
+                if not tr.strategy.stacks:
+                    out[k] = tr.measure(t, (x, y, theta))
+                    continue
+                zv, status = tr.admit(t, (x, y, theta))
+                if status is None:
+                    key = (tr.model, tr.tau, tr.q_lin, tr.q_yaw)
+                    pending.setdefault(key, []).append((k, tr, t, zv))
+                else:
+                    out[k] = status
+            for key, rows in pending.items():
+                self._filter_rows(key[0], rows, out)
+            for k in ks:
+                self._note_gate(items[k][0], self._tracks[items[k][0]], out[k])
+        return out
+
+    def _filter_rows(
+        self, model: str, rows: list[tuple[int, TrackFilter, float, FloatArray]], out: list[str]
+    ) -> None:
+        """Predict, gate and update one model's tracks to their measurements, stacked."""
+        first = rows[0][1]
+        X = np.stack([tr.x for _, tr, _, _ in rows])
+        P = np.stack([tr.P for _, tr, _, _ in rows])
+        segs = [tr.segments(tr.t, t) for _, tr, t, _ in rows]  # type: ignore[arg-type]
+        X, P = batch.predict_rows(model, X, P, segs, first.tau, first.q_lin, first.q_yaw)
+        Z = np.stack([zv for _, _, _, zv in rows])
+        for i, (_, tr, t, _) in enumerate(rows):
+            tr.strategy.set_state(tr.kf, X[i], P[i])
+            tr.t = t
+        try:
+            d2 = batch.gate_rows(X, P, Z, first.R)
+            X1, P1 = batch.update_rows(X, P, Z, first.R)
+        except np.linalg.LinAlgError:  # one S singular: each on its own (that one restarts)
+            for k, tr, t, zv in rows:
+                try:
+                    y, S = tr.innovation(zv)
+                    out[k] = tr.conclude(t, zv, mahalanobis2(y, S))
+                except np.linalg.LinAlgError:
+                    out[k] = tr.restart(t, zv)
+            return
+        for i, (k, tr, t, zv) in enumerate(rows):
+            out[k] = tr.conclude(t, zv, float(d2[i]), (X1[i], P1[i]))
+
     def measure_object(self, t: float, x: float, y: float, theta: float) -> str:
         """Feed the object's pose measurement (m, m, rad) stamped t (s); returns a status."""
         status = self._object.measure(t, (x, y, theta))
@@ -221,6 +285,7 @@ class FleetEstimator:
         poses = np.full((n, 3), np.nan)
         vels = np.full((n, 3), np.nan)
         stale = np.ones(n, dtype=bool)
+        self._extrapolate(now)
         for i, rid in enumerate(self.ids):
             tr = self._tracks[rid]
             stale[i] = tr.stale(now, self.stale_after)
@@ -230,6 +295,21 @@ class FleetEstimator:
                 poses[i] = x[:3]
                 vels[i] = world_velocity(tr.model, x)
         return poses, vels, stale
+
+    def _extrapolate(self, now: float) -> None:
+        """Every stacking robot track's state at ``now``, extrapolated per model at once
+        (``estimation.batch``) and cached in its track, where ``state_at`` finds it."""
+        groups: dict[tuple, list[TrackFilter]] = {}
+        for tr in self._tracks.values():
+            if tr.strategy.stacks and tr.initialized and tr.t < now and tr.cached(now) is None:
+                groups.setdefault((tr.model, tr.tau, tr.q_lin, tr.q_yaw), []).append(tr)
+        for (model, tau, q_lin, q_yaw), trs in groups.items():
+            X = np.stack([tr.x for tr in trs])
+            P = np.stack([tr.P for tr in trs])
+            segs = [tr.segments(tr.t, now) for tr in trs]  # type: ignore[arg-type]
+            X, P = batch.predict_rows(model, X, P, segs, tau, q_lin, q_yaw)
+            for i, tr in enumerate(trs):
+                tr.keep(now, X[i], P[i])
 
     def object_estimate(self, now: float) -> ObjectEstimate:
         """The object's estimate predicted to ``now`` (s)."""

@@ -266,6 +266,7 @@ class EkfStrategy:
     nonlinear motion model and its Jacobian, the Joseph-form update and a wrapped residual."""
 
     name = "ekf"
+    stacks = True  # FleetEstimator.measure_robots filters its robots together (estimation.batch)
 
     def make(self, model: str, n: int, tau: float, fx: Callable[..., FloatArray]) -> Any:
         return _PoseEKF(n, MEAS_DIM)
@@ -298,6 +299,7 @@ class UkfStrategy:
     linear update or the linearised prediction."""
 
     name = "ukf"
+    stacks = False  # each track on its own (filterpy's UKF)
 
     def __init__(self) -> None:
         self._points: dict[int, PoseSigmaPoints] = {}

@@ -118,7 +118,8 @@ class TrackFilter:
         i = bisect.bisect_right(self._cmd_t, t)
         self._cmd_t.insert(i, t)
         self._cmd_u.insert(i, uv)
-        self._version += 1
+        if self._cache is None or t < self._cache[0]:
+            self._version += 1  # a command from the cached time on leaves that state as it is
         if len(self._cmd_t) > MAX_COMMANDS:
             self._bound_history()
 
@@ -231,44 +232,66 @@ class TrackFilter:
 
     def measure(self, t: float, z: ArrayLike) -> str:
         """Process a pose measurement (x m, y m, theta rad) stamped t (s); returns a status."""
+        zv, status = self.admit(t, z)
+        if status is not None:
+            return status
+        try:
+            self._predict_filter(t)
+            y, S = self.innovation(zv)
+            d2 = mahalanobis2(y, S)
+        except np.linalg.LinAlgError:  # covariance lost definiteness: start over from z
+            return self.restart(t, zv)
+        return self.conclude(t, zv, d2)
+
+    def admit(self, t: float, z: ArrayLike) -> tuple[FloatArray, str | None]:
+        """A measurement's checks before the filter: garbage (rejected), the first one
+        (initialises), one not newer than the timeline (out of order). Returns the measurement
+        (heading wrapped) and its status, or None when it is for the filter to predict, gate and
+        update (``measure``, or ``FleetEstimator.measure_robots`` for many tracks at once)."""
         zv = np.array(np.ravel(z), dtype=float)
         self._version += 1
         self.just_reacquired = False
         if zv.shape != (MEAS_DIM,) or not (np.all(np.isfinite(zv)) and math.isfinite(t)):
             self.rejected += 1  # garbage never touches the filter
             self.invalid += 1
-            return STATUS_REJECTED
+            return zv, STATUS_REJECTED
         zv[THETA] = wrap_angle(float(zv[THETA]))
         if self.t is None:
             self._initialize(t, zv)
             self._prune_commands()
-            return STATUS_INITIALIZED
+            return zv, STATUS_INITIALIZED
         if t <= self.t:
             self.out_of_order += 1
-            return STATUS_OUT_OF_ORDER
-        try:
-            self._predict_filter(t)
-            y, S = self.innovation(zv)
-            self.last_d2 = mahalanobis2(y, S)
-        except np.linalg.LinAlgError:  # covariance lost definiteness: start over from z
-            self.reacquired += 1
-            self.just_reacquired = True
-            self._initialize(t, zv)
-            self._prune_commands()
-            return STATUS_INITIALIZED
-        if not self.last_d2 <= self.threshold:
+            return zv, STATUS_OUT_OF_ORDER
+        return zv, None
+
+    def restart(self, t: float, zv: FloatArray) -> str:
+        """Start over from the measurement (the covariance lost definiteness)."""
+        self.reacquired += 1
+        self.just_reacquired = True
+        self._initialize(t, zv)
+        self._prune_commands()
+        return STATUS_INITIALIZED
+
+    def conclude(
+        self, t: float, zv: FloatArray, d2: float, post: tuple[FloatArray, FloatArray] | None = None
+    ) -> str:
+        """Gate a measurement with squared Mahalanobis distance ``d2`` against the prior at
+        ``t`` (the filter already predicted there): rejected (re-acquiring after a consistent
+        run) or accepted, the update done here or given as ``post`` (state, covariance)."""
+        self.last_d2 = d2
+        if not d2 <= self.threshold:
             self.rejected += 1
             self.consecutive_rejected += 1
             if self._extend_run(t, zv) >= self.reacquire_after:
-                self.reacquired += 1
-                self.just_reacquired = True
-                self._initialize(t, zv)
-                self._prune_commands()
-                return STATUS_INITIALIZED
+                return self.restart(t, zv)
             self._prune_commands()
             return STATUS_REJECTED
-        self.strategy.update(self.kf, zv, self.R, self._H)
-        self.kf.P = _sym(self.kf.P)
+        if post is None:
+            self.strategy.update(self.kf, zv, self.R, self._H)
+            self.kf.P = _sym(self.kf.P)
+        else:
+            self.strategy.set_state(self.kf, post[0], post[1])
         self.accepted += 1
         self.consecutive_rejected = 0
         self._run.clear()
@@ -278,13 +301,24 @@ class TrackFilter:
 
     # ---- queries
 
+    def cached(self, now: float) -> tuple[FloatArray, FloatArray] | None:
+        """The state extrapolated to ``now`` when it is cached (copies), else None."""
+        c = self._cache
+        if c is not None and c[0] == now and c[1] == self._version:
+            return c[2].copy(), c[3].copy()
+        return None
+
+    def keep(self, now: float, x: FloatArray, P: FloatArray) -> None:
+        """Cache the state extrapolated to ``now`` (computed for many tracks at once)."""
+        self._cache = (now, self._version, x, P)
+
     def state_at(self, now: float) -> tuple[FloatArray, FloatArray]:
         """Mean and covariance extrapolated to ``now`` (s) on copies; ``now`` <= t gives the
         filter's own state. Requires an initialised track."""
         assert self.t is not None
-        c = self._cache
-        if c is not None and c[0] == now and c[1] == self._version:
-            return c[2].copy(), c[3].copy()
+        hit = self.cached(now)
+        if hit is not None:
+            return hit
         segs = self.segments(self.t, now)
         if not segs:
             x, P = self.x, self.P

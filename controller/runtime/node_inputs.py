@@ -32,6 +32,7 @@ EVENT_GRACE = 1.0
 class Estimator(Protocol):
     def command(self, robot_id: str, t: float, vx: float, vy: float, wz: float) -> None: ...
     def measure_robot(self, robot_id: str, t: float, x: float, y: float, theta: float) -> str: ...
+    def measure_robots(self, items: list[tuple[str, float, float, float, float]]) -> list[str]: ...
     def measure_object(self, t: float, x: float, y: float, theta: float) -> str: ...
     def robot_arrays(self, now: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
     def robot_estimate(self, robot_id: str, now: float) -> Any: ...
@@ -122,6 +123,7 @@ class NodeInputs:
         same clock domain as the stamps) a pose stamped further than ``fleet.max_clock_skew``
         from it is dropped and counted (``skewed``), and one after it is taken at ``now``."""
         self._sample_events()
+        items = []
         for item in self._poses.drain():
             rid = self._robot_id(item.key)
             if rid not in self.index:
@@ -129,10 +131,12 @@ class NodeInputs:
             m = item.msg
             if self._skewed(m.t, now, self.index[rid]):
                 continue
-            res = est.measure_robot(rid, self._stamp(m.t, now), m.x, m.y, m.theta)
-            self.counters.poses += 1
-            self.counters.rejected += res == "rejected"
-            self.counters.out_of_order += res == "out_of_order"
+            items.append((rid, self._stamp(m.t, now), m.x, m.y, m.theta))
+        if items:  # the tick's poses through the filters at once (stacked per model)
+            res = est.measure_robots(items)
+            self.counters.poses += len(res)
+            self.counters.rejected += res.count("rejected")
+            self.counters.out_of_order += res.count("out_of_order")
         for item in self._object.drain():
             m = item.msg
             if self._skewed(m.t, now):
