@@ -607,7 +607,43 @@ def route(r: dict) -> str:
     )
 
 
+def arrest(r: dict) -> str:
+    rows = []
+    for x in r["runs"]:
+        gap = x.get("max_contact_gap_at_arrest_m")
+        hold = x.get("hold_displacement_m")
+        at = x.get("arrest_time_s")
+        rows.append([
+            f"`{x['name']}`",
+            " or ".join(f"`{e}`" for e in x["expect"]),
+            f"`{x['outcome']}`" + ("" if x["as_expected"] else " (**not as expected**)"),
+            f"{at:.1f} s" if at is not None else "-",
+            f"{hold * 1e3:.1f} mm" if hold is not None else "-",
+            f"{gap * 1e2:.1f} cm" if gap is not None else "-",
+            str(x.get("wall_replans") if x.get("wall_replans") is not None else "-"),
+            f"{x['wall_s']:.0f} s",
+        ])  # fmt: skip
+    head = ["scenario", "expected", "outcome", "arrest at (sim)", "hold displacement",
+            "largest contact gap at the arrest", "wall re-plans", "wall time"]  # fmt: skip
+    h = r["hold_displacement_m"]
+    arrests = sum(x["outcome"] == "arrest" for x in r["runs"])
+    held = (
+        f"Hold displacement from truth over the {h['n']} arrests: median "
+        f"{h['median'] * 1e3:.1f} mm, max {h['max'] * 1e3:.1f} mm (goal < 5 cm: "
+        f"{_met(h['max'] is not None and h['max'] < 0.05)})."
+        if h["n"]
+        else "No arrest: no hold displacement."
+    )
+    return (
+        f"The seeded arrest suite in pybullet, the object alive through the hold (walls, "
+        f"corners, fast, evasive, concave), default rules: **{r['as_expected']} of "
+        f"{r['total']} runs end as their test expects** ({arrests} arrests)."
+        f" {held} Load {r['load_avg_1m']:.1f} at the end.\n\n" + _table(head, rows)
+    )
+
+
 RENDER: dict[str, Callable[[dict], str]] = {
+    "arrest": arrest,
     "approach": approach,
     "contact_lp": contact_lp,
     "estimation": estimation,

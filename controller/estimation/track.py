@@ -235,6 +235,10 @@ class TrackFilter:
         zv, status = self.admit(t, z)
         if status is not None:
             return status
+        return self.filter(t, zv)
+
+    def filter(self, t: float, zv: FloatArray) -> str:
+        """Predict to ``t``, gate and update with an admitted measurement (``admit``)."""
         try:
             self._predict_filter(t)
             y, S = self.innovation(zv)
