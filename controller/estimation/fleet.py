@@ -16,7 +16,6 @@ from numpy.typing import NDArray
 
 from controller.config import EstimationSection
 from controller.estimation import batch
-from controller.estimation.kalman import mahalanobis2
 from controller.estimation.models import ROBOT_MODELS, THETA, world_velocity
 from controller.estimation.track import STATUS_OUT_OF_ORDER, STATUS_REJECTED, TrackFilter
 
@@ -180,8 +179,7 @@ class FleetEstimator:
                     continue
                 zv, status = tr.admit(t, (x, y, theta))
                 if status is None:
-                    key = (tr.model, tr.tau, tr.q_lin, tr.q_yaw)
-                    pending.setdefault(key, []).append((k, tr, t, zv))
+                    pending.setdefault(_stack_key(tr), []).append((k, tr, t, zv))
                 else:
                     out[k] = status
             for key, rows in pending.items():
@@ -198,25 +196,18 @@ class FleetEstimator:
         self, model: str, rows: list[tuple[int, TrackFilter, float, FloatArray]], out: list[str]
     ) -> None:
         """Predict, gate and update one model's tracks to their measurements, stacked."""
-        first = rows[0][1]
-        X = np.stack([tr.x for _, tr, _, _ in rows])
-        P = np.stack([tr.P for _, tr, _, _ in rows])
-        segs = [tr.segments(tr.t, t) for _, tr, t, _ in rows]  # type: ignore[arg-type]
-        X, P = batch.predict_rows(model, X, P, segs, first.tau, first.q_lin, first.q_yaw)
+        trs = [tr for _, tr, _, _ in rows]
+        X, P = _predict_stack(model, trs, [t for _, _, t, _ in rows])
         Z = np.stack([zv for _, _, _, zv in rows])
         for i, (_, tr, t, _) in enumerate(rows):
             tr.strategy.set_state(tr.kf, X[i], P[i])
             tr.t = t
         try:
-            d2 = batch.gate_rows(X, P, Z, first.R)
-            X1, P1 = batch.update_rows(X, P, Z, first.R)
+            d2 = batch.gate_rows(X, P, Z, trs[0].R)
+            X1, P1 = batch.update_rows(X, P, Z, trs[0].R)
         except np.linalg.LinAlgError:  # one S singular: each on its own (that one restarts)
             for k, tr, t, zv in rows:
-                try:
-                    y, S = tr.innovation(zv)
-                    out[k] = tr.conclude(t, zv, mahalanobis2(y, S))
-                except np.linalg.LinAlgError:
-                    out[k] = tr.restart(t, zv)
+                out[k] = tr.judge(t, zv)
             return
         for i, (k, tr, t, zv) in enumerate(rows):
             out[k] = tr.conclude(t, zv, float(d2[i]), (X1[i], P1[i]))
@@ -305,15 +296,12 @@ class FleetEstimator:
         (``estimation.batch``) and cached in its track, where ``state_at`` finds it."""
         groups: dict[tuple, list[TrackFilter]] = {}
         for tr in self._tracks.values():
-            if tr.strategy.stacks and tr.initialized and tr.t < now and tr.cached(now) is None:
-                groups.setdefault((tr.model, tr.tau, tr.q_lin, tr.q_yaw), []).append(tr)
-        for (model, tau, q_lin, q_yaw), trs in groups.items():
+            if tr.strategy.stacks and tr.initialized and tr.t < now and not tr.is_cached(now):
+                groups.setdefault(_stack_key(tr), []).append(tr)
+        for key, trs in groups.items():
             if len(trs) < STACK_MIN:
                 continue  # a few: state_at one by one costs less than the stacking
-            X = np.stack([tr.x for tr in trs])
-            P = np.stack([tr.P for tr in trs])
-            segs = [tr.segments(tr.t, now) for tr in trs]  # type: ignore[arg-type]
-            X, P = batch.predict_rows(model, X, P, segs, tau, q_lin, q_yaw)
+            X, P = _predict_stack(key[0], trs, [now] * len(trs))
             for i, tr in enumerate(trs):
                 tr.keep(now, X[i], P[i])
 
@@ -415,6 +403,27 @@ class FleetEstimator:
             else:
                 log.info("%s: pose fresh", name)
             self._was_stale[name] = stale
+
+
+def _stack_key(tr: TrackFilter) -> tuple:
+    """What tracks stacked together share: the model and its noise and lag."""
+    return (tr.model, tr.tau, tr.q_lin, tr.q_yaw)
+
+
+def _predict_stack(
+    model: str, trs: list[TrackFilter], ts: list[float]
+) -> tuple[FloatArray, FloatArray]:
+    """The tracks' states and covariances predicted to their times ``ts``, stacked."""
+    first = trs[0]
+    return batch.predict_rows(
+        model,
+        np.stack([tr.x for tr in trs]),
+        np.stack([tr.P for tr in trs]),
+        [tr.segments(tr.t, t) for tr, t in zip(trs, ts, strict=True)],  # type: ignore[arg-type]
+        first.tau,
+        first.q_lin,
+        first.q_yaw,
+    )
 
 
 # robots of one model below which a round of poses (or the extrapolation to the tick) is

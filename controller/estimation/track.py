@@ -241,6 +241,13 @@ class TrackFilter:
         """Predict to ``t``, gate and update with an admitted measurement (``admit``)."""
         try:
             self._predict_filter(t)
+        except np.linalg.LinAlgError:  # covariance lost definiteness: start over from z
+            return self.restart(t, zv)
+        return self.judge(t, zv)
+
+    def judge(self, t: float, zv: FloatArray) -> str:
+        """Gate and update with an admitted measurement, the filter already predicted to ``t``."""
+        try:
             y, S = self.innovation(zv)
             d2 = mahalanobis2(y, S)
         except np.linalg.LinAlgError:  # covariance lost definiteness: start over from z
@@ -305,12 +312,10 @@ class TrackFilter:
 
     # ---- queries
 
-    def cached(self, now: float) -> tuple[FloatArray, FloatArray] | None:
-        """The state extrapolated to ``now`` when it is cached (copies), else None."""
+    def is_cached(self, now: float) -> bool:
+        """Whether the state extrapolated to ``now`` is cached (and still current)."""
         c = self._cache
-        if c is not None and c[0] == now and c[1] == self._version:
-            return c[2].copy(), c[3].copy()
-        return None
+        return c is not None and c[0] == now and c[1] == self._version
 
     def keep(self, now: float, x: FloatArray, P: FloatArray) -> None:
         """Cache the state extrapolated to ``now`` (computed for many tracks at once)."""
@@ -320,9 +325,9 @@ class TrackFilter:
         """Mean and covariance extrapolated to ``now`` (s) on copies; ``now`` <= t gives the
         filter's own state. Requires an initialised track."""
         assert self.t is not None
-        hit = self.cached(now)
-        if hit is not None:
-            return hit
+        if self.is_cached(now):
+            c = self._cache
+            return c[2].copy(), c[3].copy()  # type: ignore[index]
         segs = self.segments(self.t, now)
         if not segs:
             x, P = self.x, self.P
