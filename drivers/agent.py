@@ -178,9 +178,12 @@ class Agent:
         rid = params.robot_id
         # lossless: the lockstep handshake counts every command, and no e-stop may be lost
         self._cmds = bus.subscribe_topic("robot_cmd", waker=commands_arrived, lossless=True, id=rid)
-        self._estops = bus.subscribe_topic("estop", lossless=True)
+        self._estop_arrived = threading.Condition()  # wakes the loop's wait (wait_for_estop)
+        self._estops = bus.subscribe_topic("estop", waker=self._estop_arrived, lossless=True)
         self._second_estops = (
-            None if estop_bus is None else estop_bus.subscribe_topic("estop", lossless=True)
+            None
+            if estop_bus is None
+            else estop_bus.subscribe_topic("estop", waker=self._estop_arrived, lossless=True)
         )
         self._latch_replies = _Replies()
         self._pose_pub = bus.publisher("robot_pose", id=rid)
@@ -329,6 +332,15 @@ class Agent:
             n += 1
         self.core.counters.poses += n
         return n
+
+    def wait_for_estop(self, timeout: float) -> None:
+        """Sleep up to ``timeout`` s, woken at once by an operator's e-stop (the wall-clock
+        loop's pause between cycles: an e-stop is acted on when it arrives, not a period
+        later)."""
+        inboxes = [i for i in (self._estops, self._second_estops) if i is not None]
+        with self._estop_arrived:  # the inboxes notify under this lock: no arrival is missed
+            if not any(i.qsize() for i in inboxes):
+                self._estop_arrived.wait(timeout)
 
     def step(self, now: float) -> None:
         """One agent cycle: inputs, safety checks, poses out."""

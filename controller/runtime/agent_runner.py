@@ -214,7 +214,7 @@ def _serve(
         # the past, dropped as skewed, while the capped catch-up below slowly made it good)
         hub.advance_to(time.time() - wall0)
     rate = max(cfg.fleet.rate_hz, 20.0)
-    rk = Ratekeeper(rate)
+    rk = Ratekeeper(rate, sleep=agent.wait_for_estop)  # an e-stop ends the pause at once
     catch_up = None if hub is None else max(1, math.ceil(2.0 / (rate * hub.dt)))
     behind_told = False
     next_latch = time.monotonic() + LATCH_EVERY

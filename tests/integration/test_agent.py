@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -117,6 +119,30 @@ def test_estop_is_latched_until_resume(rig):
     agent.step(0.45)
     hub.advance_to(0.5)
     assert speed(w) == pytest.approx(0.1)
+
+
+def test_an_estop_ends_the_agents_pause_between_cycles_at_once(rig):
+    """The wall-clock loop sleeps between cycles in ``wait_for_estop``: an e-stop arriving
+    wakes it (acted on when it comes, not a period later); nothing else shortens the pause."""
+    agent = rig["agent"]
+    t0 = time.monotonic()
+    agent.wait_for_estop(0.3)  # nothing arrives: the whole pause
+    assert time.monotonic() - t0 >= 0.29
+    timer = threading.Timer(
+        0.1, rig["estop"].put, [wire.EStop(t=0.0, engaged=True, source="test", epoch=1)]
+    )
+    timer.start()
+    t0 = time.monotonic()
+    agent.wait_for_estop(5.0)
+    woke = time.monotonic() - t0
+    timer.join()
+    assert woke < 2.0, woke  # woken by the arrival (~0.1 s), not at the 5 s timeout
+    assert agent._estops.qsize() == 1
+    t0 = time.monotonic()
+    agent.wait_for_estop(5.0)  # one waiting already: no pause at all
+    assert time.monotonic() - t0 < 1.0
+    agent.step(0.0)
+    assert agent.core.estop
 
 
 def test_limits_are_clamped_and_diff_vy_dropped(rig):

@@ -36,6 +36,7 @@ from tests.support.wait import wait_for
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 RESUME_DELAY = 60.0  # s the operator's resume comes after the lab is up (a slow bring-up)
+STOP_WITHIN = 1.0  # s from the e-stop to every robot standing still, with a hog on every core
 BLOCK_MARK = "<!-- lab-quickstart"
 
 
@@ -66,15 +67,17 @@ def _port_free(port: int) -> bool:
     return True
 
 
-def _speeds_after(tracks: dict[str, list], t0: float) -> dict[str, float]:
-    """Each track's largest speed (m/s) from ``t0`` on (rows t, x, y, theta)."""
+def _still_from(tracks: dict[str, list], t0: float, still: float = 0.02) -> dict[str, float]:
+    """Each track's time (s after ``t0``) from which it stood still to its end (every speed
+    under ``still`` m/s; rows t, x, y, theta): its last sample's when it never did."""
     out = {}
     for rid, rows in tracks.items():
         a = np.array([r for r in rows if r[0] >= t0])
         if len(a) < 3:
             continue
         v = np.hypot(np.diff(a[:, 1]), np.diff(a[:, 2])) / np.maximum(np.diff(a[:, 0]), 1e-6)
-        out[rid] = float(v.max())
+        moving = np.flatnonzero(v >= still)
+        out[rid] = float(a[moving[-1] + 1, 0] - t0) if len(moving) else 0.0
     return out
 
 
@@ -191,17 +194,21 @@ def test_ctrl_c_stops_every_robot_first_and_leaves_a_readable_log_under_load(tmp
     assert run.complete
     last_engage = max(e["t"] for e in run.estops if e["engaged"])
     assert last_engage > max(e["t"] for e in run.estops if not e["engaged"])
-    # the robots stood still from the e-stop (+0.5 s: the agents' zero, the world's step) until
-    # the world was stopped, last but the hub
+    # every robot stood still soon after the e-stop (the agent's zero, the world's step, the
+    # robot's braking) until the world was stopped, last but the hub: 0.1-0.3 s measured with
+    # the hogs on the machine this was written on; bounded at STOP_WITHIN
     tracks: dict[str, list] = {}
     for key, m in rows:
         tracks.setdefault(key, []).append((m.t, m.x, m.y, m.theta))
-    speeds = _speeds_after(tracks, last_engage + 0.5)
-    assert len(speeds) == 6 and max(speeds.values()) < 0.02, speeds
+    still = _still_from(tracks, last_engage)
+    ends = {rid: rows[-1][0] - last_engage for rid, rows in tracks.items()}
+    assert len(still) == 6 and max(still.values()) < STOP_WITHIN, (still, ends)
+    assert min(ends.values()) > max(still.values()) + 0.3, (still, ends)  # and stayed so
     daemon = (Path(final["run_dir"]) / "daemon.log").read_text()
     stopped = re.search(r"fleet daemon: stopped.*", daemon)
     print(
         f"\nlab under load: up in {final.get('ready_s')} s; restarts {final['outcome']['restarts']}"
+        f"; robots still {max(still.values()):.2f} s after the e-stop"
         f"; {stopped.group(0) if stopped else 'no stop line'}",
         file=sys.stderr,
     )
