@@ -72,9 +72,9 @@ def test_a_full_disk_does_not_stop_the_daemon_and_the_log_resumes(tmp_path, port
         wait_for(lambda: status(cfg).get("ok"), 40, "the daemon")
         code, res = fleet_json("resume", "--config", c, "--timeout", "30")
         assert code == 0, res
-        wait_for(lambda: out.exists() and out.stat().st_size > 4096, 20, "the log flushed")
+        # messages on disk (a size alone can be the header, its schemas and channels only)
+        wait_for(lambda: out.exists() and len(list(read_log(out))) > 0, 20, "messages flushed")
         before = len(list(read_log(out)))
-        assert before > 0
 
         # the disk is full: every write past 1 KiB fails (the latch file, ≈ 200 B, still fits)
         _prlimit(daemon.proc.pid, "1024:")
