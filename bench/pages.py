@@ -642,6 +642,35 @@ def arrest(r: dict) -> str:
     )
 
 
+def waits(r: dict) -> str:
+    run, route, cap = r["run"], r["route"], r["capture"]
+
+    def goal(x: dict, unit_goal: str) -> str:
+        return f"{unit_goal}: **{'met' if x['goal_met'] else 'not met'}**"
+
+    rows = [
+        ["`make run` (`fleet run --config fleet.toml`, the whole process)",
+         f"{run['wall_s_median']:.1f} s" if run["wall_s_median"] is not None else "-",
+         f"{run['sim_time_s_median']:.0f} s of sim time"
+         if run["sim_time_s_median"] is not None else "-",
+         goal(run, f"<= {run['goal_s']:g} s"), str(run["failed"])],
+        ["`fleet plan route --config fleet.toml` (128² × 36), the plan",
+         f"{route['seconds_median']:.2f} s" if route["seconds_median"] is not None else "-",
+         f"{route['wall_s_median']:.1f} s with the process",
+         goal(route, f"< {route['goal_s']:g} s"), str(route["failed"])],
+        ["`fleet plan capture --config fleet.toml`, the GA",
+         f"{cap['seconds_median']:.2f} s" if cap["seconds_median"] is not None else "-",
+         f"{cap['wall_s_median']:.1f} s with the process", "", str(cap["failed"])],
+    ]  # fmt: skip
+    head = ["what the user runs", "median", "beside it", "goal", "failed runs"]
+    load = r["load_avg_1m"]
+    return (
+        f"What a newcomer waits for, each in a process of its own, {r['repeats']} times "
+        f"interleaved (medians). Load average {load[0]:.1f} at the start, {load[1]:.1f} at "
+        "the end.\n\n" + _table(head, rows)
+    )
+
+
 RENDER: dict[str, Callable[[dict], str]] = {
     "arrest": arrest,
     "approach": approach,
@@ -658,6 +687,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "capture": capture,
     "capture_fresh": capture_fresh,
     "route": route,
+    "waits": waits,
 }
 
 
