@@ -35,6 +35,10 @@ from scipy import sparse
 from controller import geometry
 
 INF = 1e20
+# robot pairs above which the QP keeps only the pairs that can bind (about 17 robots): below,
+# every pair's row (the golden logs' fleets of 6 replay unchanged); above, the pair rows
+# (N²/2: 4 950 at 100 robots) made osqp most of the lab tick
+PRUNE_PAIRS = 128
 
 
 def _solved(res) -> bool:
@@ -69,16 +73,31 @@ class SafetyFilter:
     warm: bool = True
     axial: np.ndarray | None = None  # (N,) bool: differential robots (they move along their axis)
     close_margin: float | None = None  # m between two ``close`` robots (None: ``margin``)
+    prune: bool | None = None  # only the pairs that can bind (None: above PRUNE_PAIRS pairs)
     _prob: osqp.OSQP | None = field(default=None, repr=False)
     _perm: np.ndarray | None = field(default=None, repr=False)
+    _kept_index: np.ndarray = field(default_factory=lambda: np.zeros(0, int), repr=False)
+    _last: np.ndarray | None = field(default=None, repr=False)  # the last solution (warm start)
 
     def __post_init__(self) -> None:
         n = len(self.radii)
         self.n = n
-        iu, ju = np.triu_indices(n, 1)
+        self.axial = np.zeros(n, bool) if self.axial is None else np.asarray(self.axial, bool)
+        self._all_i, self._all_j = np.triu_indices(n, 1)
+        # a large fleet's QP holds only the pairs that can bind (``_pairs_for``)
+        if self.prune is None:
+            self.prune = len(self._all_i) > PRUNE_PAIRS
+        if self.prune:  # no pair until one can bind
+            self._layout(self._all_i[:0], self._all_j[:0])
+        else:
+            self._layout(self._all_i, self._all_j)
+
+    def _layout(self, iu: np.ndarray, ju: np.ndarray) -> None:
+        """The constraint matrix's rows and sparsity pattern for the robot pairs ``iu``, ``ju``
+        (row layout: pairs, robot x polygon, box (2N), diagonals (2N), axes (N))."""
+        n = self.n
         self.pi, self.pj = iu, ju
         npair = len(iu)
-        # row layout: pairs, robot x polygon, box (2N)
         rows, cols = [], []
         r = np.arange(npair)
         for k in range(2):
@@ -103,7 +122,6 @@ class SafetyFilter:
         self._rows = np.concatenate(rows)
         self._cols = np.concatenate(cols)
         self.m = npair + n * self.n_polygons + 5 * n
-        self.axial = np.zeros(n, bool) if self.axial is None else np.asarray(self.axial, bool)
         self._box = slice(npair + n * self.n_polygons, npair + n * self.n_polygons + 4 * n)
         self._axis = slice(self.m - n, self.m)
         tag = sparse.csc_matrix(
@@ -113,6 +131,30 @@ class SafetyFilter:
         self._perm = tag.data.astype(int) - 1  # csc data order -> our COO order
         self._pattern = tag
         self.ri = ri
+        self._prob = None  # a new pattern: set up again at the next call
+
+    def _pairs_for(self, p: np.ndarray, close: np.ndarray | None) -> None:
+        """Keep in the QP every pair whose row can bind at positions ``p``: the others hold
+        for any velocities in the speed octagon (|u| ≤ √2 max_speed), since
+        2 d·(u_i − u_j) ≥ −2|d| √2 (v_i + v_j) ≥ −γh, so leaving them out changes neither the
+        feasible set nor the solution. The kept set has slack (pairs up to twice that reach)
+        and is rebuilt only when a pair that can bind is missing from it."""
+        d = p[self._all_i] - p[self._all_j]
+        dist = np.sqrt(np.sum(d * d, axis=1))
+        margin = self._pair_margin(close, self._all_i, self._all_j)
+        h = dist**2 - (self.radii[self._all_i] + self.radii[self._all_j] + margin) ** 2
+        reach = (
+            2.0 * np.sqrt(2.0) * dist * (self.max_speed[self._all_i] + self.max_speed[self._all_j])
+        )
+        need = self.gamma * h < reach * (1.0 + 1e-6)
+        kept = np.zeros(len(self._all_i), bool)
+        kept[self._kept_index] = True
+        if not np.all(kept[need]):
+            index = np.flatnonzero(self.gamma * h < 2.0 * reach)
+            self._kept_index = index
+            warm = self._last
+            self._layout(self._all_i[index], self._all_j[index])
+            self._last = warm
 
     def _setup(self, ax: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
         a = self._pattern.copy()
@@ -168,9 +210,11 @@ class SafetyFilter:
         stale = np.zeros(n, bool) if stale is None else np.asarray(stale, bool)
         u_nom = np.where(stale[:, None], 0.0, u_nom)
         p = positions
+        if self.prune:
+            self._pairs_for(p, close)
         # robot pairs
         d = p[self.pi] - p[self.pj]
-        rs = self.radii[self.pi] + self.radii[self.pj] + self._pair_margin(close)
+        rs = self.radii[self.pi] + self.radii[self.pj] + self._pair_margin(close, self.pi, self.pj)
         h = np.sum(d * d, axis=1) - rs**2
         vals = [2 * d[:, 0], -2 * d[:, 0], 2 * d[:, 1], -2 * d[:, 1]]
         lo_pair = -self.gamma * h
@@ -237,6 +281,8 @@ class SafetyFilter:
         q = -u_nom.reshape(-1).astype(float)
         if self._prob is None or not self.warm:
             self._setup(ax, q, lo, hi)
+            if self.warm and self._last is not None:
+                self._prob.warm_start(x=self._last)  # a pattern rebuilt: start from the last
         else:
             self._prob.update(q=q, l=lo, u=hi, Ax=ax[self._perm])
         # rows a squeezed robot may relax: inside its margin to a polygon it is not closing
@@ -261,13 +307,16 @@ class SafetyFilter:
             u, status2, stopped = self._solve(lo, hi, rows, stopped, fresh=False)
             status = status if status2.startswith("solved") else status2
         u = np.where(stale[:, None], 0.0, u)
+        self._last = u.reshape(-1).copy()
         return FilterResult(u, status, stopped, float(np.abs(u - u_nom).max()), aim)
 
-    def _pair_margin(self, close: np.ndarray | None) -> np.ndarray | float:
+    def _pair_margin(
+        self, close: np.ndarray | None, pi: np.ndarray, pj: np.ndarray
+    ) -> np.ndarray | float:
         """Each pair's margin: ``close_margin`` for two ``close`` robots, else ``margin``."""
         if close is None or self.close_margin is None:
             return self.margin
-        both = np.asarray(close, bool)[self.pi] & np.asarray(close, bool)[self.pj]
+        both = np.asarray(close, bool)[pi] & np.asarray(close, bool)[pj]
         return np.where(both, min(self.margin, self.close_margin), self.margin)
 
     def _solve(
@@ -329,6 +378,11 @@ class SafetyFilter:
         box_hi[2 * n :][held] = 0.0
         self._prob.update(l=lo2, u=hi2)
         res = self._prob.solve(raise_error=False)
+        if not _solved(res):
+            # warm-started from an infeasible solve's iterates, ADMM can stall (max_iter) on a
+            # problem that standing still makes feasible: once more from rest before stopping all
+            self._prob.warm_start(x=np.zeros(2 * n), y=np.zeros(self.m))
+            res = self._prob.solve(raise_error=False)
         if not _solved(res):
             return np.zeros((n, 2)), status, np.ones(n, bool)
         u = res.x.reshape(n, 2)

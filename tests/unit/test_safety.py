@@ -226,3 +226,44 @@ def test_two_robots_at_the_object_keep_the_capture_clearance_between_them():
     assert 0.02 - 1e-3 <= least < 0.05 and went > 1.1, (least, went)
     least, went = _pass_by(close=False)
     assert least >= 0.05 - 1e-3 and went < 1.0, (least, went)
+
+
+def test_a_large_fleet_filtered_with_only_the_pairs_that_can_bind_matches_every_pair():
+    """60 robots, clustered (pairs in and out of reach), an obstacle, a few axial ones: the
+    QP with the pairs that can bind (the default above PRUNE_PAIRS pairs) gives the velocities
+    of the QP with all 1 770 pairs, step after step, and keeps the margin in a crowded swap."""
+    rng = np.random.default_rng(5)
+    n = 60
+    centres = rng.uniform(2, 8, (6, 2))
+    p = np.zeros((0, 2))
+    while len(p) < n:  # in clusters, 0.3 m apart at least (outside each other's margin)
+        q = np.clip(centres[rng.integers(0, 6)] + rng.normal(0, 0.6, 2), 0.5, 9.5)
+        inside_box = np.all(np.abs(q - 5.0) < 0.5 + 0.2)
+        if not inside_box and (len(p) == 0 or np.linalg.norm(p - q, axis=1).min() > 0.3):
+            p = np.vstack([p, q])
+    goal = rng.uniform(1, 9, (n, 2))
+    box = np.array([[4.5, 4.5], [5.5, 4.5], [5.5, 5.5], [4.5, 5.5]])
+    axial = np.arange(n) % 5 == 0
+    kw = dict(margin=0.05, axial=axial)
+    pruned = SafetyFilter(np.full(n, 0.1), np.full(n, 0.4), BOUNDS, 1, **kw)
+    full = SafetyFilter(np.full(n, 0.1), np.full(n, 0.4), BOUNDS, 1, prune=False, **kw)
+    assert pruned.prune and not full.prune
+    dmin, kept = np.inf, []
+    for _ in range(60):
+        v = goal - p
+        s = np.linalg.norm(v, axis=1, keepdims=True)
+        u_nom = v / np.maximum(s, 1e-9) * np.minimum(s, 0.4)
+        th = np.arctan2(u_nom[:, 1], u_nom[:, 0])
+        a = pruned.filter(p, u_nom, [box], headings=th)
+        b = full.filter(p, u_nom, [box], headings=th)
+        assert a.status == b.status
+        assert np.allclose(a.velocities, b.velocities, atol=2e-3), np.abs(
+            a.velocities - b.velocities
+        ).max()
+        kept.append(len(pruned.pi))
+        p = p + 0.1 * a.velocities
+        d = np.linalg.norm(p[:, None] - p[None], axis=-1)
+        d[np.eye(n, dtype=bool)] = np.inf
+        dmin = min(dmin, float(d.min()))
+    assert max(kept) < len(full.pi) / 4  # the QP held a fraction of the pairs
+    assert dmin >= 0.25 - 5e-3
