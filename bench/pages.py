@@ -671,6 +671,61 @@ def waits(r: dict) -> str:
     )
 
 
+def _verdict_m(verdict: str) -> str:
+    m = re.match(r"DELIVERED ([\d.]+ m)", verdict)
+    return m.group(1) if m else "-"
+
+
+def job(r: dict) -> str:
+    rows = []
+    for x in r["runs"]:
+        d = x.get("dry_run")
+        if d:
+            done = d.get("status") == "ok"
+            rows.append(
+                [
+                    str(x["robots"]),
+                    "dry run (`fleet run`, lockstep)",
+                    "**delivered**" if done else f"**{d.get('status')}** ({d.get('reason')})",
+                    f"{d['wall_s']:.0f} s wall, {d['sim_time_s']:.0f} s sim",
+                    f"{d['goal_error_m']:.3f} m" if done else "-",
+                    f"{d['missed_ticks']} missed",
+                    str(d.get("watchdog_stops", "-")),
+                ]
+            )
+        for lab in x.get("labs", []):
+            o = lab.get("outcome") or {}
+            ok = lab.get("exit") == 0
+            ticks = (
+                (
+                    f"{lab['late_ticks']} late of {lab['ticks']}; p50 {lab['tick_p50_ms']:.0f}"
+                    f" / p99 {lab['tick_p99_ms']:.0f} ms"
+                )
+                if "ticks" in lab
+                else "-"
+            )
+            rows.append(
+                [
+                    str(x["robots"]),
+                    "lab in real time (`fleet up`, `resume`, `down --wait`)",
+                    "**delivered**" if ok else f"**{o.get('verdict', 'failed')}**",
+                    f"{lab['job_wall_s']:.0f} s from the resume; up in {lab['up_s']:.0f} s",
+                    _verdict_m(o.get("verdict", "")),
+                    ticks,
+                    str(lab.get("watchdog_stops_while_driven", "-")),
+                ]
+            )
+    # fmt: skip
+    head = ["robots", "how", "outcome", "time", "goal error", "ticks",
+            "watchdog stops while driven"]  # fmt: skip
+    load = r["load_avg_1m"]
+    return (
+        "`fleet.toml`'s job with the fleet in three staggered rows along the south wall (every "
+        "third robot differential), run as a user runs it. Load average "
+        f"{load[0]:.1f} at the start, {load[1]:.1f} at the end.\n\n" + _table(head, rows)
+    )
+
+
 RENDER: dict[str, Callable[[dict], str]] = {
     "arrest": arrest,
     "approach": approach,
@@ -688,6 +743,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "capture_fresh": capture_fresh,
     "route": route,
     "waits": waits,
+    "job": job,
 }
 
 
