@@ -726,6 +726,39 @@ def job(r: dict) -> str:
     )
 
 
+def transport(r: dict) -> str:
+    rows = []
+    for name, x in r["planners"].items():
+        sa, dh, sp, warm = x["sa"], x["downhill"], x["serpentine"], x["sa_warm_ticks"]
+        rows.append([f"`{name}`", str(x["robots"]),
+                     f"{sa['median_ms']:.1f} / {sa['p95_ms']:.1f} ms",
+                     f"{warm['median_ms']:.1f} ms",
+                     f"{dh['median_ms']:.1f} ms", f"{sp['median_ms']:.1f} ms",
+                     f"{sa['energy_median']:.1f}", f"{dh['energy_median']:.1f}",
+                     f"{sp['energy_median']:.1f}"])  # fmt: skip
+    head = ["scenario", "robots", "sa median / p95", "sa re-planning each tick", "downhill",
+            "serpentine", "energy: sa", "downhill", "serpentine"]  # fmt: skip
+    g = r["goals"]
+    cmp = ", ".join(
+        f"{it} iterations: lower on {v['sa_lower']}, equal on {v['equal']}, higher on "
+        f"{v['sa_higher']}"
+        for it, v in r["sa_vs_downhill"].items()
+    )
+    load = r["load_average"][0], r["load_average_end"][0]
+    return (
+        "One local plan (`controller.planning.transport.plan_local`, the defaults: 100 "
+        "iterations over 8 intervals) on the bench's seeded planning scenarios, wall-clock "
+        "medians. Energy: lower is better; 800 is 8 intervals with no force equilibrium "
+        "(`k_equilibrium` 100 each) and no progress, i.e. a plan that cannot move the object. "
+        "The goal, one SA plan at 8 robots under 50 ms (the median over the 8-robot "
+        f"scenarios): {g['sa_plan_8_robots_median_ms']:.1f} ms from scratch, "
+        f"{g['sa_plan_8_robots_warm_tick_median_ms']:.1f} ms re-planning each tick, "
+        f"**{'met' if g['sa_goal_50ms_met'] else 'not met'}**. SA against its downhill "
+        f"ablation, same seeds, over the (scenario, seed) pairs: {cmp}. Load average "
+        f"{load[0]:.1f} at the start, {load[1]:.1f} at the end.\n\n" + _table(head, rows)
+    )
+
+
 RENDER: dict[str, Callable[[dict], str]] = {
     "arrest": arrest,
     "approach": approach,
@@ -744,6 +777,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "route": route,
     "waits": waits,
     "job": job,
+    "transport": transport,
 }
 
 
