@@ -759,6 +759,75 @@ def transport(r: dict) -> str:
     )
 
 
+def transport_loop(r: dict) -> str:
+    def num(v, fmt: str, unit: str = "") -> str:
+        return "-" if v is None else f"{v:{fmt}}{unit}"
+
+    rows = []
+    for name, a in r["closed_loop"].items():
+        done = sum(bool(x.get("transported")) for x in a["runs_detail"])
+        rows.append(
+            [
+                f"`{name}`",
+                f"**{done} of {a['runs']}**",
+                num(a["transport_time_s"], ".1f", " s"),
+                num(
+                    a["lateral_deviation_rms_m"] and a["lateral_deviation_rms_m"] * 100,
+                    ".1f",
+                    " cm",
+                ),
+                num(
+                    a["max_lateral_deviation_m"] and a["max_lateral_deviation_m"] * 100,
+                    ".1f",
+                    " cm",
+                ),
+                num(a["impulse_ns"], ".0f", " N·s"),
+                num(a["rearrangements"], ".1f"),
+                num(a.get("plan_tick_ms_p90_median"), ".2f", " ms"),
+                str(a["missed_ticks_max"]),
+            ]
+        )
+    # fmt: skip
+    head = [
+        "strategy",
+        "delivered",
+        "transport time",
+        "lateral deviation RMS",
+        "max",
+        "contact impulse",
+        "re-arrangements",
+        "the tick's plan stage, p90",
+        "missed ticks (max)",
+    ]
+    # fmt: skip
+    suite = "; ".join(
+        f"{x['name']}: {x['shape']}, {'pillar' if x['pillar'] else 'open'}" for x in r["suite"]
+    )
+    text = (
+        "Whole `fleet run --mission transport` runs in pybullet, lockstep (the robots already "
+        "hold the object; judged from the world's truth), on the bench's seeded suite, never "
+        f"used by the tests ({suite}). Medians over each strategy's delivered runs. "
+    )
+    pair = r.get("sa_vs_serpentine")
+    if pair and not pair["both_delivered"]:
+        text += "No scenario did both SA and serpentine deliver: no paired comparison. "
+    elif pair:
+        text += (
+            f"SA against serpentine on the {pair['both_delivered']} scenarios both delivered "
+            "(the fair count): impulse ratio "
+            f"{num(pair['impulse_ns_ratio_paired_median'], '.2f')}, time ratio "
+            f"{num(pair['transport_time_s_ratio_paired_median'], '.2f')}; the ratios of each "
+            "one's medians over its own successes (the unfair count): "
+            f"{num(pair['impulse_ns_ratio_of_medians'], '.2f')} and "
+            f"{num(pair['transport_time_s_ratio_of_medians'], '.2f')}. "
+        )
+    load = r["load_average"][0], r["load_average_end"][0]
+    return text + (
+        f"Load average {load[0]:.1f} at the start, {load[1]:.1f} at the end (the outcomes do "
+        "not depend on it; the plan times do).\n\n" + _table(head, rows)
+    )
+
+
 RENDER: dict[str, Callable[[dict], str]] = {
     "arrest": arrest,
     "approach": approach,
@@ -778,6 +847,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "waits": waits,
     "job": job,
     "transport": transport,
+    "transport_loop": transport_loop,
 }
 
 
