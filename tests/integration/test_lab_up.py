@@ -7,7 +7,8 @@ daemon, each a process of its own, on 127.0.0.1.
   resume; no robot stopped by its watchdog while the daemon drove it; late ticks rare.
 - Ctrl-C in the foreground with a CPU hog on every core: a crashed agent restarted under an
   engaged e-stop comes up stopped; the SIGINT engages the e-stop first, the console's output
-  ends with the verdict, the MCAP is readable and the robots stood still after the e-stop.
+  ends with the verdict, the MCAP is readable, and from a second after the e-stop every
+  command to the world was zero and no robot moved more than 2 cm.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from tests.support.wait import wait_for
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 RESUME_DELAY = 60.0  # s the operator's resume comes after the lab is up (a slow bring-up)
-STOP_WITHIN = 1.0  # s from the e-stop to every robot standing still, with a hog on every core
+STOP_WITHIN = 1.0  # s from the e-stop to every robot stopped, with a hog on every core
 BLOCK_MARK = "<!-- lab-quickstart"
 
 
@@ -67,17 +68,16 @@ def _port_free(port: int) -> bool:
     return True
 
 
-def _still_from(tracks: dict[str, list], t0: float, still: float = 0.02) -> dict[str, float]:
-    """Each track's time (s after ``t0``) from which it stood still to its end (every speed
-    under ``still`` m/s; rows t, x, y, theta): its last sample's when it never did."""
+def _path_after(tracks: dict[str, list], t0: float) -> dict[str, tuple[float, float]]:
+    """Each track's path length (m) from ``t0`` to its end, and how long that is (s) (rows t,
+    x, y, theta)."""
     out = {}
     for rid, rows in tracks.items():
         a = np.array([r for r in rows if r[0] >= t0])
-        if len(a) < 3:
+        if len(a) < 2:
+            out[rid] = (0.0, 0.0)
             continue
-        v = np.hypot(np.diff(a[:, 1]), np.diff(a[:, 2])) / np.maximum(np.diff(a[:, 0]), 1e-6)
-        moving = np.flatnonzero(v >= still)
-        out[rid] = float(a[moving[-1] + 1, 0] - t0) if len(moving) else 0.0
+        out[rid] = (float(np.hypot(np.diff(a[:, 1]), np.diff(a[:, 2])).sum()), a[-1, 0] - a[0, 0])
     return out
 
 
@@ -174,9 +174,11 @@ def test_ctrl_c_stops_every_robot_first_and_leaves_a_readable_log_under_load(tmp
                 assert fleet("resume", "--config", str(cfg), "--timeout", "20").returncode == 0
                 wait_for(lambda: not latch_states(bus)["robot/r1"].engaged, 30, "r1 resumed")
                 truth = bus.subscribe_topic("truth_robot", lossless=True)  # the world's, to its end
+                cmds = bus.subscribe_topic("world_cmd", lossless=True)  # agents' to the world
                 up.send_signal(signal.SIGINT)  # the operator's Ctrl-C
                 code = up.wait(timeout=180)
                 rows = [(item.key, item.msg) for item in truth.drain()]
+                cmd_rows = [(item.key, item.msg) for item in cmds.drain()]
             finally:
                 bus.close()
         finally:
@@ -194,21 +196,24 @@ def test_ctrl_c_stops_every_robot_first_and_leaves_a_readable_log_under_load(tmp
     assert run.complete
     last_engage = max(e["t"] for e in run.estops if e["engaged"])
     assert last_engage > max(e["t"] for e in run.estops if not e["engaged"])
-    # every robot stood still soon after the e-stop (the agent's zero, the world's step, the
-    # robot's braking) until the world was stopped, last but the hub: 0.1-0.3 s measured with
-    # the hogs on the machine this was written on; bounded at STOP_WITHIN
+    # from STOP_WITHIN after the e-stop until the world was stopped, last but the hub: every
+    # command an agent gave the world was zero, and no robot moved more than 2 cm (a robot
+    # still driven would cover 0.4 m a second; the live crate pushing on a stopped cage can
+    # make a robot creep a few mm, a single 50 ms sample above 2 cm/s)
+    late = [(k, m) for k, m in cmd_rows if m.t > last_engage + STOP_WITHIN]
+    assert all(m.vx == m.vy == m.wz == 0.0 for _, m in late), [x for x in late if x[1].vx][:3]
     tracks: dict[str, list] = {}
     for key, m in rows:
         tracks.setdefault(key, []).append((m.t, m.x, m.y, m.theta))
-    still = _still_from(tracks, last_engage)
-    ends = {rid: rows[-1][0] - last_engage for rid, rows in tracks.items()}
-    assert len(still) == 6 and max(still.values()) < STOP_WITHIN, (still, ends)
-    assert min(ends.values()) > max(still.values()) + 0.3, (still, ends)  # and stayed so
+    moved = _path_after(tracks, last_engage + STOP_WITHIN)
+    assert len(moved) == 6, moved
+    assert all(span > 0.3 and path < 0.02 for path, span in moved.values()), moved
     daemon = (Path(final["run_dir"]) / "daemon.log").read_text()
     stopped = re.search(r"fleet daemon: stopped.*", daemon)
     print(
         f"\nlab under load: up in {final.get('ready_s')} s; restarts {final['outcome']['restarts']}"
-        f"; robots still {max(still.values()):.2f} s after the e-stop"
+        f"; robots moved at most {1000 * max(p for p, _ in moved.values()):.1f} mm from "
+        f"{STOP_WITHIN} s after the e-stop"
         f"; {stopped.group(0) if stopped else 'no stop line'}",
         file=sys.stderr,
     )
