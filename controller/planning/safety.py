@@ -152,9 +152,7 @@ class SafetyFilter:
         if not np.all(kept[need]):
             index = np.flatnonzero(self.gamma * h < 2.0 * reach)
             self._kept_index = index
-            warm = self._last
             self._layout(self._all_i[index], self._all_j[index])
-            self._last = warm
 
     def _setup(self, ax: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
         a = self._pattern.copy()
