@@ -806,7 +806,8 @@ def transport_loop(r: dict) -> str:
     text = (
         "Whole `fleet run --mission transport` runs in pybullet, lockstep (the robots already "
         "hold the object; judged from the world's truth), on the bench's seeded suite, never "
-        f"used by the tests ({suite}). Medians over each strategy's delivered runs. "
+        f"used by the tests ({suite}). One run per scenario and strategy: no spread (the "
+        "180-run comparison below has it). Medians over each strategy's delivered runs. "
     )
     pair = r.get("sa_vs_serpentine")
     if pair and not pair["both_delivered"]:
