@@ -30,6 +30,7 @@ COMMANDS: tuple[tuple[tuple[str, ...], str, str], ...] = (
     (("daemon",), "daemon", "the controller on the lab network"),
     (("driver",), "driver", "one robot's agent: its driver bound to the bus"),
     (("hub",), "hub", "the fleet's zenoh hub, keeper of the latched e-stop"),
+    (("router",), "router", "a site's zenoh router: several fleets on one zenoh network"),
     (("world",), "world", "the shared stand-in world as its own process (lab rehearsal)"),
     (("up",), "up", "the whole lab from one config: hub, world, agents, daemon, a console"),
     (("down",), "down", "stop a lab that fleet up --detach started (--wait: after the job)"),

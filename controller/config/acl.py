@@ -149,3 +149,45 @@ def write_acl(config: FleetConfig, path: str | Path) -> Path:
     p = Path(path)
     p.write_text(acl_json5(config), encoding="utf-8")
     return p
+
+
+def site_acl(configs: list[FleetConfig], backbone: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The ``access_control`` block of a site's router (``fleet router``): each fleet's lab
+    profile (:func:`acl_for`) side by side, every rule, subject and policy id prefixed with its
+    fleet's name, so robot ``X`` of fleet A may do for fleet A's keys what the profile lets it
+    and nothing on fleet B's (its rules name only ``fleet/A/...``; default deny).
+
+    ``backbone``: usernames of the site's other routers that connect to this one (carrying
+    daemons, operators and other hosts' traffic, which their own router admits): they may do
+    everything, as a fleet's controller may. An operator of any fleet stays an operator of
+    that fleet only."""
+    rules: list[dict[str, Any]] = []
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    for cfg in configs:
+        block = acl_for(cfg)
+        tag = f"{cfg.fleet.name}:"
+        rules += [r | {"id": tag + r["id"]} for r in block["rules"]]
+        subjects += [s | {"id": tag + s["id"]} for s in block["subjects"]]
+        policies += [
+            p
+            | {
+                "id": tag + p["id"],
+                "rules": [tag + r for r in p["rules"]],
+                "subjects": [tag + s for s in p["subjects"]],
+            }
+            for p in block["policies"]
+        ]
+    if backbone:
+        rules.append(_rule("site:backbone", READ + SERVE + WRITE, BOTH, ["**"]))
+        subjects.append({"id": "site:backbone", "usernames": list(backbone)})
+        policies.append(
+            {"id": "site:backbone", "rules": ["site:backbone"], "subjects": ["site:backbone"]}
+        )
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }

@@ -653,6 +653,10 @@ class Bus:
         if self._decoder_thread is not None:
             self._decoder_thread.close()
 
+    def routers(self) -> list[str]:
+        """The zids of the routers this session is linked to now (a router: its peers)."""
+        return [str(z) for z in self.session.info.routers_zid()]
+
     def __enter__(self) -> Bus:
         return self
 
