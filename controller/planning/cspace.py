@@ -319,6 +319,17 @@ class FootprintChecker:
                 best, what = d, f"obstacles[{i}]"
         return best, what
 
+    def overlap(self, pose: ArrayLike) -> float:
+        """Area (m²) of the object polygon at a reference pose inside obstacles or beyond the
+        walls: 0 when it only touches them (:meth:`clearance` is 0 for both)."""
+        w = self.world(pose)[0]
+        poly = shapely.Polygon(w)
+        x0, y0, x1, y1 = self.box
+        area = float(poly.area - poly.intersection(shapely.box(x0, y0, x1, y1)).area)
+        for o in self._shapes:
+            area += float(poly.intersection(o).area)
+        return area
+
     # -- sweeps -------------------------------------------------------------------------------
     def _near(self, centers: FloatArray, reach: float) -> tuple[BoolArray, BoolArray]:
         lo = centers.min(axis=0) - reach
@@ -636,6 +647,10 @@ class ObjectCSpace:
     def clearance(self, pose: ArrayLike) -> tuple[float, str]:
         """Object polygon to the nearest obstacle or wall (m) at an object-frame pose, and which."""
         return self.checker.clearance(self.ref_pose(pose))
+
+    def overlap(self, pose: ArrayLike) -> float:
+        """Area (m²) of the object at an object-frame pose inside obstacles or beyond the walls."""
+        return self.checker.overlap(self.ref_pose(pose))
 
     def moves_free(self, k: int, iy: int, ix: int, moves: list[int]) -> list[bool]:
         """Exact, cached test of lattice moves from free state (k, iy, ix) to free neighbours.

@@ -64,7 +64,7 @@ from __future__ import annotations
 import heapq
 import math
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -885,6 +885,35 @@ class RoutePlanner:
             )
         return ""
 
+    def _escape(self, pose: FloatArray) -> FloatArray | None:
+        """Where an object whose start leaves the robots no room (it touches or nears an
+        obstacle: an arrest against a pillar) first goes: the nearest pose, by one straight
+        move at its heading (ESCAPE_DIRECTIONS directions, up to ESCAPE_REACH robot diameters),
+        that is free with the robots' ring, the object overlapping no obstacle on the way (it may
+        slide along the one it touches), with room for a pusher behind it (the object moved
+        back one robot diameter overlaps nothing). None when the object overlaps an obstacle
+        already or no direction clears it."""
+        cs = self.cspace
+        if cs.overlap(pose) > OVERLAP_TOL:
+            return None
+        ring = 2.0 * cs.robot_radius
+        step = 0.5 * cs.frame.resolution
+        best: tuple[float, FloatArray] | None = None
+        for a in np.arange(ESCAPE_DIRECTIONS) * (2.0 * math.pi / ESCAPE_DIRECTIONS):
+            u = np.array([math.cos(a), math.sin(a), 0.0])
+            if cs.overlap(pose - ring * u) > OVERLAP_TOL:
+                continue  # no pusher fits behind the object for this direction
+            s = step
+            while s <= ESCAPE_REACH * ring and (best is None or s < best[0]):
+                p = pose + s * u
+                if cs.cell_of(p) is None or cs.overlap(p) > OVERLAP_TOL:
+                    break
+                if cs.is_free(p):
+                    best = (s, p)
+                    break
+                s += step
+        return None if best is None else best[1]
+
     def _joins(self, pose: FloatArray, to_goal: bool) -> list[_Join]:
         """Collision-free ways between an exact pose and the lattice states around it.
 
@@ -1056,7 +1085,13 @@ class RoutePlanner:
             return _no_path(self.goal_reason, kind, wg, wh)
         reason = self._check_end(start_p, "start")
         if reason:
-            return _no_path(reason, kind, wg, wh)
+            escape = self._escape(start_p) if "collides" in reason else None
+            if escape is None:
+                return _no_path(reason, kind, wg, wh)
+            rest = self.plan(
+                escape, pathmax=pathmax, max_expanded=max_expanded, trace=trace, reference=reference
+            )
+            return _after_escape(start_p, rest, self.params) if rest.status == "ok" else rest
         if np.allclose(start_p, self.goal, atol=1e-12):
             wp = np.vstack([start_p, self.goal])
             return RouteResult("ok", waypoints=wp, subgoals=wp[1:], cost=0.0, heuristic=kind,
@@ -1141,6 +1176,27 @@ class RoutePlanner:
         return ok_result(
             wp, kinds, p.subgoal_spacing, cost, length, manip, (self.kind, self.wg, self.wh), counts
         )
+
+
+# the start's escape (RoutePlanner._escape): directions tried, reach in robot diameters, and the
+# overlap (m²) still counted as touching
+ESCAPE_DIRECTIONS = 16
+ESCAPE_REACH = 4.0
+OVERLAP_TOL = 1e-6
+
+
+def _after_escape(start: FloatArray, rest: RouteResult, p: RouteSection) -> RouteResult:
+    """``rest`` (planned from the escape pose) with the escape's straight move before it: one
+    more subgoal (the escape pose, where the robots re-arrange), its time and length."""
+    d = float(np.hypot(*(rest.waypoints[0, :2] - start[:2])))
+    return replace(
+        rest,
+        waypoints=np.vstack([start, rest.waypoints]),
+        subgoals=np.vstack([rest.waypoints[:1], rest.subgoals]),
+        cost=rest.cost + d / p.speed + p.manipulation_cost,
+        length_m=rest.length_m + d,
+        manipulations=rest.manipulations + 1,
+    )
 
 
 def _padded(a: NDArray[Any], fill: Any = False) -> NDArray[Any]:

@@ -241,3 +241,47 @@ def test_a_planner_from_the_fleet_config_plans_the_shipped_scenario():
         cfg.object.start
     )
     assert other.ok and other.cost > 0
+
+
+def test_an_object_arrested_against_an_obstacle_slides_clear_before_its_route():
+    """An object stopped touching a pillar (an arrest that ended there) leaves the robots no room
+    around it: the route first slides it clear by one straight move at its heading, never into
+    an obstacle, with room for a pusher behind it; one that overlaps an obstacle has none."""
+    from controller.config import load_config
+    from controller.planning.route import build_object_cspace
+    from tests.support.config import FLEET_TOML
+
+    cfg = load_config(FLEET_TOML)
+    obs = [np.asarray(o.polygon) for o in cfg.obstacles]
+    foot = np.asarray(cfg.object.polygon)
+    radius = max(r.radius for r in cfg.robots)
+    cs = build_object_cspace(
+        cfg.world.bounds, obs, foot, radius, cfg.route.resolution, cfg.route.heading_bins
+    )
+    start = np.array([8.0, 2.5, 0.0])  # the L's right edge on the pillar's face (x = 9.0)
+    assert not cs.is_free(start) and cs.clearance(start)[0] == 0.0 and cs.overlap(start) == 0.0
+    res = plan_route(None, [], foot, radius, start, cfg.object.goal, cfg.route, cspace=cs)
+    assert res.status == "ok", res.reason
+    wp = res.waypoints
+    assert np.allclose(wp[0], start) and np.allclose(wp[-1], cfg.object.goal)
+    escape = wp[1]
+    assert escape[2] == start[2] and cs.is_free(escape)  # a straight move, free at its end
+    assert 0 < np.hypot(*(escape[:2] - start[:2])) <= 4 * 2 * radius + 1e-9
+    for f in np.linspace(0.0, 1.0, 41):  # the object never enters an obstacle on the way
+        assert cs.overlap(start + f * (escape - start)) < 1e-6
+    u = (escape - start) / np.hypot(*(escape[:2] - start[:2]))
+    assert cs.overlap(start - 2 * radius * u) < 1e-6  # a pusher fits behind it
+    assert np.allclose(res.subgoals[0], escape) and res.manipulations >= 1
+    # planned from the escape pose, the rest is the route of an object that starts there
+    alone = plan_route(None, [], foot, radius, escape, cfg.object.goal, cfg.route, cspace=cs)
+    assert np.allclose(res.waypoints[1:], alone.waypoints)
+    assert res.cost == pytest.approx(
+        alone.cost
+        + np.hypot(*(escape[:2] - start[:2])) / cfg.route.speed
+        + cfg.route.manipulation_cost
+    )
+    # an object overlapping the pillar is not moved out of it: no route, the reason named
+    inside = np.array([8.2, 2.5, 0.0])
+    assert cs.overlap(inside) > 0.01
+    res = plan_route(None, [], foot, radius, inside, cfg.object.goal, cfg.route, cspace=cs)
+    assert res.status == "no_path" and "start pose collides" in res.reason
