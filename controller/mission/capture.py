@@ -43,16 +43,18 @@ import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
-from controller.events import ArrestEvent, PhaseEvent
+from controller.events import ArrestEvent
 from controller.mission.capture_phase import (
     CLOSED,
     CaptureSettings,
     CaptureState,
     Measures,
     advance,
+    entered,
 )
 from controller.mission.guard import SafetyStage
 from controller.mission.planners import InlinePlanners, Planners, PlanSlot
+from controller.mission.sequence import Cue, Sequencer
 from controller.mission.summary import CaptureSummary
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase
 from controller.planning.approach import (
@@ -98,6 +100,8 @@ class CaptureMission:
     guard: SafetyStage | None = None
     waypoints: dict[int, list[np.ndarray]] = field(default_factory=dict)
     planners: Planners | None = None  # the port the detours are asked of (None: at once)
+    # the job's phase, read here and reported into (None: one of its own, a capture alone)
+    sequencer: Sequencer | None = None
 
     def __post_init__(self) -> None:
         cfg = self.cfg
@@ -118,6 +122,8 @@ class CaptureMission:
         self.assigned = np.zeros(self.n, bool)
         self.assigned[self.assignment] = True
         self.state = CaptureState(contact_t=np.full(len(self.points), np.nan))
+        # alone (no job's sequencer): its own, at approach (its first tick announces it)
+        self.seq = self.sequencer if self.sequencer is not None else Sequencer(Phase.APPROACH)
         self.heading: np.ndarray | None = None
         self._detours_planned = False
         self._detour_job = PlanSlot(self.planners or InlinePlanners(), "detour")
@@ -133,7 +139,7 @@ class CaptureMission:
 
     @property
     def phase(self) -> str:
-        return self.state.phase
+        return self.seq.phase
 
     # --- stage 1: the pose the goals ride on ------------------------------------------------
     def goal_pose(self, view: FleetView) -> np.ndarray:
@@ -236,7 +242,7 @@ class CaptureMission:
         first."""
         centers = view.poses[:, :2]
         a = self.assignment
-        phase = self.state.phase
+        phase = self.phase
         tgt = goals.stations if phase == Phase.APPROACH else goals.touch
         vel = self.point_velocity(view, pose, tgt)
         if phase != Phase.APPROACH:  # creep the last centimetres, no feed-forward
@@ -270,7 +276,7 @@ class CaptureMission:
         """Sharma Table I velocities (N, 2): robots closing in may reach the object."""
         polys = self.obstacles + [geometry.transform(self.object_poly, pose)]
         avoid = np.ones((self.n, len(polys)), bool)
-        if self.state.phase != Phase.APPROACH:
+        if self.phase != Phase.APPROACH:
             avoid[self.assignment, -1] = False
         active = self.assigned & ~view.stale & view.present
         if self.heading is None:
@@ -303,7 +309,7 @@ class CaptureMission:
         world = geometry.transform(self.object_poly, np.asarray(view.object_pose, float))
         gap = self.gaps(view)
         dist = np.linalg.norm(xy - tgt, axis=1)
-        if self.state.phase == Phase.APPROACH:
+        if self.phase == Phase.APPROACH:
             dist = np.maximum(dist - goals.shortfall, 0.0)
         self.last_distance = dist  # read by the capture job (a robot stuck on its way)
         return Measures(view.t, dist, goals.preload, gap, world, bool(self.waypoints))
@@ -311,7 +317,7 @@ class CaptureMission:
     def _caged(self) -> np.ndarray | None:
         """Robots holding a frozen contact target (they keep their heading)."""
         cage = self.state.cage
-        if cage is None or self.state.phase == Phase.APPROACH:
+        if cage is None or self.phase == Phase.APPROACH:
             return None
         out = np.zeros(self.n, bool)
         out[self.assignment] = ~np.isnan(cage[:, 0])
@@ -321,11 +327,12 @@ class CaptureMission:
     def plan(self, view: FleetView) -> Intent:
         zero = np.zeros((self.n, 2))
         if view.object_pose is None or view.estop:
-            return Intent(zero, self.state.phase, stop=True)
+            return Intent(zero, self.phase, stop=True)
         events: list[Event] = []
-        if self.state.t0 is None:
+        if self.state.t0 is None:  # this capture starts: the job (again) at approach
             self.state = replace(self.state, t0=view.t)
-            events.append(PhaseEvent(phase=self.state.phase, t=view.t))
+            cue = Cue.READY if self.phase == Phase.PLAN else Cue.REPLANNED
+            events += self.seq.report(view.t, cue).events
         pose = self.goal_pose(view)
         goals = self.goals(pose)
         if not self._detours_planned:
@@ -337,33 +344,37 @@ class CaptureMission:
         if self.detour_hold is not None:  # the blocked robots wait for their routes
             vel[self.detour_hold] = 0.0
         m = self.measures(view, tgt, goals)
-        step = advance(self.state, m, self.s)
-        self.state = step.state
+        report = advance(self.state, m, self.s, self.phase)
+        step = self.seq.report(m.t, report.cue, report.failure)
+        self.state, moved = entered(report.state, step, m)
         contacts = [
             {"robot": view.ids[i], "point": [float(x) for x in p]}
             for i, p in zip(self.assignment, goals.points, strict=True)
         ]
         events += [
-            replace(e, contacts=contacts) if isinstance(e, ArrestEvent) else e for e in step.events
+            replace(e, contacts=contacts) if isinstance(e, ArrestEvent) else e
+            for e in report.events + moved
         ]
-        closed = self.state.phase in CLOSED
+        failure = self.seq.state.failure
+        failed = self.phase == Phase.FAILED
+        closed = self.phase in CLOSED
         return Intent(
             vel,
-            self.state.phase,
+            self.phase,
             events,
             object_pose=pose,
-            touch=self.assigned if self.state.phase != Phase.APPROACH else None,
+            touch=self.assigned if self.phase != Phase.APPROACH else None,
             # a caging robot's barrier never pushes it off the object's estimate: the physics
             # keeps it out; it holds its ground
             overlap=float(self.radii.max()) if closed else 0.0,
             cage=closed,
             hold=self._caged(),
-            done=step.done,
-            failed=step.failed,
-            reason=step.reason,
-            arrest=step.arrest,
+            done=self.phase == Phase.DONE,
+            failed=failed,
+            reason=failure.reason if failed and failure else "",
+            arrest=step.fired and self.phase == Phase.ARRESTED,
             progress={
-                "phase": str(self.state.phase),
+                "phase": str(self.phase),
                 "max_distance_m": float(np.max(m.dist)),
                 "max_gap_m": float(np.max(m.gap)),
             },
@@ -377,7 +388,7 @@ class CaptureMission:
         assert self.guard is not None
         st = self.state
         return CaptureSummary(
-            phase=str(st.phase),
+            phase=str(self.phase),
             arrival_spread_s=st.arrival_spread,
             arrest_time_s=st.arrest_t,
             hold_displacement_estimated_m=st.hold_displacement if st.hold_t0 else None,

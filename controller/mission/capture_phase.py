@@ -1,6 +1,7 @@
 """The capture's phase logic, pure (Sharma §3): what the capture measures each tick turned into
-a cue for ``mission.sequence`` (which moves the phase), and what it remembers (contact times,
-the cage of frozen contact targets, the hold's displacement, the arrest)."""
+a report for ``mission.sequence`` (a cue or a failure: the sequence moves the job's phase, which
+this module only reads), and what it remembers (contact times, the cage of frozen contact
+targets, the hold's displacement, the arrest)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,8 @@ import numpy as np
 
 from controller.config import ApproachSection, FleetConfig, configured, from_section
 from controller.events import ArrestEvent, ContactLostEvent, EscapeEvent
-from controller.mission.sequence import CAPTURING, Cue, Failure, JobState, next_phase
-from controller.mission.sequence import Measures as SeqMeasures
+from controller.mission.sequence import CAPTURING, Cue, Failure
+from controller.mission.sequence import Step as SeqStep
 from controller.mission.types import Event, Phase, Reason
 
 CLOSED = (Phase.HOLD, Phase.ARRESTED, Phase.DONE)  # robots in contact, preloading
@@ -72,9 +73,9 @@ class Measures:
 
 @dataclass(frozen=True)
 class CaptureState:
-    """The capture's phase and what it remembers (immutable; :func:`advance` returns a new one)."""
+    """What the capture remembers (immutable; :func:`advance` returns a new one). The phase is
+    the job's (``sequence.Sequencer``), not the capture's."""
 
-    job: JobState = JobState(Phase.APPROACH)  # the phase, moved by sequence.next_phase only
     t0: float | None = None
     contact_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     hold_t0: float | None = None
@@ -86,32 +87,27 @@ class CaptureState:
     escapes: int = 0
     releases: int = 0
 
-    @property
-    def phase(self) -> Phase:
-        return self.job.phase
-
 
 @dataclass(frozen=True)
-class Step:
-    """The phase logic's answer for one tick."""
+class Report:
+    """The phase logic's answer for one tick: what it remembers, its events, and what it saw
+    for the sequence (at most one cue, or a failure)."""
 
     state: CaptureState
     events: list[Event]
-    arrest: bool = False
-    done: bool = False
-    failed: bool = False
-    reason: str = ""
+    cue: Cue | None = None
+    failure: Failure | None = None
 
 
-def advance(st: CaptureState, m: Measures, s: CaptureSettings) -> Step:
-    """The capture's measures, pure: what it saw (a cue for :func:`sequence.next_phase`, which
-    moves the phase), what it remembers, and its events."""
+def advance(st: CaptureState, m: Measures, s: CaptureSettings, phase: Phase) -> Report:
+    """The capture's measures in the job's ``phase``, pure: what it saw (a cue or a failure for
+    :func:`sequence.next_phase`, which moves the phase), what it remembers, and its events."""
     events: list[Event] = []
     cue: Cue | None = None
-    if st.phase == Phase.APPROACH:
+    if phase == Phase.APPROACH:
         if np.all(m.dist < s.envelope_tolerance) and not m.detouring:
             cue = Cue.ON_ENVELOPE
-    elif st.phase == Phase.CLOSE_IN:
+    elif phase == Phase.CLOSE_IN:
         touching = m.gap < s.contact_tolerance
         contact_t = st.contact_t.copy()
         contact_t[touching & np.isnan(contact_t)] = m.t
@@ -119,30 +115,24 @@ def advance(st: CaptureState, m: Measures, s: CaptureSettings) -> Step:
         if np.all(touching):
             st = replace(st, hold_t0=m.t, hold_polygon=m.polygon, hold_displacement=0.0)
             cue = Cue.ALL_TOUCHING
-    elif st.phase in CLOSED:
-        st, cue = _hold(st, m, s, events)
+    elif phase in CLOSED:
+        st, cue = _hold(st, m, s, events, phase)
     failure = None
-    if st.phase in CAPTURING and m.t - st.t0 > s.timeout:
+    if phase in CAPTURING and m.t - st.t0 > s.timeout:
         reason = Reason.ESCAPED if st.escapes else Reason.TIMEOUT
-        failure = Failure(reason, _timeout_detail(st, m, s))
-    step = next_phase(st.job, SeqMeasures(m.t, cue, failure))
-    if step.fired:
-        st = _entered(replace(st, job=step.state), m)
-    events += step.events
-    arrest = step.fired and st.phase == Phase.ARRESTED
-    if arrest:
-        events.append(_arrest_event(st, m))
-    failed = st.phase == Phase.FAILED
-    reason = step.state.failure.reason if failed and step.state.failure else ""
-    return Step(st, events, arrest, st.phase == Phase.DONE, failed, reason)
+        failure = Failure(reason, _timeout_detail(st, m, s, phase))
+    return Report(st, events, cue, failure)
 
 
-def _entered(st: CaptureState, m: Measures) -> CaptureState:
-    """What the capture remembers of the phase it has just entered."""
-    if st.phase == Phase.ARRESTED:
+def entered(st: CaptureState, step: SeqStep, m: Measures) -> tuple[CaptureState, list[Event]]:
+    """What the capture remembers of the phase the sequence has just moved the job into (the
+    arrest: its time, the arrival spread and its event), and the sequence's events."""
+    events = list(step.events)
+    if step.fired and step.state.phase == Phase.ARRESTED:
         spread = float(np.nanmax(st.contact_t) - np.nanmin(st.contact_t))
-        return replace(st, arrest_t=m.t, arrival_spread=spread)
-    return st
+        st = replace(st, arrest_t=m.t, arrival_spread=spread)
+        events.append(_arrest_event(st, m))
+    return st, events
 
 
 def _arrest_event(st: CaptureState, m: Measures) -> Event:
@@ -164,7 +154,7 @@ def _recage(cage: np.ndarray | None, touching: np.ndarray, preload: np.ndarray) 
     return out
 
 
-def _hold(st: CaptureState, m: Measures, s: CaptureSettings, events) -> tuple:
+def _hold(st: CaptureState, m: Measures, s: CaptureSettings, events, phase: Phase) -> tuple:
     """Hold, arrested, done: contact kept and the object still (``held`` after ``hold_s``,
     ``settled`` ``settle_s`` after the arrest), or contact lost or the object escaped."""
     moved = float(np.max(np.linalg.norm(m.polygon - st.hold_polygon, axis=1)))
@@ -177,21 +167,21 @@ def _hold(st: CaptureState, m: Measures, s: CaptureSettings, events) -> tuple:
     if np.any(m.gap > s.release_factor * s.contact_tolerance):
         events.append(ContactLostEvent(t=m.t, gaps_m=m.gap.round(4).tolist()))
         return replace(st, releases=st.releases + 1, cage=None), Cue.CONTACT_LOST
-    if moved > s.hold_tolerance and st.phase == Phase.HOLD:
+    if moved > s.hold_tolerance and phase == Phase.HOLD:
         events.append(EscapeEvent(t=m.t, displacement_m=moved))
         return replace(st, escapes=st.escapes + 1, cage=None), Cue.ESCAPED
-    if st.phase == Phase.HOLD and m.t - st.hold_t0 >= s.hold_s and np.all(touching):
+    if phase == Phase.HOLD and m.t - st.hold_t0 >= s.hold_s and np.all(touching):
         return st, Cue.HELD
-    if st.phase == Phase.ARRESTED and m.t - st.arrest_t >= s.settle_s:
+    if phase == Phase.ARRESTED and m.t - st.arrest_t >= s.settle_s:
         return st, Cue.SETTLED
     return st, None
 
 
-def _timeout_detail(st: CaptureState, m: Measures, s: CaptureSettings) -> str:
-    if st.phase == Phase.APPROACH:
+def _timeout_detail(st: CaptureState, m: Measures, s: CaptureSettings, phase: Phase) -> str:
+    if phase == Phase.APPROACH:
         far = int(np.sum(m.dist >= s.envelope_tolerance))
         return f"{far} robots still {np.max(m.dist):.2f} m from their stations after {s.timeout} s"
-    if st.phase == Phase.CLOSE_IN:
+    if phase == Phase.CLOSE_IN:
         return (
             f"{int(np.sum(m.gap >= s.contact_tolerance))} robots not in contact (gaps up to "
             f"{np.max(m.gap):.3f} m); {st.escapes} escapes, {st.releases} contacts lost"

@@ -21,7 +21,7 @@ from controller.mission.outage import OutageWatch
 from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spawn_rng
 from controller.mission.reach import Reach
 from controller.mission.roster import Roster, parked
-from controller.mission.sequence import Cue, Failure, JobState, Measures, next_phase
+from controller.mission.sequence import Failure, Sequencer, SequenceSettings
 from controller.mission.summary import CapturePlanSummary, JobSummary
 from controller.mission.transport import TransportMission, route_planner_for
 from controller.mission.types import (
@@ -85,7 +85,8 @@ class CaptureJob:
         self.rng = rng if rng is not None else np.random.default_rng(cfg.capture.seed)
         self.n = len(cfg.robots)
         self.entry = entry
-        self.job = JobState(Phase.PLAN)  # until the capture (or the transport) starts
+        # the job's one phase: the capture and the transport read it and report into it
+        self.seq = Sequencer(Phase.PLAN, SequenceSettings(carry=cfg.object.goal is not None))
         self.capture: CaptureSet | None = None
         if entry == Phase.PLAN:
             try:
@@ -113,10 +114,8 @@ class CaptureJob:
 
     @property
     def phase(self) -> Phase:
-        """The job's phase: the stage in charge holds it (the sequence moves it)."""
-        if self.transport is not None:
-            return self.transport.phase
-        return self.inner.phase if self.inner is not None and not self.failed else self.job.phase
+        """The job's phase (the sequence moves it, on the stages' reports)."""
+        return self.seq.phase
 
     def plan(self, view: FleetView) -> Intent:
         if self.failed:
@@ -177,6 +176,7 @@ class CaptureJob:
             normals,
             route_planner=self.route_planner,
             planners=self.planners,
+            sequencer=self.seq,
         )
 
     def _carry_from_contact(self, view: FleetView) -> Intent:
@@ -270,8 +270,7 @@ class CaptureJob:
 
     def _fail(self, view: FleetView, reason: Reason, detail: str, events: list) -> Intent:
         """Fail safe: every robot stopped, the failure event with its detail."""
-        step = next_phase(JobState(self.phase), Measures(view.t, None, Failure(reason, detail)))
-        self.job = step.state
+        step = self.seq.report(view.t, None, Failure(reason, detail))
         events = events + list(step.events)
         self.failed = True
         self.failure_reason = reason
@@ -296,8 +295,8 @@ class CaptureJob:
 
     def _start(self, view: FleetView, pinned: bool) -> Intent:
         """Assign robots to the capture set and start the approach (the capture event first;
-        the approach announces itself at its first tick, as after every re-plan)."""
-        self.job = next_phase(self.job, Measures(view.t, Cue.READY)).state
+        the capture reports its start at its first tick: ``ready`` from ``plan``, ``replanned``
+        after a re-plan, each moving the job to ``approach``)."""
         costs = interception_costs(self.cfg, self.capture, view)
         self.assignment = assign(costs, self.roster.available)
         self.reassigner.assigned(view.t)
@@ -331,6 +330,7 @@ class CaptureJob:
             self.rng,
             settings=settings,
             planners=self.planners,
+            sequencer=self.seq,
         )
 
     def _await_pinned(self, view: FleetView, intent: Intent) -> Intent:

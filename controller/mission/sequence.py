@@ -10,7 +10,11 @@ the job's current :class:`JobState`, and writes the ``phase`` and ``failure`` ev
 leads nowhere from the current phase (a stage's report out of turn) leaves the phase as it is.
 A failure wins over a cue of the same tick: the job stops. ``done`` and ``failed`` are final.
 
-``fleet run --mission transport`` is the same job entered at ``route`` (:func:`entered_at`).
+The job holds the one :class:`JobState` in a :class:`Sequencer` and hands it to its stages:
+they read the phase from it and report into it; none keeps a phase of its own. A capture that
+starts again (a re-plan after a loss or a pin) reports ``replanned``: back to ``approach``.
+``fleet run --mission transport`` is the same job entered at ``route``: its transport's first
+``carry`` moves ``plan`` to ``route`` (the object already held).
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ class Cue(StrEnum):
     STUCK = "stuck"  # transport: the local plans keep re-positioning without pushing
     OFF_ROUTE = "off_route"  # transport: the object left the route's corridor
     DELIVERED = "delivered"  # route, rearrange, transport: the object inside the goal tolerance
+    REPLANNED = "replanned"  # a capturing phase: a new capture set (a loss, a pin): approach again
 
 
 @dataclass(frozen=True)
@@ -101,6 +106,11 @@ TRANSITIONS: dict[tuple[Phase, Cue], Phase] = {
     (Phase.ARRESTED, Cue.CONTACT_LOST): Phase.CLOSE_IN,
     (Phase.ARRESTED, Cue.SETTLED): Phase.DONE,
     (Phase.ARRESTED, Cue.CARRY): Phase.ROUTE,
+    (Phase.PLAN, Cue.CARRY): Phase.ROUTE,  # entered at route (--mission transport): held already
+    (Phase.APPROACH, Cue.REPLANNED): Phase.APPROACH,  # a new set: the approach starts over
+    (Phase.CLOSE_IN, Cue.REPLANNED): Phase.APPROACH,
+    (Phase.HOLD, Cue.REPLANNED): Phase.APPROACH,
+    (Phase.ARRESTED, Cue.REPLANNED): Phase.APPROACH,  # a re-plan asked before the arrest came
     (Phase.ROUTE, Cue.CAN_PUSH): Phase.TRANSPORT,
     (Phase.ROUTE, Cue.CANNOT_PUSH): Phase.REARRANGE,
     (Phase.REARRANGE, Cue.ARRANGED): Phase.TRANSPORT,
@@ -141,7 +151,21 @@ def next_phase(state: JobState, m: Measures, s: SequenceSettings | None = None) 
     return Step(replace(state, phase=nxt, since=m.t), (PhaseEvent(phase=nxt, t=m.t),))
 
 
-def entered_at(phase: Phase, t: float | None = None) -> JobState:
-    """A job entered part way: ``--mission transport`` starts at ``route`` with the object
-    held (the capture done before, by the same job or by hand)."""
-    return JobState(phase, t)
+class Sequencer:
+    """The job's one phase: a :class:`JobState` moved by :func:`next_phase` alone. The job makes
+    it and hands it to its stages, which read ``phase`` and ``report`` what they saw; a stage
+    used on its own (a capture alone, a test) makes its own at its first phase."""
+
+    def __init__(self, first: Phase = Phase.PLAN, settings: SequenceSettings | None = None):
+        self.state = JobState(first)
+        self.settings = settings
+
+    @property
+    def phase(self) -> Phase:
+        return self.state.phase
+
+    def report(self, t: float, cue: Cue | None = None, failure: Failure | None = None) -> Step:
+        """One stage's report of this tick: the new state (kept here) and its events."""
+        step = next_phase(self.state, Measures(t, cue, failure), self.settings)
+        self.state = step.state
+        return step

@@ -30,13 +30,7 @@ from controller.mission.planners import InlinePlanners, JobOwned, Planners, Plan
 from controller.mission.progress import RouteProgress, at, plan_route_job, route_planner_for
 from controller.mission.push import Pusher
 from controller.mission.rearrange import Rearranger
-from controller.mission.sequence import (
-    Cue,
-    Failure,
-    JobState,
-    Measures,
-    next_phase,
-)
+from controller.mission.sequence import Cue, Failure, Sequencer
 from controller.mission.summary import TransportSummary
 from controller.mission.transport_settings import SEQUENCE, TransportSettings
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
@@ -68,9 +62,12 @@ class TransportMission:
         normals: np.ndarray,
         route_planner: Any = None,
         planners: Planners | None = None,
+        sequencer: Sequencer | None = None,
     ) -> None:
         """``planners``: the port the route, the re-arrangement set and the local plans are
-        asked of (off the tick; None: computed at once, ready the same tick)."""
+        asked of (off the tick; None: computed at once, ready the same tick). ``sequencer``:
+        the job's phase, which this stage reads and reports into (None: one of its own, the
+        object held: a transport alone)."""
         self.cfg = cfg
         self.rng = rng
         self.guard = guard
@@ -97,8 +94,8 @@ class TransportMission:
             self.planners, rng,
         )  # fmt: skip
         self.pusher = Pusher(cfg, self.model, self.params, self.planners, rng, self.s.contact_gain)
-        # the object held: the job goes on at ``route`` (sequence.next_phase moves the phase)
-        self.job = JobState(Phase.ARRESTED)
+        # the job's phase (its first carry cue moves it to ``route``; next_phase moves it)
+        self.seq = sequencer if sequencer is not None else Sequencer(Phase.ARRESTED, SEQUENCE)
         self.t0: float | None = None
         self.route_replans = 0
         self.done_t: float | None = None
@@ -108,7 +105,7 @@ class TransportMission:
 
     @property
     def phase(self) -> Phase:
-        return self.job.phase
+        return self.seq.phase
 
     # --- the plan stage -----------------------------------------------------------------------
     def plan(self, view: FleetView) -> Intent:
@@ -154,9 +151,7 @@ class TransportMission:
     def _cue(self, cue: Cue | None, t: float, events: list[Event], failure: Failure | None = None):
         """Report what the transport saw: the sequence moves the phase (and writes its
         events)."""
-        step = next_phase(self.job, Measures(t, cue, failure), SEQUENCE)
-        self.job = step.state
-        events.extend(step.events)
+        events.extend(self.seq.report(t, cue, failure).events)
 
     def _fail(self, reason: str, detail: str, view: FleetView, events: list[Event]) -> Intent:
         if reason == Reason.STALLED and self.grip.lost:

@@ -10,8 +10,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from controller.mission.capture_phase import CaptureSettings, CaptureState, Measures, advance
-from controller.mission.sequence import JobState
+from controller.mission.capture_phase import (
+    CaptureSettings,
+    CaptureState,
+    Measures,
+    advance,
+    entered,
+)
+from controller.mission.sequence import Cue, Sequencer
 from controller.mission.types import Phase
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -30,20 +36,28 @@ def measures(t: float, gaps, polygon=SQUARE) -> Measures:
     )
 
 
-def closing_in() -> CaptureState:
-    return CaptureState(
-        job=JobState(Phase.CLOSE_IN, since=0.0), t0=0.0, contact_t=np.full(M, np.nan)
-    )
+def closing_in() -> tuple[CaptureState, Sequencer]:
+    """A capture closing in: what it remembers, and the job's phase (its sequencer)."""
+    seq = Sequencer(Phase.PLAN)
+    for cue in (Cue.READY, Cue.ON_ENVELOPE):  # plan -> approach -> close_in, by the table
+        seq.report(0.0, cue)
+    return CaptureState(t0=0.0, contact_t=np.full(M, np.nan)), seq
 
 
-def run(gaps_per_tick, dt: float = 0.05, st: CaptureState | None = None):
+def tick(st: CaptureState, seq: Sequencer, m: Measures, s: CaptureSettings) -> CaptureState:
+    """One tick as the capture mission runs it: measure, report, remember the phase entered."""
+    rep = advance(st, m, s, seq.phase)
+    return entered(rep.state, seq.report(m.t, rep.cue, rep.failure), m)[0]
+
+
+def run(gaps_per_tick, dt: float = 0.05):
     """Feed the gaps tick by tick; return the phases visited and the final state."""
-    st = st or closing_in()
-    phases = [st.phase]
+    st, seq = closing_in()
+    phases = [seq.phase]
     for k, gaps in enumerate(gaps_per_tick):
-        st = advance(st, measures(k * dt, gaps), SETTINGS).state
-        if st.phase != phases[-1]:
-            phases.append(st.phase)
+        st = tick(st, seq, measures(k * dt, gaps), SETTINGS)
+        if seq.phase != phases[-1]:
+            phases.append(seq.phase)
     return phases, st
 
 
@@ -79,7 +93,7 @@ def test_the_hold_completes_only_once_every_robot_is_back_within_contact():
 def test_the_band_is_the_release_factor(factor):
     """With no band (factor 1) a gap just over the contact tolerance releases; with 2 it holds."""
     s = replace(SETTINGS, release_factor=factor)
-    st = closing_in()
-    st = advance(st, measures(0.0, [0.01] * M), s).state
-    st = advance(st, measures(0.05, [0.01, 0.01, 0.01, 0.02]), s).state
-    assert st.phase == (Phase.CLOSE_IN if factor == 1.0 else Phase.HOLD)
+    st, seq = closing_in()
+    st = tick(st, seq, measures(0.0, [0.01] * M), s)
+    st = tick(st, seq, measures(0.05, [0.01, 0.01, 0.01, 0.02]), s)
+    assert seq.phase == (Phase.CLOSE_IN if factor == 1.0 else Phase.HOLD)

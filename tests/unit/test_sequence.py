@@ -39,6 +39,11 @@ TABLE = [
     (P.TRANSPORT, Cue.STUCK, P.REARRANGE),
     (P.TRANSPORT, Cue.OFF_ROUTE, P.ROUTE),
     (P.TRANSPORT, Cue.DELIVERED, P.DONE),
+    (P.PLAN, Cue.CARRY, P.ROUTE),  # --mission transport: the job entered at route
+    (P.APPROACH, Cue.REPLANNED, P.APPROACH),  # a new capture set: the approach again
+    (P.CLOSE_IN, Cue.REPLANNED, P.APPROACH),
+    (P.HOLD, Cue.REPLANNED, P.APPROACH),
+    (P.ARRESTED, Cue.REPLANNED, P.APPROACH),
 ]
 CARRY = seq.SequenceSettings(carry=True)
 
@@ -194,6 +199,31 @@ def test_the_transport_mission_is_the_same_job_entered_at_route():
     assert all(c is None for c in job.transport.grip.contacts.values())
     with pytest.raises(Exception, match="entered at plan or route"):
         CaptureJob(cfg, np.random.default_rng(0), entry=P.HOLD)
+
+
+def test_the_job_holds_the_only_phase_and_its_stages_report_into_it():
+    """One ``JobState`` in the code: built in the sequence module only (an AST walk over the
+    controller), held by the job's ``Sequencer``, which the capture and the transport it
+    starts read and report into (the same object: none keeps a phase of its own)."""
+    root = Path(seq.__file__).parents[1]
+    built = []
+    for f in sorted(root.rglob("*.py")):
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Call):
+                name = getattr(node.func, "id", getattr(node.func, "attr", ""))
+                if name == "JobState":
+                    built.append(f"{f.relative_to(root)}:{node.lineno}")
+    assert built and all(b.startswith("mission/sequence.py:") for b in built), built
+    cfg = make_config(transport=True)
+    job = build_mission(cfg, "transport")
+    n = len(cfg.robots)
+    far = np.column_stack([np.linspace(1.0, 2.0, n), np.full(n, 11.0), np.zeros(n)])
+    job.plan(_view(cfg, 0.05, far, np.asarray(cfg.object.start, float)))
+    assert job.transport.seq is job.seq and job.phase == job.transport.phase
+    capture = build_mission(make_config())
+    capture.plan(_view(make_config(), 0.0, far, np.asarray(cfg.object.start, float)))
+    assert capture.inner is not None and capture.inner.seq is capture.seq
+    assert capture.phase == P.APPROACH
 
 
 def test_no_mission_module_over_400_lines():
