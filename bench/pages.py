@@ -674,8 +674,12 @@ def arrest_edge(r: dict) -> str:
     for name in variants:
         head += [f"{label.get(name, name)}: arrested (Wilson 95 %)", "median arrest (sim)"]
     edges = "; ".join(
-        f"{label.get(n, n)}: every seed up to "
-        + (f"{e['variants'][n]['edge_m_s']:.2f} m/s" if e["variants"][n]["edge_m_s"] else "none")
+        f"{label.get(n, n)}: "
+        + (
+            f"every seed up to {e['variants'][n]['edge_m_s']:.2f} m/s"
+            if e["variants"][n]["edge_m_s"]
+            else "no speed of this run on every seed"
+        )
         for n in variants
     )
     paired = ""
