@@ -407,6 +407,37 @@ def replay_json_page() -> str:
     )
 
 
+def phases_page() -> str:
+    """The job's phases: the transition table (``mission.sequence.TRANSITIONS``) as a table and
+    drawn as text, each cue with its meaning (its comment in ``Cue``)."""
+    from controller.config.schema import member_comments
+    from controller.mission import sequence
+    from controller.mission.types import Phase
+
+    cues = member_comments(sequence.Cue)
+    out = [
+        _header("controller/mission/sequence.py (TRANSITIONS, Cue)"),
+        "# The job's phases\n\n",
+        re.sub(r":(?:class|func):`", "`", prose(sequence.__doc__.split("\n\n", 2)[-1])) + "\n\n",
+        "## Every way out of every phase\n\n",
+        "Any phase but `done` and `failed` also leads to `failed` on a stage's failure (its "
+        "reason in `failure.reason`). A cue not in this table leaves the phase as it is.\n\n",
+        "| from | cue | to | the cue means |\n|---|---|---|---|\n",
+    ]
+    for (a, cue), b in sequence.TRANSITIONS.items():
+        out.append(f"| `{a}` | `{cue}` | `{b}` | {cell(cues.get(cue.name, ''))} |\n")
+    out.append("\n## Drawn\n\nEach phase and where its cues lead (`failed` left out):\n\n```text\n")
+    for phase in Phase:
+        ways = [(c, b) for (a, c), b in sequence.TRANSITIONS.items() if a == phase]
+        if not ways:
+            continue
+        out.append(f"{phase}\n")
+        for c, b in ways:
+            out.append(f"  --{c}--> {b}\n")
+    out.append("```\n")
+    return "".join(out)
+
+
 # --------------------------------------------------------------------------- all of it
 
 GENERATED: dict[str, Callable[[], str]] = {
@@ -415,6 +446,7 @@ GENERATED: dict[str, Callable[[], str]] = {
     "docs/reference/bus.md": bus_page,
     "docs/reference/run-json.md": run_json_page,
     "docs/reference/replay-json.md": replay_json_page,
+    "docs/reference/phases.md": phases_page,
     **{path: schema_text for path in SCHEMA_COPIES},
 }
 

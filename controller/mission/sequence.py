@@ -36,9 +36,9 @@ class Cue(StrEnum):
     ESCAPED = "escaped"  # hold: the object moved more than hold_tolerance
     HELD = "held"  # hold: contact and stillness kept through hold_s
     SETTLED = "settled"  # arrested, capture alone: settle_s more of holding
-    CARRY = "carry"  # arrested, with a goal: transport.start_after has passed
+    CARRY = "carry"  # arrested, with a goal: transport.start_after has passed (or entered at route)
     CAN_PUSH = "can_push"  # a new route segment the contacts can push along (the LP)
-    CANNOT_PUSH = "cannot_push"  # ... they cannot: new contacts are needed
+    CANNOT_PUSH = "cannot_push"  # a new route segment the contacts cannot push along: new ones
     ARRANGED = "arranged"  # rearrange: every mover at its new contact
     RESET = "reset"  # rearrange: the set is given up (a mover blocked): another set
     STUCK = "stuck"  # transport: the local plans keep re-positioning without pushing
