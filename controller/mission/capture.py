@@ -30,9 +30,8 @@ Phases:
   (arrival spread, contacts, the displacement seen); the robots keep holding;
 - ``done`` after ``settle_s`` more seconds of hold (when the mission is the capture alone).
 
-The arrest is declared from contact and from the object staying put, both estimated; the dry
-run scores it against ground truth (``contact_gaps_at_arrest_m``, ``hold_displacement_m``), and
-the stand-in world never stops the object because the controller declared anything.
+The arrest is declared from estimates (contact, the object staying put); the dry run scores it
+against ground truth, and the world never stops the object on the controller's word.
 """
 
 from __future__ import annotations
@@ -140,6 +139,10 @@ class CaptureMission:
     @property
     def phase(self) -> str:
         return self.seq.phase
+
+    def keep_clock(self, t0: float | None) -> None:
+        """A re-assignment: the approach begun at ``t0`` goes on (its timeout, no new start)."""
+        self.state = replace(self.state, t0=t0)
 
     # --- stage 1: the pose the goals ride on ------------------------------------------------
     def goal_pose(self, view: FleetView) -> np.ndarray:
@@ -355,8 +358,7 @@ class CaptureMission:
             replace(e, contacts=contacts) if isinstance(e, ArrestEvent) else e
             for e in report.events + moved
         ]
-        failure = self.seq.state.failure
-        failed = self.phase == Phase.FAILED
+        failure, failed = self.seq.state.failure, self.phase == Phase.FAILED
         closed = self.phase in CLOSED
         return Intent(
             vel,

@@ -29,6 +29,17 @@ class Contact:
 
 
 @dataclass(frozen=True)
+class RobotOrder:
+    """What a local plan tells one robot: its action and, when it keeps or takes a contact,
+    that contact (``hold``: the contact it pushes at; ``relocate``: the one it goes to)."""
+
+    robot: int
+    action: str
+    contact: Contact | None = None
+    how: str = ""  # "hold", "relocate" or "" (the action alone)
+
+
+@dataclass(frozen=True)
 class GripSettings:
     """``contact_tolerance`` (m: a robot this close to its contact point is in contact),
     ``arrival_tolerance`` (m: a relocating robot this close to its contact arrived),
@@ -159,6 +170,16 @@ class Grip:
         for i, c in self.targets.items():
             self.contacts[i] = c
         self.targets.clear()
+
+    def follow_plan(self, orders: list[RobotOrder], view: FleetView, pose: np.ndarray) -> None:
+        """A local plan's orders, robot by robot in order: each robot's action, then the
+        contact it holds or the one it relocates to."""
+        for o in orders:
+            self.actions[o.robot] = o.action
+            if o.how == "hold":
+                self.contacts[o.robot] = o.contact
+            elif o.how == "relocate":
+                self.relocate(o.robot, o.contact, view, pose)
 
     def relocate(self, i: int, target: Contact, view: FleetView, pose: np.ndarray) -> None:
         """A robot the plan relocates goes to that contact along the lane around the object,

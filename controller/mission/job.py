@@ -147,7 +147,7 @@ class CaptureJob:
         if not self._replan_job.pending and reach.blocked(
             view, self.inner.phase, self.capture, self.inner.last_distance, self.inner
         ):
-            reach.blocked_ticks = 0
+            reach.restart()
             pose = np.asarray(view.object_pose, float)
             k = int(self.roster.available.sum())
             self._ask_replan("pinned", view, replan_pinned, pose, frozenset(reach.unreachable), k)
@@ -201,7 +201,7 @@ class CaptureJob:
             k = int(ready.sum())
             if k < len(self.capture.points):
                 return self._start_with(view, ready, k, still)
-        self.roster.available = ready
+        self.roster.start_with(ready)
         return self._start(view, pinned=False)
 
     def _start_with(self, view: FleetView, ready: np.ndarray, k: int, still: Intent) -> Intent:
@@ -217,7 +217,7 @@ class CaptureJob:
         if got is None or not got.ok or got.value is None or self.start_tried != k:
             return still
         self.capture = got.value
-        self.roster.available = ready
+        self.roster.start_with(ready)
         return self._start(view, pinned=False)
 
     def _ask_replan(self, why: str, view: FleetView, fn, *args) -> None:
@@ -263,7 +263,7 @@ class CaptureJob:
             return self._fail(view, Reason.ROBOTS_LOST, detail, events)
         self.loss_replans += 1
         self.capture = new
-        self.reach.blocked_ticks = 0
+        self.reach.restart()
         intent = self._start(view, pinned=bool(new.walls))
         intent.events[:0] = events
         return intent
@@ -290,7 +290,7 @@ class CaptureJob:
             t0 = self.inner.state.t0
             self.assignment = new
             self.inner = self._mission(view)
-            self.inner.state = dataclasses.replace(self.inner.state, t0=t0)
+            self.inner.keep_clock(t0)
         return events
 
     def _start(self, view: FleetView, pinned: bool) -> Intent:
@@ -356,7 +356,7 @@ class CaptureJob:
                 f"({x:.2f}, {y:.2f}, {math.degrees(th):.0f}°), at rest, {self.pin_fails} tries)"
             )
             return self._fail(view, Reason.PINNED, detail, [])
-        self.reach.replans += 1
+        self.reach.replanned()
         self.capture = new
         return self._start(view, pinned=True)
 

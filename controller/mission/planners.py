@@ -37,6 +37,12 @@ class JobOwned:
     def __init__(self, value: Any = None) -> None:
         self.value = value
 
+    def built(self, make: Callable[[], Any]) -> Any:
+        """The value, made by ``make()`` first when there is none (a job's lazy state)."""
+        if self.value is None:
+            self.value = make()
+        return self.value
+
 
 @dataclass(frozen=True)
 class PlanResult:

@@ -63,6 +63,15 @@ class RouteProgress:
         self.route_j = 0
         self.progress_t = t
 
+    def hold_clock(self, t: float) -> None:
+        """The stall clock waits at ``t`` (the carry starting, a re-arrangement under way: no
+        progress is due)."""
+        self.progress_t = t
+
+    def next_subgoal(self) -> None:
+        """The current subgoal reached: on to the next."""
+        self.subgoal += 1
+
     def pause(self, dt: float) -> None:
         """``dt`` s that do not count toward a stall (an outage, a re-arrangement)."""
         self.progress_t += dt
@@ -149,9 +158,7 @@ class RouteProgress:
 def plan_route_job(box: JobOwned, cfg: FleetConfig, pose: np.ndarray) -> Any:
     """Job ``route``: the route from ``pose`` (the planner, kept in ``box``, built first when
     there is none)."""
-    if box.value is None:
-        box.value = route_planner_for(cfg)
-    return box.value.plan(pose)
+    return box.built(lambda: route_planner_for(cfg)).plan(pose)
 
 
 def route_planner_for(cfg: FleetConfig) -> RoutePlanner:

@@ -11,7 +11,7 @@ import numpy as np
 from controller import geometry
 from controller.config import FleetConfig
 from controller.events import TransportEvent
-from controller.mission.grip import Contact, Grip
+from controller.mission.grip import Contact, Grip, RobotOrder
 from controller.mission.planners import JobOwned, Planners, PlanSlot, spawn_rng
 from controller.mission.types import Event, FleetView
 from controller.planning.serpentine import passive_velocity
@@ -97,40 +97,40 @@ class Pusher:
         """The plan asked for, once it has come (a ``PlanResult``), else None."""
         return self._job.take(t)
 
-    def apply(
-        self,
-        view: FleetView,
-        pose: np.ndarray,
-        plan: LocalPlan,
-        grip: Grip,
-        relocate_ok: bool,
-        events: list[Event],
-    ) -> None:
-        """A local plan has come: its first interval's contacts, relocations and actions.
-        ``relocate_ok``: the contacts held cannot push as asked (a relocation costs seconds of
-        travel the kinematic model does not pay in full: robots leave their contacts only
-        then)."""
+    def orders(self, plan: LocalPlan, grip: Grip, relocate_ok: bool) -> list[RobotOrder]:
+        """A local plan has come: what its first interval tells each robot (its action, the
+        contact it holds or the one it relocates to), for the grip to follow. ``relocate_ok``:
+        the contacts held cannot push as asked (a relocation costs seconds of travel the
+        kinematic model does not pay in full: robots leave their contacts only then)."""
         self.last_plan = plan
         self.plans += 1
         first_ok = plan.lp_status[0] == "optimal" if plan.lp_status else True
         self.stuck = 0 if first_ok or grip.moves else self.stuck + 1
         self.plan_energy.append(plan.energy.total)
+        out = []
         for i in range(grip.n):
             if i in grip.lost:
                 continue
             action = plan.first_actions[i]
-            grip.actions[i] = action
             p, nv = plan.contact_points[i], plan.contact_normals[i]
-            if i in grip.moves:
-                continue  # committed to a relocation: it finishes it first
+            if i in grip.moves:  # committed to a relocation: it finishes it first
+                out.append(RobotOrder(i, action))
+                continue
             code = action_code(action)
             if np.all(np.isfinite(p)) and code in ATTACHED:
-                grip.contacts[i] = Contact(p.copy(), nv.copy())
+                out.append(RobotOrder(i, action, Contact(p.copy(), nv.copy()), "hold"))
             elif code == RELOCATE and np.all(np.isfinite(p)) and relocate_ok:
-                grip.relocate(i, Contact(p.copy(), nv.copy()), view, pose)
+                out.append(RobotOrder(i, action, Contact(p.copy(), nv.copy()), "relocate"))
             elif code == RELOCATE:
-                grip.actions[i] = "follow"
+                out.append(RobotOrder(i, "follow"))
+            else:
+                out.append(RobotOrder(i, action))
         self.forces.extend(float(x) for x in plan.forces[0] if x > 0)
+        return out
+
+    def planned(self, view: FleetView, grip: Grip, events: list[Event]) -> None:
+        """The event of the plan the grip now follows (who relocates, how far)."""
+        plan = self.last_plan
         moving = {
             view.ids[i]: float(np.sum(np.linalg.norm(np.diff(np.asarray(p), axis=0), axis=1)))
             for i, p in grip.moves.items()
@@ -146,6 +146,14 @@ class Pusher:
                 plan_age_s=round(lag, 6),
             )
         )
+
+    def give_up(self, plans: int) -> None:
+        """Count the contacts as unable to push (``plans`` failed plans): a re-arrangement."""
+        self.stuck = plans
+
+    def unstick(self) -> None:
+        """A re-arrangement was asked for: the count of failed plans starts again."""
+        self.stuck = 0
 
     def execute(self, view: FleetView, pose: np.ndarray, grip: Grip):
         """The plan's first interval, closed every tick: a robot holding a contact moves with

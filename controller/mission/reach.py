@@ -34,6 +34,14 @@ class Reach:
         self.unreachable: set[int] = set()
         self.progress: tuple[np.ndarray, np.ndarray, np.ndarray, Any] | None = None
 
+    def restart(self) -> None:
+        """A new approach (a re-plan asked or done): the blocked count starts again."""
+        self.blocked_ticks = 0
+
+    def replanned(self) -> None:
+        """A capture re-planned against the wall (counted: at most MAX_REPLANS)."""
+        self.replans += 1
+
     def blocked(
         self, view: FleetView, phase: str, capture: CaptureSet, dist: Any, approach: Any
     ) -> bool:

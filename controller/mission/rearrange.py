@@ -1,7 +1,8 @@
 """The transport's re-arrangement stage (pure): when the contacts held cannot push the object
 along its segment, a new set (Sharma's Eq. 5, ``controller.planning.arrangement``) is asked for
-off the tick; when it comes, the robots nearest to its contacts move there (:meth:`Grip.regrip`)
-and the event says who moves where."""
+off the tick; when it comes, the transport has the grip move the robots nearest to its contacts
+there (:meth:`Grip.regrip`) and this stage says who moves where. It changes nothing but its own
+state: the grip only by the transport's hand."""
 
 from __future__ import annotations
 
@@ -40,18 +41,24 @@ class Rearranger:
         self.futile = 0
         self.since = 0.0
 
+    def pause(self, dt: float) -> None:
+        """An outage of ``dt`` s: the timeout does not run while it lasts."""
+        self.since += dt
+
+    def progressed(self) -> None:
+        """The object made progress: the re-arrangements since are no longer futile."""
+        self.futile = 0
+
     @property
     def pending(self) -> bool:
         return self._job.pending
 
-    def ask(self, t: float, direction: np.ndarray, grip: Grip) -> None:
-        """Ask for new contacts for the unit twist ``direction`` (object frame); the robots
-        hold until they come."""
+    def ask(self, t: float, direction: np.ndarray, active: list[int]) -> None:
+        """Ask for new contacts for the unit twist ``direction`` (object frame) among the
+        ``active`` robots; the robots hold until they come."""
         self.count += 1
         self.futile += 1
         self.since = t
-        grip.unplan()
-        active = grip.active()
         weakest = min(self.cfg.robots[i].max_force for i in active)
         self._job.request(
             t,
@@ -71,18 +78,17 @@ class Rearranger:
         """The set asked for, once it has come (a ``PlanResult``), else None."""
         return self._job.take(t)
 
-    def arrange(
+    def arranged(
         self,
         view: FleetView,
-        pose: np.ndarray,
         new: Arrangement,
         direction: np.ndarray,
         grip: Grip,
         events: list[Event],
     ) -> None:
-        """The new contacts have come: the grip moves the nearest robots to them."""
-        self.since = view.t  # the timeout counts from the set's arrival
-        grip.regrip(view, pose, new.points, new.normals)
+        """The new contacts have come and the grip has moved the nearest robots to them
+        (:meth:`Grip.regrip`): the event says who moves where; the timeout counts from now."""
+        self.since = view.t
         d = direction[:2]
         event = RearrangeEvent(
             t=view.t,

@@ -28,6 +28,10 @@ class Roster:
         self.silent = np.zeros(n, bool)  # gone by a stale estimate alone (liveliness still up)
         self.first_t: float | None = None
 
+    def start_with(self, ready: np.ndarray) -> None:
+        """The capture starts with the robots ``ready`` (N,): the ones an assignment may use."""
+        self.available = np.asarray(ready, bool).copy()
+
     def seen(self, view: FleetView) -> np.ndarray:
         """(N,) robots present with a fresh estimate (and the first estimates' time noted)."""
         ready = np.asarray(view.present & ~view.stale, bool)

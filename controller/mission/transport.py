@@ -115,7 +115,8 @@ class TransportMission:
         pose = np.asarray(view.object_pose, float)
         events: list[Event] = []
         if self.t0 is None:
-            self.t0 = self.way.progress_t = view.t
+            self.t0 = view.t
+            self.way.hold_clock(view.t)
             # the carrying starts here (the route comes a few ticks later, planned off the tick)
             self._cue(Cue.CARRY, view.t, events)
         dt = 0.0 if self._last_t is None else view.t - self._last_t
@@ -171,7 +172,7 @@ class TransportMission:
         """An outage: every robot still; the stall clock and the re-arrangement's timeout do
         not run while it lasts (``dt`` s since the last tick)."""
         self.way.pause(dt)
-        self.rearranger.since += dt
+        self.rearranger.pause(dt)
         return Intent(np.zeros((self.n, 2)), self.phase, events, stop=True)
 
     def _held(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
@@ -226,7 +227,8 @@ class TransportMission:
     def _start_rearrangement(self, view: FleetView, pose: np.ndarray, events: list[Event], cue):
         """New contacts asked for (``cue``: why: cannot push, stuck, a set given up)."""
         self._cue(cue, view.t, events)
-        self.rearranger.ask(view.t, self.way.direction(pose), self.grip)
+        self.grip.unplan()
+        self.rearranger.ask(view.t, self.way.direction(pose), self.grip.active())
 
     def _take_arrangement(self, view: FleetView, pose: np.ndarray, events: list) -> Intent | None:
         """The new contacts, once they have come (None: go on with them); meanwhile the robots
@@ -240,7 +242,8 @@ class TransportMission:
         if not got.value.feasible:
             return self._fail(Reason.TOO_HEAVY, got.value.detail, view, events)
         direction = self.way.direction(pose)
-        self.rearranger.arrange(view, pose, got.value, direction, self.grip, events)
+        self.grip.regrip(view, pose, got.value.points, got.value.normals)
+        self.rearranger.arranged(view, got.value, direction, self.grip, events)
         return None
 
     def _rearrange(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
@@ -251,7 +254,7 @@ class TransportMission:
         k = self.s.accept_margin
         if at(pose, goal, k * self.s.tolerance, k * self.s.heading_tolerance):
             return self._deliver(view, pose, events)
-        self.way.progress_t = view.t
+        self.way.hold_clock(view.t)
         if self.rearranger.pending:
             waiting = self._take_arrangement(view, pose, events)
             if waiting is not None:
@@ -288,7 +291,7 @@ class TransportMission:
             return self._deliver(view, pose, events)
         stall, progressed = self.way.stalled(view.t, pose)
         if progressed:
-            self.rearranger.futile = 0
+            self.rearranger.progressed()
         k = s.accept_margin  # the estimate is off by a centimetre: keep clear of the edge
         inside = at(pose, goal, k * s.tolerance, k * s.heading_tolerance)
         pusher = self.pusher
@@ -300,7 +303,7 @@ class TransportMission:
             return self._fail(Reason.STALLED, stall, view, events)
         if stall or view.t - self.way.progress_t > s.stall_timeout / 2:
             # receding-horizon plans can keep re-positioning without ever pushing: re-arrange
-            pusher.stuck = s.stuck_plans
+            pusher.give_up(s.stuck_plans)
         if self.way.off_route(pose):
             if self.route_replans >= s.max_route_replans:
                 return self._fail(Reason.STALLED, "left the route corridor too often", view, events)
@@ -308,10 +311,10 @@ class TransportMission:
             self._cue(Cue.OFF_ROUTE, view.t, events)
             return self._route(view, pose, events)
         if self.way.subgoal_reached(pose):
-            self.way.subgoal += 1
+            self.way.next_subgoal()
             return self._begin_segment(view, pose, events)
         if pusher.stuck >= s.stuck_plans:  # the contacts cannot push as the route asks
-            pusher.stuck = 0
+            pusher.unstick()
             pusher.forget()
             self._start_rearrangement(view, pose, events, Cue.STUCK)
             return self._rearrange(view, pose, events)
@@ -329,7 +332,8 @@ class TransportMission:
                 detail = f"the local planner failed: {got.error}"
                 return self._fail(Reason.STALLED, detail, view, events)
             relocate_ok = not self._can_push(pose)
-            pusher.apply(view, pose, got.value, self.grip, relocate_ok, events)
+            self.grip.follow_plan(pusher.orders(got.value, self.grip, relocate_ok), view, pose)
+            pusher.planned(view, self.grip, events)
         if pusher.last_plan is None:
             return self._held(view, pose, events)
         vel, touch, twist = pusher.execute(view, pose, self.grip)

@@ -231,3 +231,58 @@ def test_no_mission_module_over_400_lines():
     root = Path(seq.__file__).parent
     sizes = {f.name: len(f.read_text().splitlines()) for f in root.glob("*.py")}
     assert max(sizes.values()) <= 400, sizes
+
+
+# the stages of the job and of the transport: each reports or returns what it decided, and
+# changes nothing but its own state; ``grip`` is the transport's one state value, changed only
+# through its own methods (by the transport's hand)
+STAGES = ("push", "rearrange", "progress", "roster", "assign", "reach", "outage", "capture_phase")
+COORDINATORS = ("job", "transport")
+
+
+def _pokes(source: str, rooted_at_self: bool = False) -> list[str]:
+    """Assignments to an attribute of another object (``grip.actions[i] = ...``,
+    ``self.pusher.stuck = 0``): with ``rooted_at_self`` only those into a component the module
+    holds (``self.a.b``), else any whose owner is not ``self`` itself."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.Assign | ast.AugAssign | ast.AnnAssign):
+            continue
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+        for t in targets:
+            for sub in t.elts if isinstance(t, ast.Tuple) else [t]:
+                base = sub
+                while isinstance(base, ast.Subscript):
+                    base = base.value
+                if not isinstance(base, ast.Attribute):
+                    continue
+                owner = base.value
+                if isinstance(owner, ast.Name) and owner.id == "self":
+                    continue
+                root = owner
+                while isinstance(root, ast.Attribute | ast.Subscript):
+                    root = root.value
+                if rooted_at_self and not (isinstance(root, ast.Name) and root.id == "self"):
+                    continue
+                out.append(f"{node.lineno}: {ast.unparse(sub)}")
+    return out
+
+
+def test_stages_import_no_other_stage_and_change_nothing_but_their_own():
+    root = Path(seq.__file__).parent
+    for name in (*STAGES, "grip"):
+        src = (root / f"{name}.py").read_text()
+        imported = {
+            n.module for n in ast.walk(ast.parse(src)) if isinstance(n, ast.ImportFrom) and n.module
+        }
+        others = {f"controller.mission.{s}" for s in STAGES if s != name}
+        assert not imported & others, (name, sorted(imported & others))
+        assert _pokes(src) == [], name
+    for name in COORDINATORS:  # they change a stage by its verbs, never its fields
+        assert _pokes((root / f"{name}.py").read_text(), rooted_at_self=True) == [], name
+
+
+def test_the_boundary_check_sees_a_field_poke():
+    src = "grip.actions[i] = a\nself.pusher.stuck = 0\nself.n = 3\nx.y += 1\n"
+    assert _pokes(src) == ["1: grip.actions[i]", "2: self.pusher.stuck", "4: x.y"]
+    assert _pokes(src, rooted_at_self=True) == ["2: self.pusher.stuck"]
