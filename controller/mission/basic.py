@@ -25,14 +25,14 @@ class GotoMission:
         arrived = np.linalg.norm(err, axis=1) < self.tolerance
         done = bool(np.all(arrived))
         phase = Phase.DONE if done else Phase.GOTO
-        return Intent(self.gain * err, phase, hold=arrived, done=done)
+        return Intent.of(self.gain * err, phase, hold=arrived, done=done)
 
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
         """No filter: staging and tests drive straight (the tracking law and the limits)."""
-        cmds = track_velocity(view.poses, intent.velocities, self.limits)
-        cmds[intent.hold] = 0.0
+        cmds = track_velocity(view.poses, intent.command.velocities, self.limits)
+        cmds[intent.command.hold] = 0.0
         cmds[view.stale | ~view.present] = 0.0
-        return MissionOutput(commands=cmds, phase=intent.phase, done=intent.done)
+        return MissionOutput.of(cmds, intent)
 
 
 @dataclass
@@ -42,7 +42,7 @@ class HoldMission:
     n: int
 
     def plan(self, view: FleetView) -> Intent:
-        return Intent(np.zeros((self.n, 2)), Phase.HOLD, stop=True)
+        return Intent.of(np.zeros((self.n, 2)), Phase.HOLD, stop=True)
 
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
-        return MissionOutput(commands=np.zeros((self.n, 3)), phase=intent.phase)
+        return MissionOutput.of(np.zeros((self.n, 3)), intent)

@@ -330,7 +330,7 @@ class CaptureMission:
     def plan(self, view: FleetView) -> Intent:
         zero = np.zeros((self.n, 2))
         if view.object_pose is None or view.estop:
-            return Intent(zero, self.phase, stop=True)
+            return Intent.of(zero, self.phase, stop=True)
         events: list[Event] = []
         if self.state.t0 is None:  # this capture starts: the job (again) at approach
             self.state = replace(self.state, t0=view.t)
@@ -360,7 +360,7 @@ class CaptureMission:
         ]
         failure, failed = self.seq.state.failure, self.phase == Phase.FAILED
         closed = self.phase in CLOSED
-        return Intent(
+        return Intent.of(
             vel,
             self.phase,
             events,

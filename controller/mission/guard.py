@@ -67,29 +67,20 @@ class SafetyStage:
         """Body-frame commands for ``intent``: zero on e-stop or ``stop``; otherwise the nominal
         velocities, acceleration-limited, filtered, tracked; stale or absent robots and
         ``hold`` robots get exactly zero."""
-        out = MissionOutput(
-            np.zeros((self.n, 3)),
-            intent.phase,
-            events=list(intent.events),
-            done=intent.done,
-            failed=intent.failed,
-            arrest=intent.arrest,
-            reason=intent.reason,
-            progress=intent.progress,
-            object_push=intent.object_push,
-        )
-        if view.estop or intent.stop:
+        out = MissionOutput.of(np.zeros((self.n, 3)), intent)
+        c, phase = intent.command, intent.report.phase
+        if view.estop or c.stop:
             self.v_prev[:] = 0.0
             return out
-        vel = limit_accel(intent.velocities, self.v_prev, self.max_accel, self.dt)
-        polys = self.obstacles + [self.object_world(intent.object_pose)]
+        vel = limit_accel(c.velocities, self.v_prev, self.max_accel, self.dt)
+        polys = self.obstacles + [self.object_world(c.object_pose)]
         exempt = np.zeros((self.n, len(polys)), bool)
-        if intent.touch is not None:
-            exempt[:, -1] = intent.touch
+        if c.touch is not None:
+            exempt[:, -1] = c.touch
         stale = view.stale | ~view.present
-        fixed = _fixed(stale, intent.hold)
+        fixed = _fixed(stale, c.hold)
         motion = [None] * len(self.obstacles) + [view.object_velocity]
-        overlap = np.full(self.n, intent.overlap)
+        overlap = np.full(self.n, c.overlap)
         res = self.filter.filter(
             view.poses[:, :2],
             vel,
@@ -98,13 +89,13 @@ class SafetyStage:
             stale=fixed,
             motion=motion,
             overlap=overlap,
-            hold=intent.touch if intent.cage else None,
+            hold=c.touch if c.cage else None,
             # a robot the live object squeezes against a wall while the fleet closes in slides
             # out; in transport a robot stuck inside a margin stops, as it always did (its
             # pushes are deliberate contacts)
-            relax=intent.phase in RELAX_PHASES,
+            relax=phase in RELAX_PHASES,
             headings=view.poses[:, 2],
-            close=intent.touch if intent.phase in CLOSING_PHASES else None,
+            close=c.touch if phase in CLOSING_PHASES else None,
         )
         if res.stopped.any():
             self.counters.infeasible += 1
@@ -112,12 +103,12 @@ class SafetyStage:
             out.events.append(SafetyStopEvent(robots=robots))
         self.v_prev = res.velocities
         cmds = track_reversible(view.poses, res.velocities, self.limits, aim=res.aim)
-        if intent.steady is not None:
+        if c.steady is not None:
             # a differential robot holding a contact resists sideways with its tyres and along
             # its axis with its motor; turning toward a few mm of error only lets go
-            cmds[intent.steady, 2] = 0.0
-        if intent.hold is not None:
-            cmds[intent.hold] = 0.0
+            cmds[c.steady, 2] = 0.0
+        if c.hold is not None:
+            cmds[c.hold] = 0.0
         cmds[stale] = 0.0
         out.commands = cmds
         return out

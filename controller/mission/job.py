@@ -120,7 +120,7 @@ class CaptureJob:
     def plan(self, view: FleetView) -> Intent:
         if self.failed:
             zero = np.zeros((self.n, 2))
-            return Intent(zero, Phase.FAILED, stop=True, failed=True, reason=self.failure_reason)
+            return Intent.of(zero, Phase.FAILED, stop=True, failed=True, reason=self.failure_reason)
         view = parked(view)  # (a robot never seen: no estimate)
         if self.transport is not None:
             return self.transport.plan(view)
@@ -131,7 +131,7 @@ class CaptureJob:
             view.t, gone, self.roster.available, view.ids, self.roster.silent
         )
         if pause:  # one fleet-wide silence: every robot still until it ends or its grace runs out
-            return Intent(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
+            return Intent.of(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
         events += self.roster.joins(view, gone)
         if self.inner.phase in WATCHED:
             lost, replan = self.roster.losses(view, gone, self.assignment, str(self.inner.phase))
@@ -141,8 +141,7 @@ class CaptureJob:
         if self._replan_job.pending and self._replan_why == "lost":
             return self._await_lost(view, events)
         events += self._reassign(view)
-        intent = self.inner.plan(view)
-        intent.events[:0] = events
+        intent = self.inner.plan(view).after(events)
         reach = self.reach
         if not self._replan_job.pending and reach.blocked(
             view, self.inner.phase, self.capture, self.inner.last_distance, self.inner
@@ -153,7 +152,7 @@ class CaptureJob:
             self._ask_replan("pinned", view, replan_pinned, pose, frozenset(reach.unreachable), k)
         if self._replan_job.pending:
             return self._await_pinned(view, intent)
-        if intent.arrest:
+        if intent.report.outcome.arrest:
             self.arrest_t = view.t
         wait = self.cfg.transport.start_after
         waited = self.arrest_t is not None and view.t - self.arrest_t >= wait
@@ -189,7 +188,7 @@ class CaptureJob:
     def _wait(self, view: FleetView) -> Intent:
         """Phase ``plan``: start when the object and every robot are seen, or, ``start_wait``
         s after the first estimates, with the robots seen when they can close the object."""
-        still = Intent(np.zeros((self.n, 2)), Phase.PLAN, stop=True)
+        still = Intent.of(np.zeros((self.n, 2)), Phase.PLAN, stop=True)
         ready = self.roster.seen(view)
         if view.object_pose is None:
             return still
@@ -241,7 +240,7 @@ class CaptureJob:
         """Every robot holds until the re-plan comes; then it is re-assigned (the approach
         starts over), or the job fails with ``robots_lost``."""
         got = self._replan_job.take(view.t)
-        hold = Intent(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
+        hold = Intent.of(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
         if got is None:
             return hold
         if not got.ok and self._lost_retries < LOST_REPLAN_RETRIES:
@@ -264,9 +263,7 @@ class CaptureJob:
         self.loss_replans += 1
         self.capture = new
         self.reach.restart()
-        intent = self._start(view, pinned=bool(new.walls))
-        intent.events[:0] = events
-        return intent
+        return self._start(view, pinned=bool(new.walls)).after(events)
 
     def _fail(self, view: FleetView, reason: Reason, detail: str, events: list) -> Intent:
         """Fail safe: every robot stopped, the failure event with its detail."""
@@ -274,7 +271,7 @@ class CaptureJob:
         events = events + list(step.events)
         self.failed = True
         self.failure_reason = reason
-        return Intent(
+        return Intent.of(
             np.zeros((self.n, 2)), Phase.FAILED, events, stop=True, failed=True, reason=reason
         )
 
@@ -314,9 +311,7 @@ class CaptureJob:
             wall_contacts=self.capture.walls,
             unavailable=[view.ids[i] for i in np.flatnonzero(~self.roster.available)],
         )
-        intent = self.inner.plan(view)
-        intent.events.insert(0, event)
-        return intent
+        return self.inner.plan(view).after([event])
 
     def _mission(self, view: FleetView):
         settings = CaptureSettings.from_config(self.cfg)
@@ -365,13 +360,7 @@ class CaptureJob:
         if self.transport is not None:
             return self.transport.safety(view, intent)
         if self.inner is None or self.failed:
-            return MissionOutput(
-                np.zeros((self.n, 3)),
-                intent.phase,
-                list(intent.events),
-                failed=intent.failed,
-                reason=intent.reason,
-            )
+            return MissionOutput.of(np.zeros((self.n, 3)), intent)
         return self.inner.safety(view, intent)
 
     def summary(self) -> JobSummary:

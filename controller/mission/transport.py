@@ -111,7 +111,7 @@ class TransportMission:
     def plan(self, view: FleetView) -> Intent:
         zero = np.zeros((self.n, 2))
         if view.object_pose is None or view.estop:
-            return Intent(zero, self.phase, stop=True)
+            return Intent.of(zero, self.phase, stop=True)
         pose = np.asarray(view.object_pose, float)
         events: list[Event] = []
         if self.t0 is None:
@@ -160,20 +160,22 @@ class TransportMission:
             reason, detail = Reason.ROBOT_LOST, f"{detail} (lost: {lost})"
         self._cue(None, view.t, events, Failure(Reason(reason), detail))
         self.failure = {"reason": str(reason), "t": view.t, "detail": detail}
-        return Intent(
+        return Intent.of(
             np.zeros((self.n, 2)), self.phase, events, stop=True, failed=True, reason=reason
         )
 
     def _failed(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         why = self.failure["reason"] if self.failure else ""
-        return Intent(np.zeros((self.n, 2)), self.phase, events, stop=True, failed=True, reason=why)
+        return Intent.of(
+            np.zeros((self.n, 2)), self.phase, events, stop=True, failed=True, reason=why
+        )
 
     def _paused(self, view: FleetView, dt: float, events: list[Event]) -> Intent:
         """An outage: every robot still; the stall clock and the re-arrangement's timeout do
         not run while it lasts (``dt`` s since the last tick)."""
         self.way.pause(dt)
         self.rearranger.pause(dt)
-        return Intent(np.zeros((self.n, 2)), self.phase, events, stop=True)
+        return Intent.of(np.zeros((self.n, 2)), self.phase, events, stop=True)
 
     def _held(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         """A plan is on its way: every robot holds where it is (those in contact keep it)."""
@@ -355,15 +357,14 @@ class TransportMission:
                 away = view.poses[i, :2] - c
                 vel[i] = 0.1 * away / max(float(np.linalg.norm(away)), 1e-9)
         intent = self._intent(vel, events, pose, np.zeros(self.n, bool), None)
-        intent.done = view.t - self.done_t >= self.s.back_off / 0.1
-        return intent
+        return intent.ending(view.t - self.done_t >= self.s.back_off / 0.1)
 
     def _intent(self, vel, events, pose, touch, hold, twist=None) -> Intent:
         if self.way.route is not None:
             to_goal = self.way.remaining(pose)
         else:
             to_goal = float(np.linalg.norm(pose[:2] - np.asarray(self.cfg.object.goal)[:2]))
-        return Intent(
+        return Intent.of(
             vel,
             self.phase,
             events,

@@ -27,7 +27,7 @@ class CutLink:
 
     def plan(self, view):
         intent = self.job.plan(view)
-        if intent.phase == "approach" and self.approach_t is None:
+        if intent.report.phase == "approach" and self.approach_t is None:
             self.approach_t = view.t
         if self.cut is None and self.approach_t is not None:
             if view.t - self.approach_t >= CUT_AFTER:
@@ -35,7 +35,7 @@ class CutLink:
                 self.drivers[i].fail_link("test: link cut mid-approach")
                 self.cut = (view.ids[i], view.t)
         if self.cut is not None and self.replanned_t is None:
-            if any(e.kind == "robot_lost" for e in intent.events):
+            if any(e.kind == "robot_lost" for e in intent.report.events):
                 self.replanned_t = view.t
         return intent
 

@@ -188,7 +188,7 @@ def test_a_robot_back_is_available_but_never_gets_its_old_point():
     for _ in range(3):  # it comes back: available, no point (nothing to chase)
         t += DT
         intent = j.plan(view(j, t))
-        assert first not in j.assignment and np.all(intent.velocities[first] == 0.0)
+        assert first not in j.assignment and np.all(intent.command.velocities[first] == 0.0)
         j.safety(view(j, t), intent)
     assert j.roster.available[first]
     # another assigned robot is lost: the re-plan needs five robots and may pick it again

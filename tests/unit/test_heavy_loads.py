@@ -78,7 +78,11 @@ def test_a_crate_too_heavy_for_the_robots_that_fit_fails_too_heavy_before_anyone
     re-arrangements."""
     m, cfg, poses = mission(heavy(CRATE, 0.4))
     out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
-    assert out.failed and out.reason == "too_heavy" and np.all(out.velocities == 0.0)
-    detail = by_kind(out.events)["failure"].detail
+    assert (
+        out.report.outcome.failed
+        and out.report.outcome.reason == "too_heavy"
+        and np.all(out.command.velocities == 0.0)
+    )
+    detail = by_kind(out.report.events)["failure"].detail
     assert "needs 14.4 N" in detail and "36.0 N in all" in detail
     assert m.pusher.plans == 0 and m.grip.relocations == 0 and m.rearranger.count == 1

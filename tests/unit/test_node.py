@@ -27,13 +27,13 @@ class Recorder:
 
     def plan(self, view: FleetView) -> Intent:
         self.views.append(view)
-        return Intent(
+        return Intent.of(
             np.zeros((self.n, 2)), Phase.APPROACH, events=[PhaseEvent(phase=Phase.APPROACH, t=0.0)]
         )
 
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
         cmds = np.tile([0.2, 0.0, 0.1], (self.n, 1))
-        return MissionOutput(cmds, intent.phase, list(intent.events))
+        return MissionOutput(cmds, intent.report.phase, list(intent.report.events))
 
 
 @pytest.fixture
@@ -175,10 +175,10 @@ class Still:
 
     def plan(self, view: FleetView) -> Intent:
         self.views.append(view)
-        return Intent(np.zeros((self.n, 2)), Phase.APPROACH)
+        return Intent.of(np.zeros((self.n, 2)), Phase.APPROACH)
 
     def safety(self, view: FleetView, intent: Intent) -> MissionOutput:
-        return MissionOutput(np.zeros((self.n, 3)), intent.phase, [])
+        return MissionOutput(np.zeros((self.n, 3)), intent.report.phase, [])
 
 
 def test_poses_stamped_ahead_inside_the_skew_cannot_move_the_estimate():

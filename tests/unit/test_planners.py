@@ -39,12 +39,12 @@ def test_the_robots_hold_while_the_route_is_on_its_way_and_take_it_when_due():
     kinds = []
     for k in range(4):
         out = m.plan(view(cfg, k * DT, poses, cfg.object.start))
-        kinds += [e.kind for e in out.events]
-        assert m.phase == Phase.ROUTE and out.hold is not None and out.hold.all()
-        assert not np.any(out.velocities)
+        kinds += [e.kind for e in out.report.events]
+        assert m.phase == Phase.ROUTE and out.command.hold is not None and out.command.hold.all()
+        assert not np.any(out.command.velocities)
     assert "route" not in kinds
     out = m.plan(view(cfg, 4 * DT, poses, cfg.object.start))
-    assert "route" in [e.kind for e in out.events]  # due at t + 4 ticks, not before
+    assert "route" in [e.kind for e in out.report.events]  # due at t + 4 ticks, not before
     assert m.phase in (Phase.TRANSPORT, Phase.REARRANGE)
 
 
@@ -66,7 +66,7 @@ def test_the_last_plan_is_executed_while_the_next_one_is_computed():
     while m.pusher.last_plan is None and t < 2.0:  # the segment's first plan: held meanwhile
         out = m.plan(view(cfg, t, poses, cfg.object.start))
         if m.phase == Phase.TRANSPORT and m.pusher.last_plan is None:
-            assert out.hold.all() and not np.any(out.velocities)
+            assert out.command.hold.all() and not np.any(out.command.velocities)
         t += DT
     assert m.phase == Phase.TRANSPORT and m.pusher.last_plan is not None
     first, plans = m.pusher.last_plan, m.pusher.plans
@@ -77,10 +77,12 @@ def test_the_last_plan_is_executed_while_the_next_one_is_computed():
         waited += 1
         if m.pusher.plans > plans:
             break
-        assert m.pusher.last_plan is first and np.any(out.velocities)  # the robots push meanwhile
+        assert m.pusher.last_plan is first and np.any(
+            out.command.velocities
+        )  # the robots push meanwhile
     # one plan per interval, as before; each one planned from a state 6 ticks old
     assert waited == round(first.interval / DT)
-    age = by_kind(out.events)["transport"].plan_age_s
+    age = by_kind(out.report.events)["transport"].plan_age_s
     assert age == pytest.approx(6 * DT)
 
 
@@ -88,8 +90,8 @@ def test_a_failing_planner_stops_the_robots_with_the_reason():
     m, cfg, poses = transport(InlinePlanners())
     m._route_box.value = _Broken()
     out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
-    assert out.failed and out.stop and m.phase == Phase.FAILED
-    failure = by_kind(out.events)["failure"]
+    assert out.report.outcome.failed and out.command.stop and m.phase == Phase.FAILED
+    failure = by_kind(out.report.events)["failure"]
     assert failure.reason == Reason.NO_ROUTE and "planner exploded" in failure.detail
 
 

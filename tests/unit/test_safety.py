@@ -179,7 +179,7 @@ def _held_barrier(tell_the_filter: bool, gap: float, speed: float) -> float:
     held = np.array([True, False])
     view = FleetView(0.0, cfg.robot_ids, poses, np.zeros((2, 3)), np.zeros(2, bool),
                      np.ones(2, bool), None, None, None, False)  # fmt: skip
-    intent = Intent(np.array([[0.0, 0.0], [-speed, 0.0]]), "close_in",
+    intent = Intent.of(np.array([[0.0, 0.0], [-speed, 0.0]]), "close_in",
                     hold=held if tell_the_filter else None)  # fmt: skip
     cmd = stage.apply(view, intent).commands
     u4 = np.array([-cmd[1, 0], 0.0])  # facing west: forward is -x

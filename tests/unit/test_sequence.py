@@ -190,12 +190,12 @@ def test_the_transport_mission_is_the_same_job_entered_at_route():
     obj = np.asarray(cfg.object.start, float)
     # the job waits in ``plan`` until it sees the object (nobody touches it here: no holders)
     first = job.plan(_view(cfg, 0.0, far, None))
-    assert first.phase == P.PLAN and first.stop
+    assert first.report.phase == P.PLAN and first.command.stop
     intent = job.plan(_view(cfg, 0.05, far, obj))
     # the carrying starts at route (the route computed at once here: nobody holds the object,
     # so the same tick goes on to re-arrange)
-    phases = [e.phase for e in intent.events if isinstance(e, PhaseEvent)]
-    assert job.transport is not None and phases == ["route", "rearrange"], intent.events
+    phases = [e.phase for e in intent.report.events if isinstance(e, PhaseEvent)]
+    assert job.transport is not None and phases == ["route", "rearrange"], intent.report.events
     assert all(c is None for c in job.transport.grip.contacts.values())
     with pytest.raises(Exception, match="entered at plan or route"):
         CaptureJob(cfg, np.random.default_rng(0), entry=P.HOLD)

@@ -23,9 +23,9 @@ OPEN = Scenario("open", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0))
 def test_first_tick_plans_the_route_and_publishes_it():
     m, cfg, poses = mission(OPEN)
     out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
-    kinds = [e.kind for e in out.events]
+    kinds = [e.kind for e in out.report.events]
     assert "route" in kinds
-    route = by_kind(out.events)["route"]
+    route = by_kind(out.report.events)["route"]
     wp = np.asarray(route.waypoints)
     assert np.allclose(wp[0], cfg.object.start, atol=1e-6)
     assert np.allclose(wp[-1], cfg.object.goal, atol=1e-6)
@@ -42,9 +42,11 @@ def test_no_route_fails_cleanly_and_stops_every_robot():
     )
     m, cfg, poses = mission(Scenario("pen", CRATE, (1.5, 2.0, 0.0), (4.1, 2.2, 0.0), obstacles=pen))
     out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
-    assert out.failed and out.reason == "no_route" and out.stop
-    assert np.all(out.velocities == 0.0)
-    assert by_kind(out.events)["failure"].detail
+    assert (
+        out.report.outcome.failed and out.report.outcome.reason == "no_route" and out.command.stop
+    )
+    assert np.all(out.command.velocities == 0.0)
+    assert by_kind(out.report.events)["failure"].detail
 
 
 def test_delivered_inside_the_settle_margin_then_backs_off_and_is_done():
@@ -55,14 +57,14 @@ def test_delivered_inside_the_settle_margin_then_backs_off_and_is_done():
     at_goal = poses + shift  # the fleet carried it there
     near = goal + [0.05, 0.0, 0.0]  # 5 cm off: inside 0.6 x 0.2 m
     out = m.plan(view(cfg, 10.0, at_goal, near))
-    assert m.phase == Phase.DONE and "delivered" in by_kind(out.events)
-    assert not out.done  # backing off first
+    assert m.phase == Phase.DONE and "delivered" in by_kind(out.report.events)
+    assert not out.report.outcome.done  # backing off first
     c = geometry.transform(m.model.centroid[None], near)[0]
     for i in range(len(cfg.robots)):
         away = at_goal[i, :2] - c
-        assert np.dot(out.velocities[i], away) > 0  # every robot moves away from the object
+        assert np.dot(out.command.velocities[i], away) > 0  # every robot moves away from the object
     out = m.plan(view(cfg, 20.0, at_goal, near))
-    assert out.done
+    assert out.report.outcome.done
 
 
 def test_progress_is_measured_along_the_route_not_as_the_crow_flies():
@@ -133,12 +135,12 @@ def test_a_lost_robot_leaves_the_job_and_is_told_nothing():
     present = np.ones(len(cfg.robots), bool)
     present[holder] = False
     out = m.plan(view(cfg, 0.05, poses, cfg.object.start, present))
-    lost = [e for e in out.events if e.kind == "robot_lost"]
+    lost = [e for e in out.report.events if e.kind == "robot_lost"]
     assert [e.robot for e in lost] == [cfg.robots[holder].id]
     assert m.grip.contacts[holder] is None and holder not in m.grip.moves
-    assert np.all(out.velocities[holder] == 0.0)
+    assert np.all(out.command.velocities[holder] == 0.0)
     out = m.plan(view(cfg, 0.1, poses, cfg.object.start, present))
-    assert not [e for e in out.events if e.kind == "robot_lost"]  # reported once
+    assert not [e for e in out.report.events if e.kind == "robot_lost"]  # reported once
 
 
 def test_a_stall_with_a_robot_lost_fails_with_robot_lost():
@@ -149,11 +151,11 @@ def test_a_stall_with_a_robot_lost_fails_with_robot_lost():
     m.plan(view(cfg, 0.05, poses, cfg.object.start, present))
     m.rearranger.futile = m.s.max_rearrangements  # nothing more to try
     t, out = 0.05, None
-    while t < 3 * m.s.stall_timeout and not (out is not None and out.failed):
+    while t < 3 * m.s.stall_timeout and not (out is not None and out.report.outcome.failed):
         t += 0.5
         out = m.plan(view(cfg, t, poses, cfg.object.start, present))  # the object never moves
-    assert out is not None and out.failed
-    assert out.reason == "robot_lost" and cfg.robots[0].id in m.failure["detail"]
+    assert out is not None and out.report.outcome.failed
+    assert out.report.outcome.reason == "robot_lost" and cfg.robots[0].id in m.failure["detail"]
     assert math.isclose(m.failure["t"], t)
 
 
@@ -169,13 +171,13 @@ def test_a_fleet_wide_silence_pauses_the_transport_and_loses_nobody():
     seen = []
     while t < 1.05:
         out = m.plan(view(cfg, t, poses, cfg.object.start, nobody))
-        seen += [e.kind for e in out.events]
-        assert out.stop and not out.failed
+        seen += [e.kind for e in out.report.events]
+        assert out.command.stop and not out.report.outcome.failed
         t += 0.05
     assert seen == ["outage"] and not m.grip.lost
     assert m.way.progress_t - stall0 == pytest.approx(1.0, abs=0.06)  # paused, not stalled
     out = m.plan(view(cfg, t, poses, cfg.object.start))
-    assert [e.kind for e in out.events][0] == "outage_end" and not m.grip.lost
+    assert [e.kind for e in out.report.events][0] == "outage_end" and not m.grip.lost
     assert m.grip.contacts == contacts
 
 
@@ -192,8 +194,12 @@ def test_an_object_the_whole_fleet_cannot_push_fails_too_heavy_before_anyone_pus
         )
         m, cfg, poses = mission(sc)
         out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
-        assert out.failed and out.reason == "too_heavy" and np.all(out.velocities == 0.0)
-        detail = by_kind(out.events)["failure"].detail
+        assert (
+            out.report.outcome.failed
+            and out.report.outcome.reason == "too_heavy"
+            and np.all(out.command.velocities == 0.0)
+        )
+        detail = by_kind(out.report.events)["failure"].detail
         need = friction * mass * 9.81
         assert f"needs {need:.1f} N" in detail and "36.0 N in all" in detail
         assert (need <= 36.0) is fleet_ok
