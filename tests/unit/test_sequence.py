@@ -286,3 +286,45 @@ def test_the_boundary_check_sees_a_field_poke():
     src = "grip.actions[i] = a\nself.pusher.stuck = 0\nself.n = 3\nx.y += 1\n"
     assert _pokes(src) == ["1: grip.actions[i]", "2: self.pusher.stuck", "4: x.y"]
     assert _pokes(src, rooted_at_self=True) == ["2: self.pusher.stuck"]
+
+
+def _entries_into(path: str, fn) -> int:
+    """How many times control passes into a function of the file ``path`` from another file
+    while ``fn()`` runs (a profile hook on every Python call)."""
+    import sys
+
+    count = 0
+
+    def hook(frame, event, arg):
+        nonlocal count
+        if event == "call" and frame.f_code.co_filename == path:
+            caller = frame.f_back
+            if caller is None or caller.f_code.co_filename != path:
+                count += 1
+
+    sys.setprofile(hook)
+    try:
+        fn()
+    finally:
+        sys.setprofile(None)
+    return count
+
+
+def test_one_tick_enters_the_job_module_twice_its_plan_and_its_safety():
+    """A tick as the node runs it (``plan`` then ``safety``) enters ``mission/job.py`` from
+    outside it twice, in the capture and in the transport: the stages never call back into
+    the job (counted by a profile hook: a call into a job.py function from another file)."""
+    from controller.mission import job as job_module
+
+    path = job_module.__file__
+    cfg = make_config(transport=True)
+    n = len(cfg.robots)
+    far = np.column_stack([np.linspace(1.0, 2.0, n), np.full(n, 11.0), np.zeros(n)])
+    obj = np.asarray(cfg.object.start, float)
+    for kind in ("capture", "transport"):
+        job = build_mission(cfg, kind)
+        for k in range(2):  # the capture (or the carry) under way
+            job.safety(_view(cfg, k * 0.05, far, obj), job.plan(_view(cfg, k * 0.05, far, obj)))
+        v = _view(cfg, 0.1, far, obj)
+        assert _entries_into(path, lambda j=job, v=v: j.safety(v, j.plan(v))) == 2, kind
+        assert job.phase in (P.APPROACH, P.REARRANGE, P.ROUTE, P.TRANSPORT), (kind, job.phase)
