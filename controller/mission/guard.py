@@ -15,7 +15,7 @@ import numpy as np
 from controller import geometry
 from controller.config import FleetConfig
 from controller.events import SafetyStopEvent
-from controller.mission.tracking import RobotLimits, track_reversible
+from controller.mission.tracking import RobotLimits, track_reversible_ends
 from controller.mission.types import FleetView, Intent, MissionOutput, Phase
 from controller.planning.approach import limit_accel
 from controller.planning.safety import SafetyFilter
@@ -56,6 +56,7 @@ class SafetyStage:
             close_margin=cfg.capture.clearance,
         )
         self.v_prev = np.zeros((self.n, 2))
+        self.backward: np.ndarray | None = None  # each diff robot's end of its axis, kept
         self.counters = GuardCounters()
 
     def object_world(self, pose: np.ndarray | None) -> np.ndarray:
@@ -102,7 +103,9 @@ class SafetyStage:
             robots = [view.ids[i] for i in np.flatnonzero(res.stopped)]
             out.events.append(SafetyStopEvent(robots=robots))
         self.v_prev = res.velocities
-        cmds = track_reversible(view.poses, res.velocities, self.limits, aim=res.aim)
+        cmds, self.backward = track_reversible_ends(
+            view.poses, res.velocities, self.limits, aim=res.aim, backward=self.backward
+        )
         if c.steady is not None:
             # a differential robot holding a contact resists sideways with its tyres and along
             # its axis with its motor; turning toward a few mm of error only lets go

@@ -81,6 +81,15 @@ def track_velocity(
     return cmds
 
 
+# rad a differential robot keeps driving toward the end of its axis it chose (forward or
+# backward) beyond the point where the other end is nearer: without it, a desired velocity
+# near 90 degrees off the axis flips the choice tick by tick, the heading error jumps between
+# about +90 and -90 degrees and the robot is commanded full yaw rate one way, then the other
+# (measured in a real-time lab run: wz +2 / -2 rad/s tick after tick, the robot dithering and
+# its filter rejecting its poses for a minute)
+REVERSE_HYSTERESIS = np.radians(30.0)
+
+
 def track_reversible(
     poses: np.ndarray,
     v_world: np.ndarray,
@@ -91,25 +100,51 @@ def track_reversible(
 ) -> np.ndarray:
     """Like :func:`controller.mission.track_velocity`, but a differential robot may drive
     backwards: it aligns its axis (either way) with the desired velocity and drives with the
-    signed component along its heading. Station keeping then needs no U-turns.
+    signed component along its heading. Station keeping then needs no U-turns. Each tick on
+    its own: the nearer end of the axis (see :func:`track_reversible_ends` for the choice
+    kept from one tick to the next).
 
     With ``aim`` (N, 2), the safety filter's free solution, ``v_world`` is already along each
     differential robot's axis (the filter's axis rows): the robot drives exactly that (the
     velocity the barriers were kept for) and turns toward ``aim``."""
+    return track_reversible_ends(poses, v_world, limits, heading_gain, turn_deadband, aim)[0]
+
+
+def track_reversible_ends(
+    poses: np.ndarray,
+    v_world: np.ndarray,
+    limits: RobotLimits,
+    heading_gain: float = 4.0,
+    turn_deadband: float = 0.03,
+    aim: np.ndarray | None = None,
+    backward: np.ndarray | None = None,
+    keep: float = REVERSE_HYSTERESIS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`track_reversible` with the end of the axis each differential robot drives toward
+    kept from the last tick: ``backward`` (N,) the last tick's choice (None: none yet), kept
+    until the other end is nearer to the desired direction by more than ``keep`` rad; a robot
+    below the turn deadband keeps it. Returns the commands (N, 3) and this tick's choice (N,)
+    (False for holonomic robots)."""
     cmds = track_velocity(poses, v_world, limits)
     diff = ~limits.holonomic
+    ends = np.zeros(len(poses), bool)
     if not np.any(diff):
-        return cmds
+        return cmds, ends
     th = poses[diff, 2]
     v = v_world[diff]
     toward = v if aim is None else np.asarray(aim, float)[diff]
     speed = np.linalg.norm(toward, axis=1)
     body = world_to_body(th, toward)
-    err = np.arctan2(body[:, 1], body[:, 0])
-    err = np.where(err > np.pi / 2, err - np.pi, np.where(err < -np.pi / 2, err + np.pi, err))
+    a = np.arctan2(body[:, 1], body[:, 0])  # the desired direction from the forward end
+    back = np.abs(a) > np.pi / 2  # the nearer end
     # below ``turn_deadband`` m/s a differential robot does not turn (only drives along its
     # axis): turning toward a few mm/s of noise makes it spin in place against its contact
     moving = speed > turn_deadband
+    if backward is not None:
+        prev = np.asarray(backward, bool)[diff]
+        off = np.where(prev, np.pi - np.abs(a), np.abs(a))  # from the end chosen last tick
+        back = np.where(~moving | (off < np.pi / 2 + keep), prev, back)
+    err = np.where(back, geometry.wrap_angle(a - np.pi), a)
     wz = np.where(moving, heading_gain * err, 0.0)
     if aim is None:
         fwd = body[:, 0] * np.abs(np.cos(err))
@@ -119,4 +154,5 @@ def track_reversible(
     cmds[diff, 0] = fwd
     cmds[diff, 1] = 0.0
     cmds[diff, 2] = np.clip(wz, -limits.max_yaw_rate[diff], limits.max_yaw_rate[diff])
-    return cmds
+    ends[diff] = back
+    return cmds, ends

@@ -11,19 +11,54 @@ where; none runs into a timeout."""
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 
-from controller.mission.factory import build_mission
-from controller.runtime.dry_run import RULES, DryRun, judge
-from tests.support.arrest_scenarios import SCENARIOS, arrest_config
+from controller.runtime.dry_run import RULES, judge
+from tests.support.arrest_scenarios import SCENARIOS
+from tests.support.config import ROOT
+
+# numpy held to AVX2 (no AVX-512 kernels) for these runs: the project's machines differ there,
+# and pybullet amplifies the last bits into another outcome of a borderline case (wall-west:
+# an arrest with AVX-512, pinned with AVX2 only); held, every machine runs what CI runs
+SIMD_HELD = "X86_V4 AVX512_ICL AVX512_SPR"
+
+
+def _run_held(name: str, out: Path) -> dict:
+    """The scenario's dry run in a process of its own with numpy held to AVX2: its result."""
+    code = (
+        "import json, sys\n"
+        "from pathlib import Path\n"
+        "from controller.mission.factory import build_mission\n"
+        "from controller.runtime.dry_run import DryRun\n"
+        "from tests.support.arrest_scenarios import SCENARIOS, arrest_config\n"
+        "sc = next(s for s in SCENARIOS if s.name == sys.argv[1])\n"
+        "cfg = arrest_config(sc)\n"
+        "assert cfg.object.motion.give_up_after == 0.0  # alive to the end\n"
+        "res = DryRun(cfg, build_mission(cfg), Path(sys.argv[2]), max_time=sc.max_time).run()\n"
+        "print(json.dumps(res, default=str))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code, name, str(out)],
+        cwd=ROOT,
+        env=dict(os.environ, NPY_DISABLE_CPU_FEATURES=SIMD_HELD, PYTHONPATH=str(ROOT)),
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sc", SCENARIOS, ids=[s.name for s in SCENARIOS])
 def test_arrest_holds_or_fails_with_its_reason(sc, tmp_path):
-    cfg = arrest_config(sc)
-    assert cfg.object.motion.give_up_after == 0.0  # alive to the end
-    res = DryRun(cfg, build_mission(cfg), tmp_path / "run.mcap", max_time=sc.max_time).run()
+    res = _run_held(sc.name, tmp_path / "run.mcap")
     failure = res.get("failure") or {}
     outcome = "arrest" if res["arrested"] else failure.get("reason")
     assert len(sc.expect) == 1  # one verdict per scenario: "arrest or pinned" protects nothing

@@ -103,7 +103,9 @@ SCENARIOS = [
     # on another (an AMD EPYC with AVX2 only: the object comes to rest at 18° against the wall,
     # no reachable set of 6 holds it after 6 tries; numpy's SIMD kernels differ in the last
     # bits and pybullet amplifies them), and it ends `pinned` with approach.intercept oncoming
-    # everywhere. The verdict asserted is this CI machine's; a run is reproducible on one CPU.
+    # everywhere. The verdict asserted is with numpy held to AVX2, as on the CI machine
+    # (tests/scenarios/test_arrest_scenarios.py runs every scenario so); with AVX-512 kernels
+    # and the kept drive direction of differential robots it arrests (an AMD EPYC here).
     ArrestScenario("wall-west", RECT, (1.2, 3.5, 0.0), {"kind": "line", "speed": 0.15,
                    "heading": 3.14159}, expect=PINNED),  # see below: a borderline case
     ArrestScenario("wall-north", L_SHAPE, (4.0, 5.3, 0.0), {"kind": "line", "speed": 0.12,

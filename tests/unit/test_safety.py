@@ -267,3 +267,44 @@ def test_a_large_fleet_filtered_with_only_the_pairs_that_can_bind_matches_every_
         dmin = min(dmin, float(d.min()))
     assert max(kept) < len(full.pi) / 4  # the QP held a fraction of the pairs
     assert dmin >= 0.25 - 5e-3
+
+
+def test_a_differential_robot_asked_to_go_sideways_turns_one_way_not_back_and_forth():
+    """A desired velocity about 90 degrees off a differential robot's axis, jittering across
+    90 (estimate noise): each tick on its own picks the nearer end of the axis, so the heading
+    error jumps between about +90 and -90 degrees and the robot is told full yaw rate one way,
+    then the other (a real-time lab run: r4 commanded +2 / -2 rad/s tick after tick, dithering,
+    its filter rejecting its poses). With the end kept from one tick to the next
+    (``track_reversible_ends``) it is never told full rate one way right after the other, and
+    asked to go somewhere fixed, it turns to it."""
+    from controller.mission.tracking import track_reversible_ends
+
+    lim = RobotLimits(np.array([False]), np.full(1, 0.4), np.full(1, 2.0), np.full(1, 1.0))
+    dt = 0.05
+
+    def run(kept: bool, relative: bool) -> tuple[int, float]:
+        """Full-rate reversals in 60 ticks, and the final heading (rad)."""
+        rng = np.random.default_rng(7)
+        pose = np.array([[5.0, 5.0, 0.0]])
+        backward, wz = None, []
+        for _ in range(60):
+            # sideways to the robot (what a barrier pushing it off asks) or up in the world
+            ang = np.pi / 2 + rng.normal(0.0, np.radians(4.0)) + (pose[0, 2] if relative else 0)
+            v = 0.3 * np.array([[np.cos(ang), np.sin(ang)]])
+            if kept:
+                cmd, backward = track_reversible_ends(pose, v, lim, backward=backward)
+            else:
+                cmd = track_reversible(pose, v, lim)
+            wz.append(cmd[0, 2])
+            pose[0, 2] += dt * cmd[0, 2]
+        w = np.array(wz)
+        return int(
+            np.sum((w[:-1] * w[1:] < 0) & (np.minimum(abs(w[:-1]), abs(w[1:])) > 1.5))
+        ), pose[0, 2]
+
+    each, _ = run(kept=False, relative=True)
+    kept, _ = run(kept=True, relative=True)
+    assert kept == 0 and each > 10, (each, kept)
+    fixed, heading = run(kept=True, relative=False)
+    off = abs((heading - np.pi / 2 + np.pi / 2) % np.pi - np.pi / 2)  # from the axis, either end
+    assert fixed == 0 and off < np.radians(8.0), np.degrees(heading)
