@@ -126,3 +126,13 @@ def report_config_errors(args, errors) -> int:
     n = len(errors)
     print(f"fleet check: {n} error{'s' if n > 1 else ''} in {first.source}", file=sys.stderr)
     return 2
+
+
+def distinct_fleets(cfgs) -> None:
+    """InputError (exit 2) when two of the configs given are the same fleet (``fleet.name``)."""
+    from controller.config import InputError
+
+    names = [c.fleet.name for c in cfgs]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise InputError(f"--config: fleet {twice[0]!r} given twice (fleet.name)")

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import sys
 
-from controller.commands import DEFAULT_CONFIG, _DefaultConfig
+from controller.commands import DEFAULT_CONFIG, _DefaultConfig, distinct_fleets
 
 EXAMPLES = {
     "status": """examples:
@@ -64,15 +64,12 @@ def add_arguments(parser, word: str) -> None:
 
 def run(args) -> int:
     from controller.cli import emit_json
-    from controller.config import InputError, load_config
+    from controller.config import load_config
     from controller.runtime.remote import act
 
     paths = args.config or [_DefaultConfig(DEFAULT_CONFIG)]
     cfgs = [load_config(p) for p in paths]  # every config read (exit 2 on any) before acting
-    names = [c.fleet.name for c in cfgs]
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise InputError(f"--config: fleet {twice[0]!r} given twice (fleet.name)")
+    distinct_fleets(cfgs)
     a = act(cfgs, args._words[-1], args)
     if args.json:
         emit_json(a.obj)

@@ -65,15 +65,12 @@ def add_arguments(parser, word: str) -> None:
 def run(args) -> int:
     from pathlib import Path
 
-    from controller.commands import stop_on_signals
+    from controller.commands import distinct_fleets, stop_on_signals
     from controller.config import InputError, ZenohIdentity, load_config
     from controller.runtime.site import run_router
 
     cfgs = [load_config(p) for p in args.config]
-    names = [c.fleet.name for c in cfgs]
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise InputError(f"--config: fleet {twice[0]!r} given twice (fleet.name)")
+    distinct_fleets(cfgs)
     listen = args.listen or (list(cfgs[0].zenoh.listen) if cfgs else [])
     if not listen:
         raise InputError("--listen: where should the router listen? (or give a --config)")

@@ -56,6 +56,17 @@ def _rule(rid: str, messages: list[str], flows: list[str], keys: list[str]) -> d
     }
 
 
+def _block(rules: list, subjects: list, policies: list) -> dict[str, Any]:
+    """An ``access_control`` block: default deny, these rules, subjects and policies."""
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
 def acl_for(config: FleetConfig) -> dict[str, Any]:
     """The ``access_control`` block of the lab profile for ``config`` (see the module doc).
 
@@ -124,13 +135,7 @@ def acl_for(config: FleetConfig) -> dict[str, Any]:
                 "subjects": [f"robot-{r.id}"],
             }
         )
-    return {
-        "enabled": True,
-        "default_permission": "deny",
-        "rules": rules,
-        "subjects": subjects,
-        "policies": policies,
-    }
+    return _block(rules, subjects, policies)
 
 
 def acl_json5(config: FleetConfig) -> str:
@@ -184,10 +189,4 @@ def site_acl(configs: list[FleetConfig], backbone: tuple[str, ...] = ()) -> dict
         policies.append(
             {"id": "site:backbone", "rules": ["site:backbone"], "subjects": ["site:backbone"]}
         )
-    return {
-        "enabled": True,
-        "default_permission": "deny",
-        "rules": rules,
-        "subjects": subjects,
-        "policies": policies,
-    }
+    return _block(rules, subjects, policies)

@@ -31,9 +31,15 @@ from pathlib import Path
 
 import pytest
 
-from tests.support.config import ROOT, base_config_dict, write_toml
+from tests.support.config import base_config_dict, write_toml
 from tests.support.lab import stop_all, tail
-from tests.support.netns import NetnsPair, NetnsUnavailable, fleet_in, spawn_in
+from tests.support.netns import (
+    NetnsPair,
+    NetnsUnavailable,
+    fleet_in,
+    spawn_argv_in,
+    spawn_in,
+)
 from tests.support.wait import wait_for
 
 pytestmark = pytest.mark.netns
@@ -323,16 +329,5 @@ def test_two_fleets_across_routers_one_site_estop_acl_and_a_daemon_lost(tmp_path
 
 def _probe_in(pair: NetnsPair, ns: str, *args: str):
     """``tests.support.site_probe`` inside namespace ``ns`` (its output in a file)."""
-    import subprocess
-
     log = Path(args[2]).with_suffix(".log")
-    with open(log, "w") as out:
-        proc = subprocess.Popen(
-            pair.command(ns, sys.executable, "-m", "tests.support.site_probe", *args),
-            cwd=ROOT,
-            env=dict(os.environ, PYTHONPATH=str(ROOT)),
-            stdout=out,
-            stderr=out,
-        )
-    proc.log_path = log  # type: ignore[attr-defined]
-    return proc
+    return spawn_argv_in(pair, ns, log, [sys.executable, "-m", "tests.support.site_probe", *args])

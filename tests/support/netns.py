@@ -114,9 +114,14 @@ def fleet_argv(*args: str) -> list[str]:
 def spawn_in(pair: NetnsPair, ns: str, log_path: Path, *args: str) -> subprocess.Popen:
     """A ``fleet`` process inside namespace ``ns``, writing to a file (``ip netns exec`` execs
     the command: the process id is the fleet process's own)."""
+    return spawn_argv_in(pair, ns, log_path, fleet_argv(*args))
+
+
+def spawn_argv_in(pair: NetnsPair, ns: str, log_path: Path, argv: list[str]) -> subprocess.Popen:
+    """Any command of this interpreter's (``argv``) inside namespace ``ns``, writing to a file."""
     with open(log_path, "w") as out:
         proc = subprocess.Popen(
-            pair.command(ns, *fleet_argv(*args)),
+            pair.command(ns, *argv),
             cwd=ROOT,
             env=dict(os.environ, PYTHONPATH=str(ROOT)),
             stdout=out,
