@@ -330,6 +330,32 @@ class FootprintChecker:
             area += float(poly.intersection(o).area)
         return area
 
+    def pusher_room(
+        self, pose: ArrayLike, direction: ArrayLike, radius: float, cone: float
+    ) -> bool:
+        """Whether a robot of ``radius`` fits against the object at a reference pose where it
+        can push it along ``direction`` (world, unit): touching a face whose inward normal is
+        within ``cone`` rad of it, at a quarter, the middle or three quarters of the face, its
+        disc inside the walls and clear of the obstacles and of the object's other faces."""
+        w = self.world(pose)[0]
+        u = np.asarray(direction, dtype=float)[:2]
+        edge = np.roll(w, -1, axis=0) - w
+        length = np.maximum(np.linalg.norm(edge, axis=1), 1e-12)
+        out = np.stack([edge[:, 1], -edge[:, 0]], 1) / length[:, None]  # outward: CCW polygon
+        x0, y0, x1, y1 = self.box
+        body = shapely.Polygon(w)
+        for i in np.flatnonzero(-(out @ u) >= math.cos(cone) - 1e-9):
+            for f in (0.25, 0.5, 0.75):
+                c = w[i] + f * edge[i] + radius * out[i]
+                if not (x0 + radius <= c[0] <= x1 - radius and y0 + radius <= c[1] <= y1 - radius):
+                    continue
+                disc = shapely.Point(c)
+                if body.distance(disc) < radius - 1e-6:
+                    continue  # another face of the object is in the way (a notch)
+                if all(float(shapely.distance(disc, o)) >= radius - _TOL for o in self._shapes):
+                    return True
+        return False
+
     # -- sweeps -------------------------------------------------------------------------------
     def _near(self, centers: FloatArray, reach: float) -> tuple[BoolArray, BoolArray]:
         lo = centers.min(axis=0) - reach
@@ -651,6 +677,11 @@ class ObjectCSpace:
     def overlap(self, pose: ArrayLike) -> float:
         """Area (m²) of the object at an object-frame pose inside obstacles or beyond the walls."""
         return self.checker.overlap(self.ref_pose(pose))
+
+    def pusher_room(self, pose: ArrayLike, direction: ArrayLike, cone: float) -> bool:
+        """Whether a robot fits against the object at an object-frame pose where it can push it
+        along ``direction`` (``FootprintChecker.pusher_room``)."""
+        return self.checker.pusher_room(self.ref_pose(pose), direction, self.robot_radius, cone)
 
     def moves_free(self, k: int, iy: int, ix: int, moves: list[int]) -> list[bool]:
         """Exact, cached test of lattice moves from free state (k, iy, ix) to free neighbours.

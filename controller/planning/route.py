@@ -890,9 +890,9 @@ class RoutePlanner:
         obstacle: an arrest against a pillar) first goes: the nearest pose, by one straight
         move at its heading (ESCAPE_DIRECTIONS directions, up to ESCAPE_REACH robot diameters),
         that is free with the robots' ring, the object overlapping no obstacle on the way (it may
-        slide along the one it touches), with room for a pusher behind it (the object moved
-        back one robot diameter overlaps nothing). None when the object overlaps an obstacle
-        already or no direction clears it."""
+        slide along the one it touches), with room for a pusher behind it (a robot fits against
+        a face it can push that way from: ``ObjectCSpace.pusher_room``). None when the object
+        overlaps an obstacle already or no direction clears it."""
         cs = self.cspace
         if cs.overlap(pose) > OVERLAP_TOL:
             return None
@@ -901,8 +901,8 @@ class RoutePlanner:
         best: tuple[float, FloatArray] | None = None
         for a in np.arange(ESCAPE_DIRECTIONS) * (2.0 * math.pi / ESCAPE_DIRECTIONS):
             u = np.array([math.cos(a), math.sin(a), 0.0])
-            if cs.overlap(pose - ring * u) > OVERLAP_TOL:
-                continue  # no pusher fits behind the object for this direction
+            if not cs.pusher_room(pose, u, ESCAPE_CONE):
+                continue  # no robot fits where it could push the object this way
             s = step
             while s <= ESCAPE_REACH * ring and (best is None or s < best[0]):
                 p = pose + s * u
@@ -1182,6 +1182,7 @@ class RoutePlanner:
 # overlap (m²) still counted as touching
 ESCAPE_DIRECTIONS = 16
 ESCAPE_REACH = 4.0
+ESCAPE_CONE = math.radians(60.0)  # a pusher's face: its inward normal this near the move
 OVERLAP_TOL = 1e-6
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -270,7 +271,7 @@ def test_an_object_arrested_against_an_obstacle_slides_clear_before_its_route():
     for f in np.linspace(0.0, 1.0, 41):  # the object never enters an obstacle on the way
         assert cs.overlap(start + f * (escape - start)) < 1e-6
     u = (escape - start) / np.hypot(*(escape[:2] - start[:2]))
-    assert cs.overlap(start - 2 * radius * u) < 1e-6  # a pusher fits behind it
+    assert cs.pusher_room(start, u[:2], math.radians(60))  # a pusher fits behind it
     assert np.allclose(res.subgoals[0], escape) and res.manipulations >= 1
     # planned from the escape pose, the rest is the route of an object that starts there
     alone = plan_route(None, [], foot, radius, escape, cfg.object.goal, cfg.route, cspace=cs)
@@ -280,8 +281,34 @@ def test_an_object_arrested_against_an_obstacle_slides_clear_before_its_route():
         + np.hypot(*(escape[:2] - start[:2])) / cfg.route.speed
         + cfg.route.manipulation_cost
     )
+    # turned a little on the pillar's face (a real-time rehearsal's arrest): the object moved
+    # back whole would graze the pillar, yet a robot fits on the faces that push it clear
+    tilted = np.array([7.997, 2.92, -0.008])
+    assert cs.clearance(tilted)[0] < 0.002 and cs.overlap(tilted) < 1e-6
+    res = plan_route(None, [], foot, radius, tilted, cfg.object.goal, cfg.route, cspace=cs)
+    assert res.status == "ok", res.reason
+    u = (res.waypoints[1] - tilted)[:2] / np.hypot(*(res.waypoints[1] - tilted)[:2])
+    assert cs.pusher_room(tilted, u, math.radians(60))
     # an object overlapping the pillar is not moved out of it: no route, the reason named
     inside = np.array([8.2, 2.5, 0.0])
     assert cs.overlap(inside) > 0.01
     res = plan_route(None, [], foot, radius, inside, cfg.object.goal, cfg.route, cspace=cs)
     assert res.status == "no_path" and "start pose collides" in res.reason
+
+
+def test_a_pusher_fits_only_where_a_robot_can_stand():
+    """Room to push an object one way: a robot's disc against a face it can push from, clear of
+    obstacles and walls (never from the side the object is flush against)."""
+    from controller.planning.cspace import FootprintChecker
+
+    block = np.array([[1.0, -1.0], [2.0, -1.0], [2.0, 1.0], [1.0, 1.0]])
+    chk = FootprintChecker([[-3.0, -3.0], [3.0, 3.0]], [block], SQUARE, 0.2)
+    flush = np.array([0.8, 0.0, 0.0])  # its east face on the block's west face
+    cone = math.radians(60)
+    assert chk.pusher_room(flush, [1.0, 0.0], 0.1, cone)  # from the west
+    assert not chk.pusher_room(flush, [-1.0, 0.0], 0.1, cone)  # from the east: the block
+    assert chk.pusher_room(flush, [0.0, 1.0], 0.1, cone)  # from the south, beside the block
+    # in a corridor no wider than the object, nothing fits beside it
+    narrow = FootprintChecker([[-3.0, -0.1], [3.0, 0.1]], [], SQUARE, 0.2)
+    assert not narrow.pusher_room(np.zeros(3), [0.0, 1.0], 0.1, cone)
+    assert narrow.pusher_room(np.zeros(3), [1.0, 0.0], 0.1, cone)  # behind it, along the way
