@@ -426,6 +426,12 @@ def phases_page() -> str:
     ]
     for (a, cue), b in sequence.TRANSITIONS.items():
         out.append(f"| `{a}` | `{cue}` | `{b}` | {cell(cues.get(cue.name, ''))} |\n")
+    out.append(
+        "\n## Timers\n\nA cue the sequence raises itself once the phase has lasted long enough:\n\n"
+    )
+    out.append("| phase | raises | after (the setting) |\n|---|---|---|\n")
+    for phase, (cue, setting) in sequence.TIMERS.items():
+        out.append(f"| `{phase}` | `{cue}` | `{setting}` s (`transport.{setting}`) |\n")
     out.append("\n## Drawn\n\nEach phase and where its cues lead (`failed` left out):\n\n```text\n")
     for phase in Phase:
         ways = [(c, b) for (a, c), b in sequence.TRANSITIONS.items() if a == phase]

@@ -21,7 +21,7 @@ from controller.mission.outage import OutageWatch
 from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spawn_rng
 from controller.mission.reach import Reach
 from controller.mission.roster import Roster, parked
-from controller.mission.sequence import Failure, Sequencer, SequenceSettings
+from controller.mission.sequence import FINAL, Cue, Failure, Sequencer, SequenceSettings
 from controller.mission.summary import CapturePlanSummary, JobSummary
 from controller.mission.transport import TransportMission, route_planner_for
 from controller.mission.types import (
@@ -86,7 +86,8 @@ class CaptureJob:
         self.n = len(cfg.robots)
         self.entry = entry
         # the job's one phase: the capture and the transport read it and report into it
-        self.seq = Sequencer(Phase.PLAN, SequenceSettings(carry=cfg.object.goal is not None))
+        carry = SequenceSettings(cfg.object.goal is not None, cfg.transport.start_after)
+        self.seq = Sequencer(Phase.PLAN, carry)
         self.capture: CaptureSet | None = None
         if entry == Phase.PLAN:
             try:
@@ -108,7 +109,6 @@ class CaptureJob:
         self.start_tried = -1  # robots a start without the missing ones was last planned for
         self.loss_replans = 0
         self.transport: TransportMission | None = None  # the carry, once started
-        self.arrest_t: float | None = None
         # the object's route planner, built before the loop (it takes a second)
         self.route_planner = route_planner_for(cfg) if cfg.object.goal is not None else None
 
@@ -118,23 +118,38 @@ class CaptureJob:
         return self.seq.phase
 
     def plan(self, view: FleetView) -> Intent:
+        """One tick: the roster and the outage watch (every phase), then the stage of the
+        job's phase; when the stage's report moves the job from ``arrested`` to ``route`` (the
+        sequence's carry timer), the transport starts and plans the same tick."""
         if self.failed:
             zero = np.zeros((self.n, 2))
             return Intent.of(zero, Phase.FAILED, stop=True, failed=True, reason=self.failure_reason)
         view = parked(view)  # (a robot never seen: no estimate)
-        if self.transport is not None:
-            return self.transport.plan(view)
-        gone = self.roster.gone(view)
-        if self.inner is None:
+        carrying = self.transport is not None
+        gone = self.roster.gone(view, carrying)
+        if self.inner is None and not carrying:
             return self._wait(view)
+        if carrying and self.phase in FINAL:
+            return self.transport.plan(view)
         gone, pause, events = self.outage.filter(
             view.t, gone, self.roster.available, view.ids, self.roster.silent
         )
         if pause:  # one fleet-wide silence: every robot still until it ends or its grace runs out
-            return Intent.of(np.zeros((self.n, 2)), self.inner.phase, events, stop=True)
+            if carrying:
+                return self.transport.paused(view, events)
+            return Intent.of(np.zeros((self.n, 2)), self.phase, events, stop=True)
+        if carrying:
+            lost, said, _ = self.roster.losses(view, gone, None, str(self.phase))
+            self.transport.lose(lost)
+            return self.transport.plan(view).after(list(events) + said)
+        return self._capture(view, gone, events)
+
+    def _capture(self, view: FleetView, gone: np.ndarray, events: list) -> Intent:
+        """The capture's tick: joins and losses, re-assignment, the stage, a re-plan for a
+        robot stuck on its way (the pin); the carry when the sequence has moved to ``route``."""
         events += self.roster.joins(view, gone)
-        if self.inner.phase in WATCHED:
-            lost, replan = self.roster.losses(view, gone, self.assignment, str(self.inner.phase))
+        if self.phase in WATCHED:
+            _, lost, replan = self.roster.losses(view, gone, self.assignment, str(self.phase))
             events += lost
             if replan:
                 self._ask_replan_lost(view)
@@ -142,6 +157,11 @@ class CaptureJob:
             return self._await_lost(view, events)
         events += self._reassign(view)
         intent = self.inner.plan(view).after(events)
+        if self.phase == Phase.ROUTE:  # the sequence's carry timer ran out: carry it
+            self._carry(
+                self.inner.guard, self.assignment, self.capture.points, self.capture.normals
+            )
+            return self.transport.plan(view).after(intent.report.events)
         reach = self.reach
         if not self._replan_job.pending and reach.blocked(
             view, self.inner.phase, self.capture, self.inner.last_distance, self.inner
@@ -152,20 +172,11 @@ class CaptureJob:
             self._ask_replan("pinned", view, replan_pinned, pose, frozenset(reach.unreachable), k)
         if self._replan_job.pending:
             return self._await_pinned(view, intent)
-        if intent.report.outcome.arrest:
-            self.arrest_t = view.t
-        wait = self.cfg.transport.start_after
-        waited = self.arrest_t is not None and view.t - self.arrest_t >= wait
-        if waited and self.cfg.object.goal is not None:
-            self._start_transport()
         return intent
 
-    def _start_transport(self) -> None:
-        """The object is arrested: from the next tick on, carry it to its goal."""
-        self._carry(self.inner.guard, self.assignment, self.capture.points, self.capture.normals)
-
     def _carry(self, guard, robots: np.ndarray, points: np.ndarray, normals: np.ndarray) -> None:
-        """The transport, from the contacts the ``robots`` hold (object frame)."""
+        """The transport, from the contacts the ``robots`` hold (object frame); robots no
+        longer available (lost during the capture, never seen) take no part."""
         self.transport = TransportMission(
             self.cfg,
             self.rng,
@@ -177,13 +188,15 @@ class CaptureJob:
             planners=self.planners,
             sequencer=self.seq,
         )
+        self.transport.lose(np.flatnonzero(~self.roster.available).tolist())
 
     def _carry_from_contact(self, view: FleetView) -> Intent:
         """Entered at ``route``: the robots touching the object hold their nearest boundary
         point (``grip.touching``); the others are free."""
         held, points, normals = touching(self.cfg, view.object_pose, view.poses, CONTACT_REACH)
         self._carry(SafetyStage(self.cfg), held, points, normals)
-        return self.transport.plan(view)
+        step = self.seq.report(view.t, Cue.CARRY)  # plan → route: the object held already
+        return self.transport.plan(view).after(step.events)
 
     def _wait(self, view: FleetView) -> Intent:
         """Phase ``plan``: start when the object and every robot are seen, or, ``start_wait``

@@ -1,6 +1,7 @@
-"""Who takes part in the capture (pure): the one wait for the first estimates, robots gone
-(liveliness or link lost, or stale too long), lost and joining again, and robots never seen
-parked out of the way in the views the planners read."""
+"""Who takes part in the job (pure): the one wait for the first estimates, robots gone
+(liveliness or link lost, or stale too long while capturing), lost and joining again (during
+the capture), and robots never seen parked out of the way in the views the planners read. The
+job holds one roster for every phase."""
 
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ PARK = 1.0e3  # m: a robot never seen is parked this far away in the views the c
 
 class Roster:
     """``available`` (N,): robots an assignment may use; ``lost``: robots lost during the
-    capture, in order; ``first_t`` (s): the first estimates (a robot's or the object's)."""
+    job, in order; ``first_t`` (s): the first estimates (a robot's or the object's)."""
 
     def __init__(self, n: int) -> None:
         self.available = np.ones(n, bool)
@@ -39,12 +40,17 @@ class Roster:
             self.first_t = view.t
         return ready
 
-    def gone(self, view: FleetView) -> np.ndarray:
-        """(N,) robots gone this tick: liveliness or link lost, or stale for ``LOST_STALE_S``."""
+    def gone(self, view: FleetView, carrying: bool = False) -> np.ndarray:
+        """(N,) robots gone this tick: liveliness or link lost, or (capturing) stale for
+        ``LOST_STALE_S``. While the object is carried only the liveliness and the link count:
+        a robot pushing it whose poses pause keeps its contact (the gate and the estimator
+        cover a pause; its agent's watchdog stops it when the commands stop)."""
         stale = np.asarray(view.stale, bool)
         self.stale_since[~stale] = np.nan
         self.stale_since[stale & np.isnan(self.stale_since)] = view.t
         held = stale & (view.t - np.nan_to_num(self.stale_since, nan=view.t) >= LOST_STALE_S)
+        if carrying:
+            held = np.zeros_like(held)
         present = np.asarray(view.present, bool)
         self.silent = held & present
         return ~present | held
@@ -56,18 +62,24 @@ class Roster:
         return [RobotJoinedEvent(t=view.t, robot=view.ids[i]) for i in np.flatnonzero(back)]
 
     def losses(
-        self, view: FleetView, gone: np.ndarray, assignment: np.ndarray, phase: str
-    ) -> tuple[list[Event], bool]:
-        """Robots lost this tick (events), and whether one of them held a capture point."""
-        new = np.flatnonzero(gone & self.available)
+        self, view: FleetView, gone: np.ndarray, assignment: np.ndarray | None, phase: str
+    ) -> tuple[list[int], list[Event], bool]:
+        """Robots lost this tick (indices, events), and whether one of them held a capture
+        point of ``assignment`` (None: the carry, where the event does not say)."""
+        new = [int(i) for i in np.flatnonzero(gone & self.available)]
         self.available[new] = False
-        self.lost += [int(i) for i in new]
-        assigned = {int(i) for i in assignment}
+        self.lost += new
+        assigned = set() if assignment is None else {int(i) for i in assignment}
         events: list[Event] = [
-            RobotLostEvent(t=view.t, robot=view.ids[i], phase=phase, assigned=a)
-            for i, a in ((int(i), int(i) in assigned) for i in new)
+            RobotLostEvent(
+                t=view.t,
+                robot=view.ids[i],
+                phase=phase,
+                assigned=None if assignment is None else i in assigned,
+            )
+            for i in new
         ]
-        return events, any(int(i) in assigned for i in new)
+        return new, events, any(i in assigned for i in new)
 
 
 def parked(view: FleetView) -> FleetView:

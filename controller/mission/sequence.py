@@ -13,8 +13,14 @@ A failure wins over a cue of the same tick: the job stops. ``done`` and ``failed
 The job holds the one :class:`JobState` in a :class:`Sequencer` and hands it to its stages:
 they read the phase from it and report into it; none keeps a phase of its own. A capture that
 starts again (a re-plan after a loss or a pin) reports ``replanned``: back to ``approach``.
-``fleet run --mission transport`` is the same job entered at ``route``: its transport's first
-``carry`` moves ``plan`` to ``route`` (the object already held).
+``fleet run --mission transport`` is the same job entered at ``route``: the job's ``carry``
+when it starts the transport moves ``plan`` to ``route`` (the object already held).
+
+A timer is a cue the sequence raises itself (``TIMERS``): a job that carries the object on
+moves from ``arrested`` to ``route`` once ``transport.start_after`` s have passed since the
+arrest, at the first report of a tick whose stage saw nothing that leads anywhere (a contact
+lost in that tick wins: back to ``close_in``, and the wait starts again at the next arrest).
+The job then runs the stage of the new phase in the same tick.
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ class Cue(StrEnum):
     ESCAPED = "escaped"  # hold: the object moved more than hold_tolerance
     HELD = "held"  # hold: contact and stillness kept through hold_s
     SETTLED = "settled"  # arrested, capture alone: settle_s more of holding
-    CARRY = "carry"  # arrested, with a goal: transport.start_after has passed (or entered at route)
+    CARRY = "carry"  # arrested: start_after has passed (a timer); plan: entered at route
     CAN_PUSH = "can_push"  # a new route segment the contacts can push along (the LP)
     CANNOT_PUSH = "cannot_push"  # a new route segment the contacts cannot push along: new ones
     ARRANGED = "arranged"  # rearrange: every mover at its new contact
@@ -54,6 +60,10 @@ class Failure:
 
     reason: Reason
     detail: str
+
+    def to_json(self, t: float | None) -> dict:
+        """The failure as the run's JSON says it (``reason``, ``t`` s, ``detail``)."""
+        return {"reason": str(self.reason), "t": t, "detail": self.detail}
 
 
 @dataclass(frozen=True)
@@ -127,9 +137,24 @@ TRANSITIONS: dict[tuple[Phase, Cue], Phase] = {
 @dataclass(frozen=True)
 class SequenceSettings:
     """What the sequence itself is configured by: whether the job carries the object on after
-    the arrest (``object.goal`` given) or ends holding it."""
+    the arrest (``object.goal`` given) or ends holding it, and how long it holds the arrested
+    object before it carries it (``transport.start_after``, s)."""
 
     carry: bool = False
+    start_after: float = 0.0
+
+
+#: phase → (the cue its timer raises, the setting that says after how many s in the phase)
+TIMERS: dict[Phase, tuple[Cue, str]] = {Phase.ARRESTED: (Cue.CARRY, "start_after")}
+
+
+def _timer(state: JobState, t: float, s: SequenceSettings) -> Cue | None:
+    """The cue of the phase's timer when it has run out at ``t``, else None."""
+    timer = TIMERS.get(state.phase)
+    if timer is None or state.since is None:
+        return None
+    cue, setting = timer
+    return cue if t - state.since >= getattr(s, setting) - 1e-9 else None
 
 
 def next_phase(state: JobState, m: Measures, s: SequenceSettings | None = None) -> Step:
@@ -141,14 +166,24 @@ def next_phase(state: JobState, m: Measures, s: SequenceSettings | None = None) 
         new = JobState(Phase.FAILED, m.t, m.failure)
         failure = FailureEvent(reason=m.failure.reason, t=m.t, detail=m.failure.detail)
         return Step(new, (PhaseEvent(phase=Phase.FAILED, t=m.t), failure))
-    if m.cue is None:
+    nxt = _leads_to(state.phase, m.cue, s)
+    if nxt is None:  # nothing the stage saw leads anywhere: the phase's timer may
+        nxt = _leads_to(state.phase, _timer(state, m.t, s), s)
+    if nxt is None:
         return Step(state)
-    nxt = TRANSITIONS.get((state.phase, m.cue))
-    if nxt is None or (m.cue == Cue.CARRY and not s.carry):
-        return Step(state)
-    if m.cue == Cue.SETTLED and s.carry:
-        return Step(state)  # a job with a goal holds on until it carries the object
     return Step(replace(state, phase=nxt, since=m.t), (PhaseEvent(phase=nxt, t=m.t),))
+
+
+def _leads_to(phase: Phase, cue: Cue | None, s: SequenceSettings) -> Phase | None:
+    """Where ``cue`` leads from ``phase`` (None: nowhere)."""
+    if cue is None:
+        return None
+    nxt = TRANSITIONS.get((phase, cue))
+    if nxt is None or (cue == Cue.CARRY and not s.carry):
+        return None
+    if cue == Cue.SETTLED and s.carry:
+        return None  # a job with a goal holds on until it carries the object
+    return nxt
 
 
 class Sequencer:

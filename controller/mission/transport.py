@@ -11,7 +11,7 @@ Vass §4), in the same closed loop as the capture. Its phases (moved by ``missio
 - ``done`` within ``transport.tolerance`` m and ``heading_tolerance_deg`` of the goal: the
   robots back off and stop; ``failed`` with ``stalled``, ``too_heavy``, ``robot_lost``.
 
-Pure: the planners are pure; time comes from the view.
+Pure: the planners are pure; time comes from the view. Robots lost and outages: the job's.
 """
 
 from __future__ import annotations
@@ -22,10 +22,9 @@ import numpy as np
 
 from controller import geometry
 from controller.config import FleetConfig
-from controller.events import DeliveredEvent, RobotLostEvent, RouteEvent
+from controller.events import DeliveredEvent, RouteEvent
 from controller.mission.grip import Contact, Grip
 from controller.mission.guard import SafetyStage
-from controller.mission.outage import OutageWatch
 from controller.mission.planners import InlinePlanners, JobOwned, Planners, PlanSlot
 from controller.mission.progress import RouteProgress, at, plan_route_job, route_planner_for
 from controller.mission.push import Pusher
@@ -33,13 +32,23 @@ from controller.mission.rearrange import Rearranger
 from controller.mission.sequence import Cue, Failure, Sequencer
 from controller.mission.summary import TransportSummary
 from controller.mission.transport_settings import SEQUENCE, TransportSettings
-from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
+from controller.mission.types import (
+    Event,
+    FleetView,
+    Intent,
+    MissionError,
+    MissionOutput,
+    Phase,
+    Reason,
+)
 from controller.planning.arrangement import can_push
 from controller.planning.contact_lp import ContactForceLP
 from controller.planning.transport_model import ObjectModel
 from controller.planning.transport_types import TransportParams
 
 __all__ = ["Contact", "TransportMission", "TransportSettings", "route_planner_for"]
+
+MAX_HOPS = 6  # phases one tick may pass through (route → rearrange → transport → done: 4)
 
 
 class TransportMission:
@@ -95,12 +104,11 @@ class TransportMission:
         )  # fmt: skip
         self.pusher = Pusher(cfg, self.model, self.params, self.planners, rng, self.s.contact_gain)
         # the job's phase (its first carry cue moves it to ``route``; next_phase moves it)
+        self._alone = sequencer is None
         self.seq = sequencer if sequencer is not None else Sequencer(Phase.ARRESTED, SEQUENCE)
         self.t0: float | None = None
         self.route_replans = 0
         self.done_t: float | None = None
-        self.failure: dict[str, Any] | None = None
-        self.outage = OutageWatch(cfg.fleet.outage_grace)
         self._last_t: float | None = None  # the last tick's time (an outage's pause)
 
     @property
@@ -109,49 +117,49 @@ class TransportMission:
 
     # --- the plan stage -----------------------------------------------------------------------
     def plan(self, view: FleetView) -> Intent:
-        zero = np.zeros((self.n, 2))
+        """The stage of the job's phase; a handler whose cue moved the phase returns None and
+        the stage of the new phase runs next, in the same tick (the table decides where a cue
+        leads: no handler calls another)."""
         if view.object_pose is None or view.estop:
-            return Intent.of(zero, self.phase, stop=True)
+            return Intent.of(np.zeros((self.n, 2)), self.phase, stop=True)
         pose = np.asarray(view.object_pose, float)
         events: list[Event] = []
         if self.t0 is None:
             self.t0 = view.t
             self.way.hold_clock(view.t)
-            # the carrying starts here (the route comes a few ticks later, planned off the tick)
-            self._cue(Cue.CARRY, view.t, events)
-        dt = 0.0 if self._last_t is None else view.t - self._last_t
+            if self._alone:  # a transport alone carries from its first tick (the job cues it)
+                self._cue(Cue.CARRY, view.t, events)
         self._last_t = view.t
-        if self.phase not in (Phase.DONE, Phase.FAILED) and self._drop_lost(view, events):
-            return self._paused(view, dt, events)
-        handler = {
+        handlers = {
             Phase.ROUTE: self._route,
             Phase.REARRANGE: self._rearrange,
             Phase.TRANSPORT: self._transport,
             Phase.DONE: self._done,
             Phase.FAILED: self._failed,
-        }[self.phase]
-        return handler(view, pose, events)
+        }
+        for _ in range(MAX_HOPS):
+            out = handlers[self.phase](view, pose, events)
+            if out is not None:
+                return out
+        raise MissionError(f"the transport moved phase {MAX_HOPS} times in one tick")
 
-    def _drop_lost(self, view: FleetView, events: list[Event]) -> bool:
-        """A robot that is gone (its liveliness or its link lost) leaves the job: no contact, no
-        path, no part in the next arrangement. The rest carry on; when they cannot push, the
-        job fails with ``robot_lost`` instead of ``stalled``. Two or more gone at once are one
-        outage (``OutageWatch``): True while the mission pauses for it."""
-        lost = self.grip.lost
-        relied = np.array([i not in lost for i in range(self.n)])
-        gone, pause, ev = self.outage.filter(view.t, ~view.present, relied, view.ids)
-        events += ev
-        if pause:
-            return True  # one fleet-wide silence: paused until it ends or its grace runs out
-        for i in range(self.n):
-            if gone[i] and i not in lost:
-                self.grip.drop(i)
-                events.append(RobotLostEvent(t=view.t, robot=view.ids[i], phase=self.phase))
-        return False
+    def lose(self, robots) -> None:
+        """Robots the job's roster found gone leave the carry (no contact, path or part in the
+        next arrangement); when the rest cannot push, the job fails ``robot_lost``."""
+        for i in robots:
+            self.grip.drop(int(i))
+
+    def paused(self, view: FleetView, events: list[Event]) -> Intent:
+        """An outage (the job's ``OutageWatch``): every robot still; the stall clock and the
+        re-arrangement's timeout do not run while it lasts."""
+        dt = 0.0 if self._last_t is None else view.t - self._last_t
+        self._last_t = view.t
+        self.way.pause(dt)
+        self.rearranger.pause(dt)
+        return Intent.of(np.zeros((self.n, 2)), self.phase, events, stop=True)
 
     def _cue(self, cue: Cue | None, t: float, events: list[Event], failure: Failure | None = None):
-        """Report what the transport saw: the sequence moves the phase (and writes its
-        events)."""
+        """Report what the transport saw: the sequence moves the phase (and writes events)."""
         events.extend(self.seq.report(t, cue, failure).events)
 
     def _fail(self, reason: str, detail: str, view: FleetView, events: list[Event]) -> Intent:
@@ -159,23 +167,14 @@ class TransportMission:
             lost = ", ".join(view.ids[i] for i in sorted(self.grip.lost))
             reason, detail = Reason.ROBOT_LOST, f"{detail} (lost: {lost})"
         self._cue(None, view.t, events, Failure(Reason(reason), detail))
-        self.failure = {"reason": str(reason), "t": view.t, "detail": detail}
-        return Intent.of(
-            np.zeros((self.n, 2)), self.phase, events, stop=True, failed=True, reason=reason
-        )
+        return self._failed(view, None, events)
 
-    def _failed(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
-        why = self.failure["reason"] if self.failure else ""
+    def _failed(self, view: FleetView, pose: np.ndarray | None, events: list[Event]) -> Intent:
+        failure = self.seq.state.failure
+        why = failure.reason if failure is not None else ""
         return Intent.of(
             np.zeros((self.n, 2)), self.phase, events, stop=True, failed=True, reason=why
         )
-
-    def _paused(self, view: FleetView, dt: float, events: list[Event]) -> Intent:
-        """An outage: every robot still; the stall clock and the re-arrangement's timeout do
-        not run while it lasts (``dt`` s since the last tick)."""
-        self.way.pause(dt)
-        self.rearranger.pause(dt)
-        return Intent.of(np.zeros((self.n, 2)), self.phase, events, stop=True)
 
     def _held(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
         """A plan is on its way: every robot holds where it is (those in contact keep it)."""
@@ -184,7 +183,7 @@ class TransportMission:
         return self._intent(zero, events, pose, self.grip.touching(), np.ones(self.n, bool))
 
     # --- route --------------------------------------------------------------------------------
-    def _route(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+    def _route(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent | None:
         """Ask for the route from the object's pose (off the tick), hold until it comes."""
         if not self._route_job.pending:
             self._route_job.request(view.t, plan_route_job, self._route_box, self.cfg, pose)
@@ -210,15 +209,17 @@ class TransportMission:
         events.append(event)
         return self._begin_segment(view, pose, events)
 
-    def _begin_segment(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
-        """A new segment: re-arrange if the contacts cannot push along it, else transport."""
+    def _begin_segment(
+        self, view: FleetView, pose: np.ndarray, events: list[Event]
+    ) -> Intent | None:
+        """A new segment: re-arrange if the contacts cannot push along it, else transport (the
+        cue moves the phase; its stage runs next)."""
         self.way.pass_reached(pose)
         self.pusher.forget()
         if self._can_push(pose):
             self._cue(Cue.CAN_PUSH, view.t, events)
-            return self._transport(view, pose, events)
-        self._start_rearrangement(view, pose, events, Cue.CANNOT_PUSH)
-        return self._rearrange(view, pose, events)
+        else:
+            self._start_rearrangement(view, pose, events, Cue.CANNOT_PUSH)
 
     def _can_push(self, pose: np.ndarray) -> bool:
         """Whether the robots in contact can push the object along the segment (the LP)."""
@@ -248,7 +249,7 @@ class TransportMission:
         self.rearranger.arranged(view, got.value, direction, self.grip, events)
         return None
 
-    def _rearrange(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+    def _rearrange(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent | None:
         """Movers follow their path around the object; the others hold still. (The stall clock
         waits: re-arranging makes no progress by design; it has its own timeout.) An object
         nudged inside the goal tolerance meanwhile is delivered."""
@@ -274,7 +275,7 @@ class TransportMission:
             grip.settle()
             if self._can_push(pose) or futile < self.s.max_rearrangements:
                 self._cue(Cue.ARRANGED, view.t, events)
-                return self._transport(view, pose, events)
+                return None
             detail = "the re-arranged contacts cannot push the object"
             return self._fail(Reason.STALLED, detail, view, events)
         if view.t - self.rearranger.since > self.s.rearrange_timeout:
@@ -285,7 +286,7 @@ class TransportMission:
         return self._intent(vel, events, pose, touch, hold)
 
     # --- transport ----------------------------------------------------------------------------
-    def _transport(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+    def _transport(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent | None:
         goal = np.asarray(self.cfg.object.goal, float)
         s = self.s
         m = s.settle_margin  # stop well inside: the estimate is a centimetre and a degree off
@@ -311,7 +312,7 @@ class TransportMission:
                 return self._fail(Reason.STALLED, "left the route corridor too often", view, events)
             self.route_replans += 1
             self._cue(Cue.OFF_ROUTE, view.t, events)
-            return self._route(view, pose, events)
+            return None
         if self.way.subgoal_reached(pose):
             self.way.next_subgoal()
             return self._begin_segment(view, pose, events)
@@ -319,7 +320,7 @@ class TransportMission:
             pusher.unstick()
             pusher.forget()
             self._start_rearrangement(view, pose, events, Cue.STUCK)
-            return self._rearrange(view, pose, events)
+            return None
         return self._plan_and_execute(view, pose, events)
 
     def _plan_and_execute(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
@@ -341,11 +342,11 @@ class TransportMission:
         vel, touch, twist = pusher.execute(view, pose, self.grip)
         return self._intent(vel, events, pose, touch, None, twist)
 
-    def _deliver(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
+    def _deliver(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent | None:
         self.done_t = view.t
         self._cue(Cue.DELIVERED, view.t, events)
         events.append(DeliveredEvent(t=view.t, pose=np.round(pose, 4).tolist()))
-        return self._done(view, pose, events)
+        return None
 
     # --- done ---------------------------------------------------------------------------------
     def _done(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent:
@@ -386,7 +387,7 @@ class TransportMission:
 
     def summary(self) -> TransportSummary:
         f = np.asarray(self.pusher.forces) if self.pusher.forces else np.zeros(0)
-        route = self.way.route
+        route, fail = self.way.route, self.seq.state.failure
         return TransportSummary(
             transport_phase=str(self.phase),
             route_length_m=None if route is None else route.length_m,
@@ -395,5 +396,5 @@ class TransportMission:
             relocations=self.grip.relocations,
             local_plans=self.pusher.plans,
             planned_force_mean_n=float(f.mean()) if len(f) else None,
-            transport_failure=self.failure,
+            transport_failure=None if fail is None else fail.to_json(self.seq.state.since),
         )

@@ -8,8 +8,9 @@ import numpy as np
 
 from controller.mission.grip import CONTACT_REACH, touching
 from controller.mission.guard import SafetyStage
+from controller.mission.job import CaptureJob
 from controller.mission.transport import TransportMission
-from controller.mission.types import FleetView
+from controller.mission.types import FleetView, Phase
 from controller.planning.contact_lp import ContactForceLP, required_wrench
 from tests.support.transport_scenarios import Scenario, scenario_config
 
@@ -37,6 +38,14 @@ def mission(sc: Scenario, seed: int = 0) -> tuple[TransportMission, object, np.n
     held, pts, nrm = holders(cfg)
     m = TransportMission(cfg, np.random.default_rng(seed), SafetyStage(cfg), held, pts, nrm)
     return m, cfg, np.array([r.start for r in cfg.robots])
+
+
+def carry_job(sc: Scenario, seed: int = 0) -> tuple[CaptureJob, object, np.ndarray]:
+    """The same transport as the whole job runs it (``fleet run --mission transport``): the
+    job entered at route, its roster and outage watch (lost robots, outages) in front of it."""
+    cfg = scenario_config(sc)
+    job = CaptureJob(cfg, np.random.default_rng(seed), entry=Phase.ROUTE)
+    return job, cfg, np.array([r.start for r in cfg.robots])
 
 
 def lp_feasible(m, pts, nrm, twist, fmax):

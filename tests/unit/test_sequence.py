@@ -45,7 +45,7 @@ TABLE = [
     (P.HOLD, Cue.REPLANNED, P.APPROACH),
     (P.ARRESTED, Cue.REPLANNED, P.APPROACH),
 ]
-CARRY = seq.SequenceSettings(carry=True)
+CARRY = seq.SequenceSettings(carry=True, start_after=5.0)
 
 
 @pytest.mark.parametrize(("phase", "cue", "to"), TABLE, ids=[f"{a}-{c}" for a, c, _ in TABLE])
@@ -71,6 +71,27 @@ def test_a_capture_alone_ends_settled_and_a_carrying_job_does_not():
     )
     # a capture alone never carries
     assert not next_phase(JobState(P.ARRESTED), Measures(3.0, Cue.CARRY)).fired
+
+
+def test_the_carry_timer_moves_an_arrested_job_to_route_after_start_after():
+    """``transport.start_after`` s after the arrest the sequence raises ``carry`` itself; a
+    cue that leads somewhere in that tick wins, and the wait starts again at the next arrest."""
+    arrested = JobState(P.ARRESTED, 10.0)
+    assert not next_phase(arrested, Measures(14.9), CARRY).fired  # 4.9 s: still held
+    step = next_phase(arrested, Measures(15.0), CARRY)
+    assert step.state == JobState(P.ROUTE, 15.0)
+    assert step.events == (PhaseEvent(phase=P.ROUTE, t=15.0),)
+    # a cue out of turn (it leads nowhere from arrested) does not hide the timer
+    assert next_phase(arrested, Measures(15.0, Cue.ON_ENVELOPE), CARRY).state.phase == P.ROUTE
+    # the contact lost in the tick the wait ends: back to close_in, no carry
+    lost = next_phase(arrested, Measures(15.0, Cue.CONTACT_LOST), CARRY)
+    assert lost.state == JobState(P.CLOSE_IN, 15.0)
+    # ... and the timer runs in no other phase
+    assert not next_phase(lost.state, Measures(99.0), CARRY).fired
+    # a capture alone holds the object: no timer carries it
+    assert not next_phase(arrested, Measures(99.0)).fired
+    # no goal: the job ends settled instead (carry off)
+    assert not next_phase(arrested, Measures(99.0), seq.SequenceSettings(False, 5.0)).fired
 
 
 @pytest.mark.parametrize("phase", sorted({a for a, _, _ in TABLE}))

@@ -14,7 +14,7 @@ from controller.events import by_kind
 from controller.mission.types import Phase
 from controller.planning.arrangement import plan_arrangement
 from controller.planning.hold import contact_wrenches
-from tests.support.transport_mission import lp_feasible, mission, view
+from tests.support.transport_mission import carry_job, lp_feasible, mission, view
 from tests.support.transport_scenarios import CRATE, Scenario
 
 OPEN = Scenario("open", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0))
@@ -129,54 +129,62 @@ def test_a_heavy_object_recruits_free_robots():
 
 
 def test_a_lost_robot_leaves_the_job_and_is_told_nothing():
-    m, cfg, poses = mission(OPEN)
-    m.plan(view(cfg, 0.0, poses, cfg.object.start))
+    """The job's roster finds a holder gone during the carry: one ``robot_lost`` event, its
+    contact dropped, the robot commanded nothing."""
+    job, cfg, poses = carry_job(OPEN)
+    job.plan(view(cfg, 0.0, poses, cfg.object.start))
+    m = job.transport
     holder = next(i for i, c in m.grip.contacts.items() if c is not None)
     present = np.ones(len(cfg.robots), bool)
     present[holder] = False
-    out = m.plan(view(cfg, 0.05, poses, cfg.object.start, present))
+    out = job.plan(view(cfg, 0.05, poses, cfg.object.start, present))
     lost = [e for e in out.report.events if e.kind == "robot_lost"]
-    assert [e.robot for e in lost] == [cfg.robots[holder].id]
+    assert [(e.robot, e.phase) for e in lost] == [(cfg.robots[holder].id, str(job.phase))]
+    assert lost[0].to_dict().keys() == {"t", "robot", "phase"}  # the carry's: no ``assigned``
     assert m.grip.contacts[holder] is None and holder not in m.grip.moves
     assert np.all(out.command.velocities[holder] == 0.0)
-    out = m.plan(view(cfg, 0.1, poses, cfg.object.start, present))
+    out = job.plan(view(cfg, 0.1, poses, cfg.object.start, present))
     assert not [e for e in out.report.events if e.kind == "robot_lost"]  # reported once
+    assert job.summary().plan is None and job.roster.lost == [holder]
 
 
 def test_a_stall_with_a_robot_lost_fails_with_robot_lost():
-    m, cfg, poses = mission(OPEN)
-    m.plan(view(cfg, 0.0, poses, cfg.object.start))
+    job, cfg, poses = carry_job(OPEN)
+    job.plan(view(cfg, 0.0, poses, cfg.object.start))
+    m = job.transport
     present = np.ones(len(cfg.robots), bool)
     present[0] = False
-    m.plan(view(cfg, 0.05, poses, cfg.object.start, present))
+    job.plan(view(cfg, 0.05, poses, cfg.object.start, present))
     m.rearranger.futile = m.s.max_rearrangements  # nothing more to try
     t, out = 0.05, None
     while t < 3 * m.s.stall_timeout and not (out is not None and out.report.outcome.failed):
         t += 0.5
-        out = m.plan(view(cfg, t, poses, cfg.object.start, present))  # the object never moves
+        out = job.plan(view(cfg, t, poses, cfg.object.start, present))  # the object never moves
     assert out is not None and out.report.outcome.failed
-    assert out.report.outcome.reason == "robot_lost" and cfg.robots[0].id in m.failure["detail"]
-    assert math.isclose(m.failure["t"], t)
+    failure = job.summary().transport.transport_failure
+    assert out.report.outcome.reason == "robot_lost" and cfg.robots[0].id in failure["detail"]
+    assert failure["reason"] == "robot_lost" and math.isclose(failure["t"], t)
 
 
 def test_a_fleet_wide_silence_pauses_the_transport_and_loses_nobody():
     """Every robot gone for 1 s (one outage): every robot stopped, nobody dropped, the stall
     clock does not run; back, the transport goes on with the same contacts."""
-    m, cfg, poses = mission(OPEN)
-    m.plan(view(cfg, 0.0, poses, cfg.object.start))
+    job, cfg, poses = carry_job(OPEN)
+    job.plan(view(cfg, 0.0, poses, cfg.object.start))
+    m = job.transport
     contacts = {i: c for i, c in m.grip.contacts.items()}
     stall0 = m.way.progress_t
     nobody = np.zeros(len(cfg.robots), bool)
     t = 0.05
     seen = []
     while t < 1.05:
-        out = m.plan(view(cfg, t, poses, cfg.object.start, nobody))
+        out = job.plan(view(cfg, t, poses, cfg.object.start, nobody))
         seen += [e.kind for e in out.report.events]
         assert out.command.stop and not out.report.outcome.failed
         t += 0.05
     assert seen == ["outage"] and not m.grip.lost
     assert m.way.progress_t - stall0 == pytest.approx(1.0, abs=0.06)  # paused, not stalled
-    out = m.plan(view(cfg, t, poses, cfg.object.start))
+    out = job.plan(view(cfg, t, poses, cfg.object.start))
     assert [e.kind for e in out.report.events][0] == "outage_end" and not m.grip.lost
     assert m.grip.contacts == contacts
 
