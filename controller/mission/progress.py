@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,7 +17,7 @@ from controller.planning.transport_model import ObjectModel
 from controller.planning.transport_types import RouteSegment
 
 if TYPE_CHECKING:
-    from controller.planning.route import RoutePlanner
+    from controller.planning.route import RoutePlanner, RouteResult
 _TRANSPORT = TransportSection()  # the config's defaults: the settings' defaults of its keys
 
 
@@ -49,13 +49,13 @@ class RouteProgress:
 
     def __init__(self, model: ObjectModel, goal: np.ndarray, s: ProgressSettings) -> None:
         self.model, self.goal, self.s = model, np.asarray(goal, float), s
-        self.route: Any = None
+        self.route: RouteResult | None = None
         self.subgoal = 0
         self.best_remaining = math.inf
         self.route_j = 0  # the route segment the object was last matched to
         self.progress_t = 0.0
 
-    def begin(self, route: Any, t: float) -> None:
+    def begin(self, route: RouteResult, t: float) -> None:
         """A new route (the route planner's result), followed from its first subgoal."""
         self.route = route
         self.subgoal = 0
@@ -155,7 +155,7 @@ class RouteProgress:
         return bool(dist.min() > self.s.corridor)
 
 
-def plan_route_job(box: JobOwned, cfg: FleetConfig, pose: np.ndarray) -> Any:
+def plan_route_job(box: JobOwned, cfg: FleetConfig, pose: np.ndarray) -> RouteResult:
     """Job ``route``: the route from ``pose`` (the planner, kept in ``box``, built first when
     there is none)."""
     return box.built(lambda: route_planner_for(cfg)).plan(pose)

@@ -16,7 +16,7 @@ Pure: the planners are pure; time comes from the view. Robots lost and outages: 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -32,20 +32,14 @@ from controller.mission.rearrange import Rearranger
 from controller.mission.sequence import Cue, Failure, Sequencer
 from controller.mission.summary import TransportSummary
 from controller.mission.transport_settings import SEQUENCE, TransportSettings
-from controller.mission.types import (
-    Event,
-    FleetView,
-    Intent,
-    MissionError,
-    MissionOutput,
-    Phase,
-    Reason,
-)
+from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
 from controller.planning.arrangement import can_push
 from controller.planning.contact_lp import ContactForceLP
 from controller.planning.transport_model import ObjectModel
 from controller.planning.transport_types import TransportParams
 
+if TYPE_CHECKING:
+    from controller.planning.route import RoutePlanner
 __all__ = ["Contact", "TransportMission", "TransportSettings", "route_planner_for"]
 
 MAX_HOPS = 6  # phases one tick may pass through (route → rearrange → transport → done: 4)
@@ -69,7 +63,7 @@ class TransportMission:
         robots: np.ndarray,
         points: np.ndarray,
         normals: np.ndarray,
-        route_planner: Any = None,
+        route_planner: RoutePlanner | None = None,
         planners: Planners | None = None,
         sequencer: Sequencer | None = None,
     ) -> None:
@@ -141,7 +135,7 @@ class TransportMission:
             out = handlers[self.phase](view, pose, events)
             if out is not None:
                 return out
-        raise MissionError(f"the transport moved phase {MAX_HOPS} times in one tick")
+        raise RuntimeError(f"the transport moved phase {MAX_HOPS} times in one tick (a bug)")
 
     def lose(self, robots) -> None:
         """Robots the job's roster found gone leave the carry (no contact, path or part in the
