@@ -16,7 +16,12 @@ differential, facing north; the others omni), then, each as a user runs it:
 The capture takes the robots the GA's set needs (six here) and the transport those holding the
 crate; the other robots hold their ground (they are in the safety filter and the estimator
 every tick: the scale this measures). A run that does not deliver makes the exit status 1.
+``--shipped``: the repository's ``lab.toml`` as it is (the README's rehearsal: fleet.toml's six
+robots where it puts them) instead of the rows, on free loopback ports; ``--robots`` is then
+ignored. A row of many ``--shipped`` lab runs says how often the README's lab block delivers.
+
 Usage: python bench/job.py [--robots 50] [--lab-repeats 2] [--no-lab] [--no-dry-run] [--keep DIR]
+[--shipped]
 """
 
 from __future__ import annotations
@@ -57,6 +62,16 @@ def write_config(n: int, workdir: Path, port: int) -> Path:
     data["zenoh"] = {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []}
     data["log"] = {"dir": str(workdir / "runs")}
     return write_toml(workdir / f"job-{n}.toml", data)
+
+
+def shipped_config(workdir: Path) -> Path:
+    """The repository's lab.toml as it ships, on free loopback ports (the bus and the e-stop's
+    second path), its logs in ``workdir``."""
+    data = tomllib.loads((ROOT / "lab.toml").read_text())
+    data["zenoh"]["listen"] = [f"tcp/127.0.0.1:{free_port()}"]
+    data["zenoh"]["estop_listen"] = [f"tcp/127.0.0.1:{free_port()}"]
+    data["log"] = {"dir": str(workdir / "runs")}
+    return write_toml(workdir / "lab.toml", data)
 
 
 def _fleet(*args: str, timeout: float = 1800) -> subprocess.CompletedProcess:
@@ -117,6 +132,8 @@ def lab(cfg: Path, workdir: Path, name: str) -> dict:
         if m:
             out.update(ticks=int(m[1]), late_ticks=int(m[2]), over_budget=int(m[3]),
                        tick_p50_ms=float(m[4]), tick_p99_ms=float(m[5]))  # fmt: skip
+        out["gate_episodes"] = text.count("in a row rejected by the gate")
+        out["run_dir"] = str(run_dir)
         done = re.search(r"^(\S+ \S+) INFO .*mission done in phase done", text, re.M)
         stops = 0
         for agent_log in run_dir.glob("r*.log"):
@@ -134,16 +151,18 @@ def main() -> int:
     ap.add_argument("--no-dry-run", action="store_true")
     ap.add_argument("--lab-repeats", type=int, default=2, help="lab runs per size")
     ap.add_argument("--keep", default=None, help="keep the configs and runs in this folder")
+    ap.add_argument("--shipped", action="store_true", help="the repository's lab.toml as is")
     ns = ap.parse_args()
     load0 = os.getloadavg()[0]
     runs, failed = [], 0
     with tempfile.TemporaryDirectory() as tmp:
         if ns.keep:
             tmp = str(Path(ns.keep).resolve())
-        for n in (int(s) for s in ns.robots.split(",")):
+        sizes = [6] if ns.shipped else [int(s) for s in ns.robots.split(",")]
+        for n in sizes:
             work = Path(tmp) / f"n{n}"
             work.mkdir(parents=True, exist_ok=True)
-            cfg = write_config(n, work, free_port())
+            cfg = shipped_config(work) if ns.shipped else write_config(n, work, free_port())
             name = tomllib.loads(cfg.read_text())["fleet"]["name"]
             row: dict = {"robots": n}
             if not ns.no_dry_run:
@@ -158,8 +177,9 @@ def main() -> int:
                 failed += one.get("exit") != 0
                 print(f"job: {json.dumps(one)}", file=sys.stderr)
             runs.append(row)
-    print(json.dumps({"bench": "job", "runs": runs, "load_avg_1m": [load0, os.getloadavg()[0]]},
-                     indent=1))  # fmt: skip
+    out = {"bench": "job", "shipped": ns.shipped, "runs": runs,
+           "load_avg_1m": [load0, os.getloadavg()[0]]}  # fmt: skip
+    print(json.dumps(out, indent=1))
     return 1 if failed else 0
 
 
