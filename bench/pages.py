@@ -708,6 +708,9 @@ def arrest_edge(r: dict) -> str:
     )
 
 
+_SAME = "the same in every run: the dry run is lockstep"
+
+
 def waits(r: dict) -> str:
     run, route, cap = r["run"], r["route"], r["capture"]
 
@@ -730,10 +733,52 @@ def waits(r: dict) -> str:
     ]  # fmt: skip
     head = ["what the user runs", "median", "beside it", "goal", "failed runs"]
     load = r["load_avg_1m"]
+    outcome = ""
+    first = (run.get("runs") or [{}])[0]
+    if first.get("goal_error_deg") is not None:  # (rows from before this field: no outcome)
+        same = all(
+            x.get("goal_error_m") == first["goal_error_m"] and x.get("status") == first["status"]
+            for x in run["runs"]
+        )
+        outcome = (
+            f"\n\nThe job's outcome ({_SAME if same else 'the runs differ: see the row'}): "
+            f"`{first['status']}`, {first['goal_error_m']:.3f} m / {first['goal_error_deg']:.1f}° "
+            f"from the goal after {first['transport_time_s']:.1f} s of transport, arrested at "
+            f"{first['arrest_time_s']:.1f} s, {first['rearrangements']} re-arrangements, "
+            f"{first['relocations']} relocations, {first['missed_ticks']} missed ticks, "
+            f"{first['watchdog_stops']} watchdog stops, robots at least "
+            f"{first['min_clearance_m']:.4f} m apart; safety verdict "
+            f"{'clean' if not first['verdict'] else first['verdict']}."
+        )
     return (
         f"What a newcomer waits for, each in a process of its own, {r['repeats']} times "
         f"interleaved (medians). Load average {load[0]:.1f} at the start, {load[1]:.1f} at "
-        "the end.\n\n" + _table(head, rows)
+        "the end.\n\n" + _table(head, rows) + outcome
+    )
+
+
+def estop(r: dict) -> str:
+    cases = [
+        ("alive", "the daemon alive"),
+        ("hung", "the daemon hung (SIGSTOP)"),
+        ("dead", "the daemon dead (killed)"),
+        ("no_hub_hung", "no `fleet hub` (the daemon's own), the daemon hung"),
+    ]
+    rows = [
+        [what, f"{r[k]['elapsed_median_ms']:.0f} ms", f"{r[k]['elapsed_max_ms']:.0f} ms",
+         f"{r[k]['resume_elapsed_median_ms']:.0f} ms", f"{r[k]['command_wall_median_s']:.2f} s",
+         str(r[k]["tries"])]
+        for k, what in cases
+        if k in r
+    ]  # fmt: skip
+    head = ["case", "e-stop to every agent engaged, median", "worst", "`fleet resume`, median",
+            "the whole `fleet estop` command, median", "tries"]  # fmt: skip
+    return (
+        "`fleet estop` from its publication to the last agent's confirmation, as the tool "
+        "reports it (`elapsed_s`): a hub, a daemon holding three sim agents still (ideal "
+        "backend), loopback; `fleet resume` after each (it first asks the latch's holders for "
+        "its epoch). The whole command includes Python's start-up. Load average "
+        f"{r['loadavg'][0]:.1f} at the end.\n\n" + _table(head, rows)
     )
 
 
@@ -933,6 +978,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "route": route,
     "waits": waits,
     "job": job,
+    "estop": estop,
     "lab_job": job,
     "transport": transport,
     "transport_loop": transport_loop,

@@ -70,10 +70,10 @@ def main() -> int:
                              "feasible": out.get("feasible")})  # fmt: skip
             log = str(Path(tmp) / f"run-{k}.mcap")
             wall, code, out = _fleet("run", "--config", cfg, "--json", "--out", log)
-            runs.append({"wall_s": wall, "exit": code, "status": out.get("status"),
-                         "sim_time_s": out.get("sim_time_s"),
-                         "transport_time_s": out.get("transport_time_s"),
-                         "goal_error_m": out.get("goal_error_m")})  # fmt: skip
+            keys = ("status", "sim_time_s", "transport_time_s", "goal_error_m", "goal_error_deg",
+                    "arrest_time_s", "rearrangements", "relocations", "missed_ticks",
+                    "watchdog_stops", "min_clearance_m", "verdict")  # fmt: skip
+            runs.append({"wall_s": wall, "exit": code, **{k: out.get(k) for k in keys}})
             print(
                 f"waits: {k + 1}/{ns.repeats}: run {wall:.1f} s ({out.get('status')}), route "
                 f"{routes[-1]['seconds']} s",
