@@ -21,7 +21,7 @@ robots where it puts them) instead of the rows, on free loopback ports; ``--robo
 ignored. A row of many ``--shipped`` lab runs says how often the README's lab block delivers.
 
 Usage: python bench/job.py [--robots 50] [--lab-repeats 2] [--no-lab] [--no-dry-run] [--keep DIR]
-[--shipped]
+[--shipped] [--resume-delay S]
 """
 
 from __future__ import annotations
@@ -95,7 +95,7 @@ def dry_run(cfg: Path, workdir: Path) -> dict:
     return {"exit": proc.returncode, "wall_s": round(wall, 1), **{k: out.get(k) for k in keys}}
 
 
-def lab(cfg: Path, workdir: Path, name: str) -> dict:
+def lab(cfg: Path, workdir: Path, name: str, resume_delay: float = 0.0) -> dict:
     c = str(cfg)
     t0 = time.perf_counter()
     up = _fleet("up", "--config", c, "--detach", timeout=900)
@@ -104,6 +104,7 @@ def lab(cfg: Path, workdir: Path, name: str) -> dict:
     try:
         if up.returncode != 0:
             return {"up_exit": up.returncode, "error": (up.stdout + up.stderr)[-2000:]}
+        time.sleep(resume_delay)  # an operator late (the README block's test: a minute)
         resume = _fleet("resume", "--config", c, "--timeout", "60")
         t1 = time.perf_counter()
         down = _fleet("down", "--config", c, "--wait", "--json", "--timeout", "1500")
@@ -152,6 +153,7 @@ def main() -> int:
     ap.add_argument("--lab-repeats", type=int, default=2, help="lab runs per size")
     ap.add_argument("--keep", default=None, help="keep the configs and runs in this folder")
     ap.add_argument("--shipped", action="store_true", help="the repository's lab.toml as is")
+    ap.add_argument("--resume-delay", type=float, default=0.0, help="s from up to the resume")
     ns = ap.parse_args()
     load0 = os.getloadavg()[0]
     runs, failed = [], 0
@@ -172,12 +174,12 @@ def main() -> int:
                 print(f"job: {json.dumps(row['dry_run'])}", file=sys.stderr)
             for k in range(0 if ns.no_lab else ns.lab_repeats):
                 print(f"job: {n} robots, the lab in real time ({k + 1})", file=sys.stderr)
-                one = lab(cfg, work, name)
+                one = lab(cfg, work, name, ns.resume_delay)
                 row.setdefault("labs", []).append(one)
                 failed += one.get("exit") != 0
                 print(f"job: {json.dumps(one)}", file=sys.stderr)
             runs.append(row)
-    out = {"bench": "job", "shipped": ns.shipped, "runs": runs,
+    out = {"bench": "job", "shipped": ns.shipped, "resume_delay_s": ns.resume_delay, "runs": runs,
            "load_avg_1m": [load0, os.getloadavg()[0]]}  # fmt: skip
     print(json.dumps(out, indent=1))
     return 1 if failed else 0
