@@ -135,7 +135,8 @@ def lab(cfg: Path, workdir: Path, name: str, resume_delay: float = 0.0) -> dict:
                        tick_p50_ms=float(m[4]), tick_p99_ms=float(m[5]))  # fmt: skip
         out["gate_episodes"] = text.count("in a row rejected by the gate")
         out["run_dir"] = str(run_dir)
-        done = re.search(r"^(\S+ \S+) INFO .*mission done in phase done", text, re.M)
+        # the mission's end (done, or failed: the daemon then stops and every watchdog fires)
+        done = re.search(r"^(\S+ \S+) \w+ .*mission (?:done|failed) in phase", text, re.M)
         stops = 0
         for agent_log in run_dir.glob("r*.log"):
             for line in agent_log.read_text(errors="replace").splitlines():

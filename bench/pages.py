@@ -61,13 +61,16 @@ def provenance(row: dict) -> str:
     if args:
         again += " -- " + " ".join(args)
     dirty = " (with uncommitted changes)" if row.get("dirty") else ""
+    code = row.get("exit")
+    failed = f"; the bench exited {code} (a failure among its figures)" if code else ""
     lb, la = row.get("load_before") or [0], row.get("load_after") or [0]
     loop = m.get("loop_1e7_s")
     speed = f", 10^7 Python additions in {loop:.2f} s" if loop else ""
     return (
         f"*Row `bench/rows/{name}.json`: `{row['command']}` at commit "
         f"`{row.get('commit') or '?'}`{dirty}, {row.get('date', '?')}; {m.get('cores', '?')} "
-        f"cores, Python {m.get('python', '?')}{speed}; load {lb[0]:.1f} before, {la[0]:.1f} after. "
+        f"cores, Python {m.get('python', '?')}{speed}; load {lb[0]:.1f} before, {la[0]:.1f} after"
+        f"{failed}. "
         f"Again: `{again}` then `python bench/pages.py`.*"
     )
 
@@ -1040,6 +1043,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "job": job,
     "estop": estop,
     "lab_job": job,
+    "lab_job_late": job,
     "transport": transport,
     "transport_loop": transport_loop,
     "transport_compare": transport_compare,

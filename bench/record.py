@@ -11,7 +11,8 @@ seconds 10^7 pure-Python additions took just before: this shared machine's speed
 day to day) and the load average before and after the run. ``bench/pages.py`` turns the rows
 into the results pages of the docs (``docs/results/``), so every figure there names its row; a
 test checks the pages are current with the rows. Progress goes to stderr; the row's path is
-printed last.
+printed last. A bench that exits non-zero with its JSON printed (a run that failed, a goal
+missed) still gets its row, with ``exit`` saying so, and this exits 1.
 """
 
 from __future__ import annotations
@@ -74,12 +75,13 @@ def record(name: str, args: list[str], row_name: str | None = None) -> Path:
     cmd = [sys.executable, str(script), *args]
     print(f"record: {' '.join(['python', f'bench/{name}.py', *args])}", file=sys.stderr)
     proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
-    if proc.returncode != 0:
-        raise SystemExit(f"record: bench/{name}.py exited {proc.returncode}: no row written")
     try:
         result = json.loads(proc.stdout)
     except json.JSONDecodeError as exc:
-        raise SystemExit(f"record: bench/{name}.py printed no JSON object ({exc})") from exc
+        raise SystemExit(
+            f"record: bench/{name}.py exited {proc.returncode} and printed no JSON object ({exc}):"
+            " no row written"
+        ) from exc
     row = {
         "bench": name,
         "row": row_name or name,
@@ -90,6 +92,9 @@ def record(name: str, args: list[str], row_name: str | None = None) -> Path:
         "machine": {**machine(), "loop_1e7_s": speed},
         "load_before": before,
         "load_after": load(),
+        # a bench that exits non-zero says its figures include a failure (a run that did not
+        # deliver, a goal missed): the row keeps them and says so
+        "exit": proc.returncode,
         "result": result,
     }
     ROWS.mkdir(parents=True, exist_ok=True)
@@ -105,7 +110,12 @@ def main() -> None:
     argv = sys.argv[1:]
     cut = argv.index("--") if "--" in argv else len(argv)
     ns = ap.parse_args(argv[:cut])  # the bench's own arguments come after --
-    print(record(ns.name, argv[cut + 1 :], ns.row))
+    path = record(ns.name, argv[cut + 1 :], ns.row)
+    print(path)
+    code = json.loads(path.read_text())["exit"]
+    if code:
+        print(f"record: the bench exited {code} (a failure among its figures): the row says so")
+        sys.exit(1)
 
 
 if __name__ == "__main__":

@@ -1,11 +1,8 @@
 """CaptureMission: approach a moving object, close in to contact, hold it, arrest it (§3).
 
-Pure per-tick mission in the node's two stages. ``plan(view) -> Intent`` is a fixed, named
-sequence: the object pose the goals ride on, the goals (capture points, envelope stations,
-contact targets), detours around static obstacles (planned once), the targets and feed-forward
-of the current phase, the projective planner (Sharma Table I), then the phase logic
-(:func:`advance`, a pure function of the measured distances). ``safety(view, intent)`` is the
-shared :class:`controller.mission.guard.SafetyStage`.
+Pure, per tick. ``plan(view) -> Intent``: the object pose the goals ride on, the goals, detours
+around obstacles (planned once), the phase's targets, the projective planner (Sharma Table I),
+then the phase logic (:func:`advance`); ``safety``: the shared ``SafetyStage``.
 
 Phases:
 
@@ -21,11 +18,10 @@ Phases:
   the contact targets freeze in the world where the object is (a cage), each
   ``preload_depth`` inside the surface, and the robots hold them with no feed-forward, while
   the live object still tries to move. A held robot's motor resists up to its ``max_force``;
-  one that cannot reach its target (the object is there) pushes the small preload. Robots
-  that chased the object's estimated velocity while touching it would carry it away (each
-  push moves it, which moves the estimate, which moves them): the cage does not follow the
-  object. A robot that loses contact, or an object that moves more than ``hold_tolerance`` (any
-  vertex of its estimate), sends the fleet back to ``close_in``;
+  one that cannot reach its target (the object is there) pushes the small preload; the cage
+  does not follow the object (see ``close_in``). A robot that loses contact, or an object that
+  moves more than ``hold_tolerance`` (any vertex of its estimate), sends the fleet back to
+  ``close_in``;
 - ``arrested``: the object stayed put through ``hold_s`` seconds of hold: the arrest event
   (arrival spread, contacts, the displacement seen); the robots keep holding;
 - ``done`` after ``settle_s`` more seconds of hold (when the mission is the capture alone).
@@ -86,9 +82,8 @@ class Goals:
 
 @dataclass
 class CaptureMission:
-    """Approach and arrest. ``points``/``normals`` (M, 2) in the object frame; ``assignment``
-    (M,) robot index per point. Robots without a point stay still (the filter still moves them
-    out of harm's way)."""
+    """Approach and arrest. ``points``/``normals`` (M, 2), object frame; ``assignment`` (M,)
+    robot per point. Robots without a point stay still (the filter moves them out of harm)."""
 
     points: np.ndarray
     normals: np.ndarray
@@ -144,10 +139,16 @@ class CaptureMission:
         """A re-assignment: the approach begun at ``t0`` goes on (its timeout, no new start)."""
         self.state = replace(self.state, t0=t0)
 
+    def wait(self, dt: float) -> None:
+        """``dt`` s the job was held (an e-stop): not counted by the timeout, hold or settle."""
+        st, keys = self.state, ("t0", "hold_t0", "arrest_t")
+        later = {k: getattr(st, k) + dt for k in keys if getattr(st, k) is not None}
+        self.state = replace(st, **later)
+
     # --- stage 1: the pose the goals ride on ------------------------------------------------
     def goal_pose(self, view: FleetView) -> np.ndarray:
-        """The object's next pose (one tick ahead): a longer look-ahead would put the trailing
-        robots' contact points inside the object as it is now."""
+        """The object's next pose (one tick ahead: a longer look-ahead puts trailing contacts
+        inside it)."""
         if view.object_velocity is not None:
             return np.asarray(view.object_pose, float) + np.asarray(view.object_velocity) * self.dt
         if view.object_prediction is not None:
@@ -239,10 +240,9 @@ class CaptureMission:
     def targets(
         self, view: FleetView, pose: np.ndarray, goals: Goals
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Goal positions (N, 2), goal velocities (N, 2) and the assigned robots' current
-        targets (M, 2): stations while approaching, aimed at where the object will be when the
-        robot can get there; contacts after; preload targets once in contact; detour waypoints
-        first."""
+        """Goal positions and velocities (N, 2) and the assigned robots' targets (M, 2):
+        stations while approaching (aimed where the object will be when the robot gets there),
+        contacts after, preload targets once in contact; detour waypoints first."""
         centers = view.poses[:, :2]
         a = self.assignment
         phase = self.phase

@@ -11,7 +11,6 @@ import math
 import numpy as np
 
 from controller.config import FleetConfig
-from controller.events import CaptureEvent
 from controller.mission.assign import Reassigner, assign, interception_costs
 from controller.mission.capture import CaptureMission
 from controller.mission.capture_phase import CaptureSettings
@@ -22,7 +21,7 @@ from controller.mission.planners import InlinePlanners, Planners, PlanSlot, spaw
 from controller.mission.reach import Reach
 from controller.mission.roster import Roster, parked
 from controller.mission.sequence import FINAL, Cue, Failure, Sequencer, SequenceSettings
-from controller.mission.summary import CapturePlanSummary, JobSummary
+from controller.mission.summary import CapturePlanSummary, JobSummary, capture_event
 from controller.mission.transport import TransportMission, route_planner_for
 from controller.mission.types import (
     FleetView,
@@ -49,8 +48,7 @@ WATCHED = (Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD)  # phases a lost robot re
 
 
 class CaptureJob:
-    """The capture: the plan at construction, robot assignment once the first estimates are in
-    (robots and object), then the approach-and-arrest mission.
+    """The job: the capture plan, the assignment at the first estimates, the capture, the carry.
 
     Until every robot is present with a fresh estimate and the object has been seen, every robot
     holds still (phase ``plan``); ``fleet.start_wait`` s after the first estimates, robots never
@@ -59,13 +57,11 @@ class CaptureJob:
     stations where the moving object will be (interception at full speed), over the robots
     *available*; robots left over stay where they are.
 
-    Robot loss and join: a robot whose liveliness or link is gone, or whose estimate has been
-    stale for ``LOST_STALE_S`` s, during the approach, close-in or hold is lost (event
-    ``robot_lost``) and no longer available. When it held a capture point, the capture is
-    re-planned with the robots left (``replan_for_robots``) and re-assigned; when none closes
-    the object, the job fails with ``robots_lost``, every robot stopped. A robot present and
-    fresh again (or seen for the first time) is available again (event ``robot_joined``): a
-    later re-plan or re-assignment may pick it; it never gets its old point back by itself.
+    Robot loss and join (``mission.roster``): a robot lost during the approach, close-in or
+    hold that held a capture point has the capture re-planned with the robots left
+    (``replan_for_robots``) and re-assigned; when none closes the object, the job fails with
+    ``robots_lost``. A robot back is available again, never given its old point by itself.
+    While the e-stop holds, nothing starts and no clock counts.
     """
 
     def __init__(
@@ -109,6 +105,7 @@ class CaptureJob:
         self.start_tried = -1  # robots a start without the missing ones was last planned for
         self.loss_replans = 0
         self.transport: TransportMission | None = None  # the carry, once started
+        self._held_since: float | None = None  # s: the e-stop holds the job since
         # the object's route planner, built before the loop (it takes a second)
         self.route_planner = route_planner_for(cfg) if cfg.object.goal is not None else None
 
@@ -118,13 +115,17 @@ class CaptureJob:
         return self.seq.phase
 
     def plan(self, view: FleetView) -> Intent:
-        """One tick: the roster and the outage watch (every phase), then the stage of the
-        job's phase; when the stage's report moves the job from ``arrested`` to ``route`` (the
-        sequence's carry timer), the transport starts and plans the same tick."""
+        """One tick: the roster and the outage watch, then the stage of the job's phase (the
+        transport from the tick the sequence's carry timer moves the job to ``route``)."""
         if self.failed:
             zero = np.zeros((self.n, 2))
             return Intent.of(zero, Phase.FAILED, stop=True, failed=True, reason=self.failure_reason)
         view = parked(view)  # (a robot never seen: no estimate)
+        if view.estop:  # held: nothing starts, nothing times out; every clock waits
+            self._held_since = view.t if self._held_since is None else self._held_since
+            return Intent.of(np.zeros((self.n, 2)), self.phase, stop=True)
+        if self._held_since is not None:
+            self._clocks_wait(view.t - self._held_since)
         carrying = self.transport is not None
         gone = self.roster.gone(view, carrying)
         if self.inner is None and not carrying:
@@ -143,6 +144,16 @@ class CaptureJob:
             self.transport.lose(lost)
             return self.transport.plan(view).after(list(events) + said)
         return self._capture(view, gone, events)
+
+    def _clocks_wait(self, dt: float) -> None:
+        """The e-stop lifted after ``dt`` s: no timer, timeout or stall clock counts them (an
+        operator's e-stop is a pause, not a failure waiting to happen)."""
+        self._held_since = None
+        self.seq.wait(dt)
+        self.reach.wait(dt)
+        for stage in (self.inner, self.transport):
+            if stage is not None:
+                stage.wait(dt)
 
     def _capture(self, view: FleetView, gone: np.ndarray, events: list) -> Intent:
         """The capture's tick: joins and losses, re-assignment, the stage, a re-plan for a
@@ -311,19 +322,9 @@ class CaptureJob:
         self.assignment = assign(costs, self.roster.available)
         self.reassigner.assigned(view.t)
         self.inner = self._mission(view)
-        event = CaptureEvent(
-            points=self.capture.points.round(4).tolist(),
-            normals=self.capture.normals.round(4).tolist(),
-            robots=[view.ids[i] for i in self.assignment],
-            objective=self.capture.objective,
-            form_closure=self.capture.form_closure,
-            robots_needed=len(self.capture.points),
-            hold_capacity=self.capture.hold_capacity,
-            reinforced=self.capture.reinforced,
-            pinned=pinned,
-            wall_contacts=self.capture.walls,
-            unavailable=[view.ids[i] for i in np.flatnonzero(~self.roster.available)],
-        )
+        robots = [view.ids[i] for i in self.assignment]
+        away = [view.ids[i] for i in np.flatnonzero(~self.roster.available)]
+        event = capture_event(self.capture, robots, away, pinned)
         return self.inner.plan(view).after([event])
 
     def _mission(self, view: FleetView):

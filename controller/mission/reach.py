@@ -38,6 +38,11 @@ class Reach:
         """A new approach (a re-plan asked or done): the blocked count starts again."""
         self.blocked_ticks = 0
 
+    def wait(self, dt: float) -> None:
+        """``dt`` s the job was held (an e-stop): a robot held still is not stuck."""
+        if self.progress is not None:
+            self.progress[1][:] += dt
+
     def replanned(self) -> None:
         """A capture re-planned against the wall (counted: at most MAX_REPLANS)."""
         self.replans += 1

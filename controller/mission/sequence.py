@@ -199,6 +199,11 @@ class Sequencer:
     def phase(self) -> Phase:
         return self.state.phase
 
+    def wait(self, dt: float) -> None:
+        """``dt`` s the job was held (an e-stop): the phase's timers do not count them."""
+        if self.state.since is not None and not self.state.final:
+            self.state = replace(self.state, since=self.state.since + dt)
+
     def report(self, t: float, cue: Cue | None = None, failure: Failure | None = None) -> Step:
         """One stage's report of this tick: the new state (kept here) and its events."""
         step = next_phase(self.state, Measures(t, cue, failure), self.settings)

@@ -10,6 +10,9 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from controller.events import CaptureEvent
+from controller.planning.capture_set import CaptureSet
+
 
 class _Flat:
     """``to_json()``: the fields in order; a nested summary (or None) merged in flat."""
@@ -105,3 +108,20 @@ def summary_of(mission: Any) -> JobSummary:
     if isinstance(got, TransportSummary):
         return JobSummary(transport=got)
     return got if isinstance(got, JobSummary) else JobSummary()
+
+
+def capture_event(capture: CaptureSet, robots: list[str], unavailable: list[str], pinned: bool):
+    """The ``capture`` event of a capture set assigned to ``robots`` (one per point)."""
+    return CaptureEvent(
+        points=capture.points.round(4).tolist(),
+        normals=capture.normals.round(4).tolist(),
+        robots=robots,
+        objective=capture.objective,
+        form_closure=capture.form_closure,
+        robots_needed=len(capture.points),
+        hold_capacity=capture.hold_capacity,
+        reinforced=capture.reinforced,
+        pinned=pinned,
+        wall_contacts=capture.walls,
+        unavailable=unavailable,
+    )

@@ -148,9 +148,13 @@ class TransportMission:
         re-arrangement's timeout do not run while it lasts."""
         dt = 0.0 if self._last_t is None else view.t - self._last_t
         self._last_t = view.t
+        self.wait(dt)
+        return Intent.of(np.zeros((self.n, 2)), self.phase, events, stop=True)
+
+    def wait(self, dt: float) -> None:
+        """``dt`` s the carry was held: the stall clock and the re-arrangement's timeout wait."""
         self.way.pause(dt)
         self.rearranger.pause(dt)
-        return Intent.of(np.zeros((self.n, 2)), self.phase, events, stop=True)
 
     def _cue(self, cue: Cue | None, t: float, events: list[Event], failure: Failure | None = None):
         """Report what the transport saw: the sequence moves the phase (and writes events)."""

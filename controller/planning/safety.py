@@ -246,6 +246,13 @@ class SafetyFilter:
                 if hold is not None:
                     relative = np.where(hold, 0.0, relative)
                 lo_poly[:, k] += relative
+        # a robot held at zero (stale, or held by the plan) keeps no barrier of its own: its
+        # velocity is fixed, so a row of its inside a margin could only make the whole QP
+        # infeasible (a held robot 4 cm from the object froze every mover of a re-arrangement
+        # for 200 s in a lab run); the others keep their barriers to it (pair rows stay), and
+        # a pair of two held robots has nothing to solve
+        lo_poly[stale] = -INF
+        lo_pair = np.where(stale[self.pi] & stale[self.pj], -INF, lo_pair)
         flat = nrm.reshape(-1, 2)
         vals += [flat[:, 0], flat[:, 1]]
         vals.append(np.ones(2 * n))

@@ -150,7 +150,7 @@ class ControllerNode:
             object_pose=None if obj is None else np.array([obj.x, obj.y, obj.theta]),
             object_velocity=None if obj is None else np.array([obj.vx, obj.vy, obj.wz]),
             object_prediction=None if pred is None else np.array([pred.x, pred.y, pred.theta]),
-            estop=self.estop,
+            estop=self.estop or self.estop_latch.pending,  # held while an answer is due too
         )
 
     def tick(self, now: float, step: int | None = None) -> MissionOutput:

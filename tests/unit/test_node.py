@@ -235,12 +235,15 @@ def test_link_restored_clears_link_lost(rig):
 def test_commands_are_zero_while_the_latch_is_unread_and_a_newer_latch_engages(rig):
     from controller.io.bus import Received
 
-    cfg, bus, _, node = rig
+    cfg, bus, mission, node = rig
     node.estop_latch.expect()
     ((key, replies),) = bus.queries
     assert key == "fleet/lab/estop/state/*/*"
     node.tick(1.0)
     assert all(bus.last("robot_cmd", id=r.id).vx == 0.0 for r in cfg.robots)
+    # the mission is held too: a kept release read at start must not start the job before the
+    # hub's newer engaged arrives (a lab run's job started, then failed pinned under the e-stop)
+    assert mission.views[-1].estop
     # the controller's own (stale) answer does not count; an agent's newer engaged one does
     own = node.estop_latch.answer()
     replies.put(Received(0.0, "fleet/lab/estop/state/controller/main", own))

@@ -308,3 +308,23 @@ def test_a_differential_robot_asked_to_go_sideways_turns_one_way_not_back_and_fo
     fixed, heading = run(kept=True, relative=False)
     off = abs((heading - np.pi / 2 + np.pi / 2) % np.pi - np.pi / 2)  # from the axis, either end
     assert fixed == 0 and off < np.radians(8.0), np.degrees(heading)
+
+
+def test_a_held_robot_inside_its_margin_freezes_no_one():
+    """A lab run's re-arrangement: a held robot (fixed at zero) 4 cm from the object, inside
+    the 5 cm margin, and two movers just off their old contacts (1 mm from the object). The
+    held robot's own barrier could never be kept (its velocity is fixed), the QP was infeasible
+    every tick, and every robot inside a margin stopped for good: the movers never left, the
+    re-arrangement timed out. Held robots keep no barrier of their own; the movers back off to
+    the margin and go on."""
+    r = np.full(3, 0.1)
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]) + 4.0
+    flt = SafetyFilter(r, np.full(3, 0.4), BOUNDS, 1, margin=0.05)
+    p = np.array([[4.5, 5.14], [3.899, 4.5], [5.101, 4.5]])  # held above; movers left, right
+    held = np.array([True, False, False])
+    nominal = np.array([[0.0, 0.0], [0.0, -0.3], [0.0, 0.3]])  # movers slide along the faces
+    res = flt.filter(p, nominal, [square], stale=held)
+    assert not res.stopped.any(), res.status
+    assert np.allclose(res.velocities[0], 0.0)  # the held robot stays held
+    assert res.velocities[1, 0] < -0.05 and res.velocities[2, 0] > 0.05  # the movers back off
+    assert abs(res.velocities[1, 1] + 0.3) < 0.05 and abs(res.velocities[2, 1] - 0.3) < 0.05

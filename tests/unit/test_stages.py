@@ -6,6 +6,7 @@ re-arrangement's counters."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 
 from controller.mission.capture_phase import CaptureSettings, CaptureState, Measures, advance
+from controller.mission.job import CaptureJob
 from controller.mission.outage import OutageWatch
 from controller.mission.planners import DeferredPlanners
 from controller.mission.progress import ProgressSettings, RouteProgress
@@ -22,6 +24,9 @@ from controller.mission.sequence import Cue
 from controller.mission.types import FleetView, Phase, Reason
 from controller.planning.transport_model import ObjectModel
 from tests.support.config import make_config
+from tests.support.transport_mission import carry_job
+from tests.support.transport_mission import view as tview
+from tests.support.transport_scenarios import CRATE, Scenario
 
 P = Phase
 S = CaptureSettings()
@@ -245,3 +250,62 @@ def test_the_rearranger_counts_futile_sets_until_the_object_moves():
     assert r.since == 7.0
     r.progressed()
     assert (r.count, r.futile) == (3, 0)
+
+
+# ------------------------------------------------------------------ the e-stop holds the job
+OPEN_SCENARIO = Scenario("open", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0))
+
+
+def _held(view, estop: bool):
+    return dataclasses.replace(view, estop=estop)
+
+
+def test_an_estop_before_the_start_keeps_the_job_from_starting():
+    """A lab brought up with the e-stop engaged: the job stays in ``plan`` (nothing is planned
+    against robots that cannot move) and starts at the resume."""
+    cfg = make_config()
+    job = CaptureJob(cfg, np.random.default_rng(0))
+    poses = np.array([r.start for r in cfg.robots], float)
+    obj = np.asarray(cfg.object.start, float)
+    for k in range(200):  # 10 s held
+        out = job.plan(_held(tview(cfg, 0.05 * k, poses, obj), True))
+        assert out.command.stop and out.report.phase == P.PLAN
+    out = job.plan(tview(cfg, 10.0, poses, obj))
+    assert job.phase == P.APPROACH and not out.command.stop
+
+
+def test_an_estop_in_the_approach_is_a_pause_not_a_stuck_fleet():
+    """An operator's e-stop for 30 s during the approach, the object at rest: the robots held
+    still are not stuck (8 s) and no pinned re-plan is asked; the approach's timeout does not
+    count the pause either. (A lab run failed ``pinned`` under an e-stop this way.)"""
+    cfg = make_config({"object": {"motion": {"kind": "static"}}})
+    job = CaptureJob(cfg, np.random.default_rng(0))
+    poses = np.array([r.start for r in cfg.robots], float)
+    obj = np.asarray(cfg.object.start, float)
+    job.plan(tview(cfg, 0.0, poses, obj))
+    assert job.phase == P.APPROACH
+    t0 = job.inner.state.t0
+    for k in range(1, 601):  # 30 s held, nobody moves
+        out = job.plan(_held(tview(cfg, 0.05 * k, poses, obj), True))
+        assert out.command.stop and not out.report.outcome.failed
+    out = job.plan(tview(cfg, 30.05, poses, obj))
+    assert job.phase == P.APPROACH and not out.report.outcome.failed
+    assert not job._replan_job.pending and job.reach.replans == 0
+    assert job.inner.state.t0 == pytest.approx(t0 + 30.0)  # the timeout waited
+
+
+def test_an_estop_in_the_carry_stops_no_stall_clock():
+    """Held longer than the re-arrangement's timeout mid-carry: on the resume the same
+    re-arrangement goes on (its timeout waited; the stall clock waits the same way)."""
+    job, cfg, poses = carry_job(OPEN_SCENARIO)
+    obj = np.asarray(cfg.object.start, float)
+    job.plan(tview(cfg, 0.0, poses, obj))
+    m = job.transport
+    assert job.phase == P.REARRANGE  # nobody holds the crate here: a set is asked for
+    since, count = m.rearranger.since, m.rearranger.count
+    held = 3 * m.s.stall_timeout  # longer than the re-arrangement's timeout too
+    for k in range(1, int(held / 0.05) + 1):
+        job.plan(_held(tview(cfg, 0.05 * k, poses, obj), True))
+    out = job.plan(tview(cfg, held + 0.05, poses, obj))
+    assert not out.report.outcome.failed and job.phase == P.REARRANGE
+    assert m.rearranger.count == count and m.rearranger.since == pytest.approx(since + held)
