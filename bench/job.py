@@ -177,7 +177,8 @@ def main() -> int:
                 print(f"job: {n} robots, the lab in real time ({k + 1})", file=sys.stderr)
                 one = lab(cfg, work, name, ns.resume_delay)
                 row.setdefault("labs", []).append(one)
-                failed += one.get("exit") != 0
+                verdict = (one.get("outcome") or {}).get("verdict") or ""
+                failed += one.get("exit") != 0 or not verdict.startswith("DELIVERED")
                 print(f"job: {json.dumps(one)}", file=sys.stderr)
             runs.append(row)
     out = {"bench": "job", "shipped": ns.shipped, "resume_delay_s": ns.resume_delay, "runs": runs,

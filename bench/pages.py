@@ -843,6 +843,13 @@ def transport_compare(r: dict) -> str:
     )
 
 
+def _delivered(lab: dict) -> bool:
+    """A lab run that exited 0 with a DELIVERED verdict (a lab of before the verdict decided
+    the exit could exit 0 on a verdict that failed)."""
+    verdict = (lab.get("outcome") or {}).get("verdict") or ""
+    return lab.get("exit") == 0 and verdict.startswith("DELIVERED")
+
+
 def _verdict_m(verdict: str) -> str:
     m = re.match(r"DELIVERED ([\d.]+ m)", verdict)
     return m.group(1) if m else "-"
@@ -867,7 +874,7 @@ def job(r: dict) -> str:
             )
         for lab in x.get("labs", []):
             o = lab.get("outcome") or {}
-            ok = lab.get("exit") == 0
+            ok = _delivered(lab)
             ticks = (
                 (
                     f"{lab['late_ticks']} late of {lab['ticks']}; p50 {lab['tick_p50_ms']:.0f}"
@@ -893,12 +900,14 @@ def job(r: dict) -> str:
     load = r["load_avg_1m"]
     if r.get("shipped"):
         labs = [lab for x in r["runs"] for lab in x.get("labs", [])]
-        k = sum(lab.get("exit") == 0 for lab in labs)
+        k = sum(_delivered(lab) for lab in labs)
         lo, hi = wilson(k, len(labs))
         why: dict[str, int] = {}
         for lab in labs:
-            if lab.get("exit") != 0:
-                reason = (lab.get("outcome") or {}).get("reason") or "no verdict"
+            if not _delivered(lab):
+                verdict = (lab.get("outcome") or {}).get("verdict") or ""
+                said = re.match(r"FAILED (\w+)", verdict)
+                reason = (lab.get("outcome") or {}).get("reason") or (said and said[1]) or "none"
                 why[reason] = why.get(reason, 0) + 1
         fails = ", ".join(f"`{w}` {c}" for w, c in sorted(why.items())) or "none"
         wait = r.get("resume_delay_s") or 0.0
