@@ -828,10 +828,15 @@ def transport_compare(r: dict) -> str:
     return (
         f"The suite: {size['scenarios']} drawn scenarios of bench/transport_loop.py's seeded "
         f"suite (never tuned on) × {size['seeds']} seeds × {len(size['strategies'])} strategies, "
-        f"each a whole `fleet run --mission transport` in lockstep on {size['backend']}; the "
-        f"robustness set: {size['sweep_runs_per_strategy']} runs per strategy with Yamashita's "
-        "robot motion errors and the object's mass, floor friction and centre of mass off. "
-        "Success on our criterion (delivered within the position and heading tolerance, clean "
+        f"each a whole `fleet run --mission transport` in lockstep on {size['backend']}; "
+        + (
+            f"the robustness set: {size['sweep_runs_per_strategy']} runs per strategy with "
+            "Yamashita's robot motion errors and the object's mass, floor friction and centre "
+            "of mass off. "
+            if size["sweep_runs_per_strategy"]
+            else "no robustness set in this row. "
+        )
+        + "Success on our criterion (delivered within the position and heading tolerance, clean "
         "verdict) and on Sharma's (the CG within the position tolerance, heading free), with "
         "95 % Wilson intervals; medians over the runs a strategy delivered with bootstrap "
         "intervals; paired: McNemar's exact test on success, Wilcoxon on time and impulse, "
