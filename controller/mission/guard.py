@@ -20,7 +20,6 @@ from controller.mission.types import FleetView, Intent, MissionOutput, Phase
 from controller.planning.approach import limit_accel
 from controller.planning.safety import SafetyFilter
 
-RELAX_PHASES = (Phase.PLAN, Phase.APPROACH, Phase.CLOSE_IN, Phase.HOLD)
 # the capture closing on the object: two robots both at it keep capture.clearance between them
 # (contacts in a concave notch lie nearer each other than the safety margin); in transport
 # every pair keeps the margin (the pushers move with the object, and the lab's estimates lag)
@@ -91,10 +90,10 @@ class SafetyStage:
             motion=motion,
             overlap=overlap,
             hold=c.touch if c.cage else None,
-            # a robot the live object squeezes against a wall while the fleet closes in slides
-            # out; in transport a robot stuck inside a margin stops, as it always did (its
-            # pushes are deliberate contacts)
-            relax=phase in RELAX_PHASES,
+            # in every phase a robot inside a margin it cannot recover at once (squeezed by
+            # the object against a wall or another robot) moves away or slides out; stopped,
+            # the object could push it on (a pusher's contact is exempt, never relaxed)
+            relax=True,
             headings=view.poses[:, 2],
             close=c.touch if phase in CLOSING_PHASES else None,
         )

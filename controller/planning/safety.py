@@ -16,11 +16,11 @@ The sparsity pattern is built once for N robots and P polygons; each call only u
 (``Ax``, ``q``, ``l``, ``u``) and warm-starts. Differential robots are filtered as single
 integrators at their centre (the mission turns the filtered velocity into (v, wz), driving
 forwards or backwards along its axis); the look-ahead-point model for them is not done yet.
-If the QP is infeasible while some robot is already inside its margin to a polygon it is not
-closing in on (squeezed between the object and a wall, say), with ``relax``, those violated
-rows are relaxed to "no closer" and the QP solved again (status ``relaxed``: the robot slides
-out along the tangent). If it is
-still infeasible (or osqp fails), the robots whose constraints are already violated
+If the QP is infeasible while some robots are already inside a margin (to each other, or to
+a polygon they are not closing in on: squeezed between the object and a wall, say), with
+``relax``, those violated rows are relaxed to "no closer" and the QP solved again (status
+``relaxed``: the robot moves away or slides out along the tangent; ``Rows.relaxations``). If
+it is still infeasible (or osqp fails), the robots whose constraints are already violated
 stop, the others keep their nominal velocity (speed-capped), and the status says so.
 """
 
@@ -58,6 +58,48 @@ class FilterResult:
     stopped: np.ndarray
     changed: float
     aim: np.ndarray | None = None  # (N, 2): the free solution (differential robots turn to it)
+
+
+@dataclass
+class Rows:
+    """The barrier rows' lower bounds of one call, for the relaxation: ``pair`` (pairs,),
+    ``poly`` (N, P) and ``moving`` (N, P), the share of ``poly`` that is the polygon's own
+    motion; ``squeezed`` (N, P) the polygon rows a robot may relax; ``relax`` whether to."""
+
+    pair: np.ndarray
+    poly: np.ndarray
+    moving: np.ndarray
+    squeezed: np.ndarray
+    relax: bool
+
+    def relaxations(self, lo: np.ndarray) -> list[np.ndarray]:
+        """The lower bounds to try in turn when the QP is infeasible with robots already
+        inside a margin (recovering at gamma is impossible for them):
+
+        1. the violated rows ask "no closer" only: a pair's distance may not shrink; a robot
+           squeezed by a moving polygon keeps its distance to it (moves with it or away);
+        2. as 1, but a squeezed robot need not give way to the polygon's motion (it may not
+           move toward it; the object pushed into it along a wall, it slides out along the
+           tangent instead of freezing).
+
+        Relaxing beats stopping: a robot the filter stops can still be pushed, by the object
+        it stands in the way of, into the robot beside it (two robots stopped in a lab's
+        carry were pushed together by the crate). Empty without ``relax`` or violated rows."""
+        pair_bad = self.pair > 0
+        if not self.relax or not (pair_bad.any() or self.squeezed.any()):
+            return []
+        k = len(self.pair)
+        floors = [self.moving]
+        if np.any(self.moving[self.squeezed] > 0):  # else the second is the first
+            floors.append(np.minimum(self.moving, 0.0))
+        out = []
+        for poly_floor in floors:
+            relaxed = lo.copy()
+            relaxed[:k][pair_bad] = 0.0
+            poly = relaxed[k : k + self.poly.size].reshape(self.poly.shape)
+            poly[self.squeezed] = poly_floor[self.squeezed]
+            out.append(relaxed)
+        return out
 
 
 @dataclass
@@ -219,6 +261,7 @@ class SafetyFilter:
         # polygons
         nrm = np.zeros((n, npoly, 2))
         lo_poly = np.full((n, npoly), -INF)
+        moving = np.zeros((n, npoly))  # each row's share of the polygon's own motion
         for k, poly in enumerate(polygons[:npoly]):
             a = poly
             b = np.roll(poly, -1, axis=0)
@@ -246,6 +289,7 @@ class SafetyFilter:
                 if hold is not None:
                     relative = np.where(hold, 0.0, relative)
                 lo_poly[:, k] += relative
+                moving[:, k] = relative
         # a robot held at zero (stale, or held by the plan) keeps no barrier of its own: its
         # velocity is fixed, so a row of its inside a margin could only make the whole QP
         # infeasible (a held robot 4 cm from the object froze every mover of a re-arrangement
@@ -291,11 +335,12 @@ class SafetyFilter:
         else:
             self._prob.update(q=q, l=lo, u=hi, Ax=ax[self._perm])
         # rows a squeezed robot may relax: inside its margin to a polygon it is not closing
-        # in on (a robot in contact with the object stops as before)
+        # in on (a robot in contact with the object stops as before), and robot pairs inside
+        # their margin
         squeezed = lo_poly > 0
         if exempt is not None:
             squeezed &= ~np.asarray(exempt, bool)[:, : lo_poly.shape[1]]
-        rows = (lo_pair, lo_poly, squeezed if relax else None)
+        rows = Rows(lo_pair, lo_poly, moving, squeezed, relax)
         u, status, stopped = self._solve(lo, hi, rows, np.zeros(n, bool), fresh=True)
         aim = None
         if axial.any():
@@ -328,35 +373,33 @@ class SafetyFilter:
         self,
         lo: np.ndarray,
         hi: np.ndarray,
-        rows: tuple,
+        rows: Rows,
         stopped: np.ndarray,
         fresh: bool,
     ) -> tuple[np.ndarray, str, np.ndarray]:
-        """Solve with bounds ``lo``/``hi``; relax squeezed rows, then stop the robots concerned
-        and solve for the others. Velocities (N, 2), status, robots stopped."""
-        lo_pair, lo_poly, squeezed = rows
+        """Solve with bounds ``lo``/``hi``; if infeasible, relax the rows already violated
+        (``Rows.relaxations``), then stop the robots concerned and solve for the others.
+        Velocities (N, 2), status, robots stopped."""
         n = self.n
         if stopped.any():
-            return self._without(lo, hi, lo_pair, lo_poly, stopped, "infeasible")
+            return self._without(lo, hi, rows.pair, rows.poly, stopped, "infeasible")
         if not fresh:
             self._prob.update(l=lo, u=hi)
         res = self._prob.solve(raise_error=False)
         status = str(res.info.status)
-        if squeezed is not None and not _solved(res) and squeezed.any():
-            # a robot already inside its margin to the object or an obstacle, squeezed (the
-            # object pushing it against a wall): recovering at gamma is impossible, so those
-            # rows only ask "no closer" and it slides out along the tangent. Robot-robot rows
-            # are not relaxed (two robots inside each other's margin still stop).
-            relaxed = lo.copy()
-            poly_rows = relaxed[len(lo_pair) : len(lo_pair) + lo_poly.size].reshape(lo_poly.shape)
-            poly_rows[squeezed] = 0.0
+        for relaxed in rows.relaxations(lo) if not _solved(res) else ():
             self._prob.update(l=relaxed)
             res = self._prob.solve(raise_error=False)
-            status = "relaxed" if _solved(res) else str(res.info.status)
+            if _solved(res):
+                status = "relaxed"
+                break
+            status = str(res.info.status)
         if _solved(res):
             return res.x.reshape(n, 2), status, np.zeros(n, bool)
         # infeasible: the robots whose constraints are violated stop
-        return self._without(lo, hi, lo_pair, lo_poly, self._concerned(lo_pair, lo_poly), status)
+        return self._without(
+            lo, hi, rows.pair, rows.poly, self._concerned(rows.pair, rows.poly), status
+        )
 
     def _without(
         self,

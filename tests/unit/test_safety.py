@@ -78,17 +78,45 @@ def test_warm_equals_cold():
         p = p + 0.05 * ra.velocities
 
 
-def test_infeasible_stops_the_robots_concerned():
-    # two robots already deep inside each other's margin: no bounded velocity restores it now,
-    # and robot-robot rows are never relaxed: both stop, the third goes on
+def test_robots_inside_each_others_margin_come_no_closer_and_stop_only_without_relaxing():
+    # two robots already deep inside each other's margin: no bounded velocity restores it now;
+    # relaxed, they may come no closer (and slide on); the third goes on either way
     r = np.full(3, 0.1)
-    flt = SafetyFilter(r, np.full(3, 0.4), BOUNDS, 0, margin=0.05)
     p = np.array([[5.0, 5.0], [5.05, 5.0], [8.0, 8.0]])
-    res = flt.filter(p, np.array([[0.3, 0.0], [-0.3, 0.0], [0.2, 0.1]]), [])
+    nom = np.array([[0.3, 0.1], [-0.3, 0.1], [0.2, 0.1]])
+    res = SafetyFilter(r, np.full(3, 0.4), BOUNDS, 0, margin=0.05).filter(p, nom, [])
+    assert res.status == "relaxed" and not res.stopped.any()
+    closing = res.velocities[0, 0] - res.velocities[1, 0]  # robot 0 is west of robot 1
+    assert closing <= 1e-3
+    assert np.allclose(res.velocities[:2, 1], 0.1, atol=1e-2)  # the tangent is kept
+    assert np.allclose(res.velocities[2], [0.2, 0.1], atol=1e-3)
+    # not relaxed (the bare filter's option), both stop and the third goes on
+    stop = SafetyFilter(r, np.full(3, 0.4), BOUNDS, 0, margin=0.05)
+    res = stop.filter(p, nom, [], relax=False)
     assert not res.status.startswith("solved")
     assert res.stopped.tolist() == [True, True, False]
     assert np.allclose(res.velocities[:2], 0.0)
     assert np.allclose(res.velocities[2], [0.2, 0.1])
+
+
+def test_a_robot_the_object_pushes_toward_another_gets_out_of_the_way_with_it():
+    # the lab's carry: the crate (moving east at 0.12 m/s) closes on a free robot with another
+    # robot just beyond it, both already inside their margins. Recovering them at gamma needs
+    # more than max_speed (infeasible); before the relaxation in every phase both stopped and
+    # the crate pushed one into the other. Now the first keeps its distance to the crate and
+    # the second gives way to the first
+    r = np.full(2, 0.1)
+    crate = np.array([[3.0, 4.0], [4.0, 4.0], [4.0, 6.0], [3.0, 6.0]])
+    p = np.array([[4.12, 5.0], [4.30, 5.0]])
+    motion = [(0.12, 0.0, 0.0)]
+    flt = SafetyFilter(r, np.full(2, 0.4), BOUNDS, 1, margin=0.05)
+    res = flt.filter(p, np.zeros((2, 2)), [crate], motion=motion)
+    assert res.status == "relaxed" and not res.stopped.any()
+    assert res.velocities[0, 0] >= 0.12 - 2e-3  # no closer to the moving crate
+    assert res.velocities[1, 0] >= res.velocities[0, 0] - 2e-3  # nor to each other
+    stop = SafetyFilter(r, np.full(2, 0.4), BOUNDS, 1, margin=0.05)
+    res = stop.filter(p, np.zeros((2, 2)), [crate], motion=motion, relax=False)
+    assert res.stopped.all() and np.allclose(res.velocities, 0.0)
 
 
 def test_a_robot_squeezed_between_the_object_and_a_wall_slides_out():
@@ -105,7 +133,7 @@ def test_a_robot_squeezed_between_the_object_and_a_wall_slides_out():
     assert res.status == "relaxed" and not res.stopped.any()
     assert res.velocities[0, 1] > 0.2  # it slides along the wall instead of freezing
     assert res.velocities[0, 0] >= -1e-4  # and comes no closer to the wall
-    # without the relaxation (transport) the same robot stops
+    # without the relaxation (the bare filter's option) the same robot stops
     stop = SafetyFilter(r, np.full(1, 0.4), BOUNDS, 1, margin=0.05)
     res = stop.filter(p, np.array([[0.0, 0.3]]), [box], motion=[(-0.2, 0.0, 0.0)], relax=False)
     assert res.stopped.all() and np.allclose(res.velocities, 0.0)
