@@ -785,6 +785,39 @@ def estop(r: dict) -> str:
     )
 
 
+SITL_FRAMES = {
+    "rover": "ackermann car (`--model rover`)",
+    "rover-skid": "skid-steer (`rover-skid`)",
+    "rover-omni3mecanum": "3-wheel mecanum omni (`rover-omni3mecanum`), driven as `diff`",
+}
+
+
+def sitl(r: dict) -> str:
+    """ArduRover SITL stop times from 0.4 m/s, one frame per row (``bench/sitl.py``)."""
+    settings = [
+        ("zero_then_hold_at_rest", '`stop_hold = "at_rest"` (the default)'),
+        ("zero_only", '`"off"`: zero setpoint only, GUIDED brakes'),
+        ("zero_and_hold", '`"now"`: zero setpoint and HOLD at once'),
+    ]
+    rows = []
+    for key, what in settings:
+        for how in ("estop", "watchdog"):
+            t = r[f"{how}_{key}_s"]
+            rows.append([what, "e-stop" if how == "estop" else "watchdog",
+                         f"{t['median']:.2f} s", f"{t['min']:.2f}–{t['max']:.2f} s"])  # fmt: skip
+    best = r["estop_zero_then_hold_at_rest_s"]["median"]
+    goal = 1.0
+    return (
+        f"{SITL_FRAMES.get(r['frame'], r['frame'])}, stock parameters: connected in "
+        f"{r['connect_s']:.0f} s (the firmware's position estimate included) at "
+        f"{r['telemetry_hz']:.0f} Hz granted. From {r['speed_mps']} m/s to the firmware's "
+        f"first LOCAL_POSITION_NED under {r['stopped_below_mps']} m/s, {r['tries']} tries "
+        f"each. Goal under {goal:.0f} s with the default: {_met(best < goal)} "
+        f"({best:.2f} s).\n\n"
+        + _table(["stop setting", "stopped by", "median", "min–max"], rows)
+    )
+
+
 def _claims(sec: dict, label: str) -> list[str]:
     """What each pairwise test of a set says at 5 % after Holm's adjustment."""
     out = []
@@ -1012,8 +1045,9 @@ def transport_loop(r: dict) -> str:
     text = (
         "Whole `fleet run --mission transport` runs in pybullet, lockstep (the robots already "
         "hold the object; judged from the world's truth), on the bench's seeded suite, never "
-        f"used by the tests ({suite}). One run per scenario and strategy: no spread (the "
-        "180-run comparison below has it). Medians over each strategy's delivered runs. "
+        f"used by the tests ({suite}). One run per scenario and strategy: no spread, so a "
+        "difference of medians here is one seed's, not a comparison (the 180-run comparison "
+        "below pairs 20 seeds per scenario). Medians over each strategy's delivered runs. "
     )
     pair = r.get("sa_vs_serpentine")
     if pair and not pair["both_delivered"]:
@@ -1056,6 +1090,9 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "waits": waits,
     "job": job,
     "estop": estop,
+    "sitl_car": sitl,
+    "sitl_skid": sitl,
+    "sitl_mecanum": sitl,
     "lab_job": job,
     "lab_job_late": job,
     "transport": transport,

@@ -410,7 +410,9 @@ class PoseNoise:
 class SimSection:
     backend: str = _rule("pybullet", choices=SIM_BACKENDS)
     world: str = _rule("solo", choices=SIM_WORLDS)  # what `fleet driver` attaches a sim robot to
-    bus: str = _rule("private", choices=SIM_BUSES)  # fleet run's bus (see SIM_BUSES)
+    # fleet run's bus: "private" a free 127.0.0.1 port of its own (two runs side by side), or
+    # "config" the [zenoh] endpoints as written (tools attach to the run there)
+    bus: str = _rule("private", choices=SIM_BUSES)
     # s per physics step: at least MIN_TIMESTEP (below it a second of sim takes hours) and at
     # most one control tick (1 / fleet.rate_hz), checked after the walk
     timestep: float = _rule(1.0 / 240.0, min=MIN_TIMESTEP, max=1)
@@ -429,7 +431,8 @@ class SimSection:
     tick_timeout: float = _rule(10.0, gt=0, max=600)
     max_time: float = _rule(300.0, gt=0, max=1e6)
     # the pybullet object as it really is, against what [object] tells the controller (the
-    # robustness sweep of bench/transport.py; 1, 1 and (0, 0): the same object)
+    # robustness sweeps of bench/transport_loop.py and bench/transport_compare.py; 1, 1 and
+    # (0, 0): the same object)
     object_mass_scale: float = _rule(1.0, gt=0, max=100)
     object_friction_scale: float = _rule(1.0, min=0, max=100)
     object_com_offset: Point = _rule((0.0, 0.0))
