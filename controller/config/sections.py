@@ -295,6 +295,8 @@ class CaptureSection:
     generations: int = _rule(600, min=1, max=1000000)
     seed: int = _rule(0, min=0)
     closure: str = _rule("exact", choices=CLOSURE_MODES)
+    # the GA of the capture points and of Eq. 5's pushers: ours (a GA plus local search and
+    # restarts) or "paper" (Sharma et al.'s as published, MATLAB ga's operators)
     ga: str = _rule("ours", choices=CAPTURE_GAS)
     # N: the largest push of the object the robots must resist at their contacts (and that force
     # times its radius of gyration in torque), with every robot at most its max_force; points

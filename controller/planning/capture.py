@@ -609,7 +609,12 @@ def run_ga(
     return search.result(evals, history)
 
 
-def run_paper_ga(prob: Problem, rng: np.random.Generator) -> GAResult:
+def run_paper_ga(
+    prob: Problem,
+    rng: np.random.Generator,
+    objective: Objective | None = None,
+    init: tuple[int, int] = (3, 6),
+) -> GAResult:
     """Sharma et al.'s GA as published, the baseline for :func:`run_ga`: binary strings, the
     penalty −1e20 on every infeasible string (no ranking among them), population
     ``population`` (60), crossover fraction ``crossover`` (0.8), mutation ``mutation`` (0.12)
@@ -620,16 +625,18 @@ def run_paper_ga(prob: Problem, rng: np.random.Generator) -> GAResult:
     bit flipped with probability ``mutation`` (mutation only on children not made by
     crossover). No local search, no restarts. One deviation, stated: initial strings hold 3-6
     robots like ours (a uniform random start, half the bits set, never reaches a feasible set).
+    ``objective`` and ``init`` as for :func:`run_ga` (Eq. 5's pushers: exactly n robots).
     """
     p = prob.params
+    fn = objective or (lambda x: evaluate(prob, x))
     k = len(prob.cand.points)
-    hi = min(6, prob.max_robots or 6)
-    lo = min(3, hi)
+    hi = min(init[1], prob.max_robots or init[1])
+    lo = min(init[0], hi)
     n = p.population
     n_elite = min(int(np.ceil(0.05 * n)), n)
     n_cross = int(round(p.crossover * (n - n_elite)))
     pop = _initial(k, n, rng, lo, hi)
-    f, v = evaluate(prob, pop)
+    f, v = fn(pop)
     search = _Search(k)
     search.note(pop, f, v)
     evals = n
@@ -651,11 +658,11 @@ def run_paper_ga(prob: Problem, rng: np.random.Generator) -> GAResult:
         cross = np.where(rng.random((n_cross, k)) < 0.5, a, b)
         mut = pop[parents[2 * n_cross :]] ^ (rng.random((n - n_elite - n_cross, k)) < p.mutation)
         new = np.vstack([cross, mut])
-        fn, vn = evaluate(prob, new)
+        f_new, vn = fn(new)
         evals += len(new)
-        search.note(new, fn, vn)
+        search.note(new, f_new, vn)
         pop = np.vstack([elite, new])
-        f = np.concatenate([f[order[:n_elite]], fn])
+        f = np.concatenate([f[order[:n_elite]], f_new])
         history.append(search.best_f if np.isfinite(search.best_f) else PENALTY)
     return search.result(evals, history)
 
@@ -989,13 +996,15 @@ def plan_push_arrangement(
     params: CaptureParams,
     rng: np.random.Generator,
 ) -> tuple[np.ndarray, float]:
-    """Eq. 5 by the GA: the n nodes (indices into the candidates) pushing hardest along D."""
+    """Eq. 5 by the GA ``capture.ga`` names (ours, or the paper's as published): the n nodes
+    (indices into the candidates) pushing hardest along D."""
     prob = make_problem(polygon, robot_radius, params)
 
     def fn(x: np.ndarray):
         return push_objective(prob, direction, n, x)
 
-    res = run_ga(prob, rng, objective=fn, init=(n, n))  # strings start with exactly n robots
+    ga = run_paper_ga if params.ga == "paper" else run_ga
+    res = ga(prob, rng, objective=fn, init=(n, n))  # strings start with exactly n robots
     return np.flatnonzero(res.best), res.objective
 
 

@@ -173,6 +173,27 @@ def test_push_arrangement_matches_brute_force():
         assert f_ga > 0 and residual < 1e-9
 
 
+def test_eq5_runs_the_ga_capture_ga_names(monkeypatch):
+    # capture.ga = "paper" makes Eq. 5's pushers the paper's GA too (issue 34 item 3), not ours
+    from controller.planning import capture as cap
+
+    calls = []
+
+    def spy(*args, **kwargs):
+        calls.append(kwargs)
+        return real(*args, **kwargs)
+
+    real = cap.run_paper_ga
+    monkeypatch.setattr(cap, "run_paper_ga", spy)
+    d, n = np.array([1.0, 1.0]), 3
+    for ga in ("ours", "paper"):
+        params = CaptureParams(spacing=0.15, generations=150, ga=ga)
+        idx, f = plan_push_arrangement(L_SHAPE, 0.08, d, n, params, np.random.default_rng(3))
+        _, f_bf = brute_force_push(L_SHAPE, 0.08, d, n, params)
+        assert len(idx) == n and 0 < f <= f_bf + 1e-9  # a real answer, never above the optimum
+    assert len(calls) == 1 and calls[0]["init"] == (n, n)
+
+
 def test_assignment_minimises_total_travel_time():
     robots = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0], [5.0, 5.0]])
     targets = np.array([[9.0, 9.0], [1.0, 1.0], [9.0, 1.0], [1.0, 9.0]])
