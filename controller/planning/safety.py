@@ -35,6 +35,12 @@ from scipy import sparse
 from controller import geometry
 
 INF = 1e20
+MAX_ITER = 2000  # osqp's iterations for one solve
+# a solve that stops at MAX_ITER goes on from its last iterate this many times longer before it
+# counts as failed: ADMM near its limit ends on either side of it with the input's last bits
+# (numpy's SIMD kernels), so the same log once replayed "relaxed" on one CPU and "every robot
+# stopped" on another
+MORE_ITER = 4
 # robot pairs above which the QP keeps only the pairs that can bind (about 17 robots): below,
 # every pair's row (the golden logs' fleets of 6 replay unchanged); above, the pair rows
 # (N²/2: 4 950 at 100 robots) made osqp most of the lab tick
@@ -212,7 +218,7 @@ class SafetyFilter:
             warm_starting=True,
             eps_abs=1e-4,
             eps_rel=1e-4,
-            max_iter=2000,
+            max_iter=MAX_ITER,
         )
 
     def filter(
@@ -369,6 +375,16 @@ class SafetyFilter:
         both = np.asarray(close, bool)[pi] & np.asarray(close, bool)[pj]
         return np.where(both, min(self.margin, self.close_margin), self.margin)
 
+    def _run(self):
+        """osqp's solve; one that stopped at its iteration limit goes on from where it stopped
+        (``MORE_ITER`` × longer) before its answer counts."""
+        res = self._prob.solve(raise_error=False)
+        if str(res.info.status).startswith("maximum iterations"):
+            self._prob.update_settings(max_iter=MORE_ITER * MAX_ITER)
+            res = self._prob.solve(raise_error=False)
+            self._prob.update_settings(max_iter=MAX_ITER)
+        return res
+
     def _solve(
         self,
         lo: np.ndarray,
@@ -385,11 +401,11 @@ class SafetyFilter:
             return self._without(lo, hi, rows.pair, rows.poly, stopped, "infeasible")
         if not fresh:
             self._prob.update(l=lo, u=hi)
-        res = self._prob.solve(raise_error=False)
+        res = self._run()
         status = str(res.info.status)
         for relaxed in rows.relaxations(lo) if not _solved(res) else ():
             self._prob.update(l=relaxed)
-            res = self._prob.solve(raise_error=False)
+            res = self._run()
             if _solved(res):
                 status = "relaxed"
                 break
@@ -425,12 +441,12 @@ class SafetyFilter:
         box[2 * n :][held] = 0.0
         box_hi[2 * n :][held] = 0.0
         self._prob.update(l=lo2, u=hi2)
-        res = self._prob.solve(raise_error=False)
+        res = self._run()
         if not _solved(res):
             # warm-started from an infeasible solve's iterates, ADMM can stall (max_iter) on a
             # problem that standing still makes feasible: once more from rest before stopping all
             self._prob.warm_start(x=np.zeros(2 * n), y=np.zeros(self.m))
-            res = self._prob.solve(raise_error=False)
+            res = self._run()
         if not _solved(res):
             return np.zeros((n, 2)), status, np.ones(n, bool)
         u = res.x.reshape(n, 2)

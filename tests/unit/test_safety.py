@@ -356,3 +356,25 @@ def test_a_held_robot_inside_its_margin_freezes_no_one():
     assert np.allclose(res.velocities[0], 0.0)  # the held robot stays held
     assert res.velocities[1, 0] < -0.05 and res.velocities[2, 0] > 0.05  # the movers back off
     assert abs(res.velocities[1, 1] + 0.3) < 0.05 and abs(res.velocities[2, 1] - 0.3) < 0.05
+
+
+def test_a_solve_stopped_at_its_iteration_limit_goes_on_before_anyone_is_stopped(monkeypatch):
+    # osqp stopping at max_iter is not an infeasible QP: near the limit the same inputs, down to
+    # numpy's SIMD kernels' last bits, ended "relaxed" on one CPU and "every robot stopped" on
+    # another. Held to a few iterations, the filter goes on from where osqp stopped and gives
+    # the fully converged answer; without going on, it would stop the robots
+    from controller.planning import safety
+
+    r = np.full(3, 0.1)
+    p = np.array([[5.0, 5.0], [5.32, 5.0], [7.0, 6.0]])
+    nom = np.array([[0.3, 0.05], [-0.3, 0.0], [0.2, -0.1]])
+    ref = SafetyFilter(r, np.full(3, 0.4), BOUNDS, 0, margin=0.05).filter(p, nom, [])
+    assert ref.status == "solved"
+    monkeypatch.setattr(safety, "MAX_ITER", 10)
+    monkeypatch.setattr(safety, "MORE_ITER", 400)
+    res = SafetyFilter(r, np.full(3, 0.4), BOUNDS, 0, margin=0.05, warm=False).filter(p, nom, [])
+    assert res.status == "solved" and not res.stopped.any()
+    assert np.allclose(res.velocities, ref.velocities, atol=2e-3)
+    monkeypatch.setattr(safety, "MORE_ITER", 1)  # no going on: the answer would not count
+    res = SafetyFilter(r, np.full(3, 0.4), BOUNDS, 0, margin=0.05, warm=False).filter(p, nom, [])
+    assert res.status != "solved"
