@@ -11,7 +11,9 @@
    never tuned on) × strategies, each a whole ``fleet run --mission transport`` in lockstep on
    ``--backend`` (pybullet by default: only it measures contact forces). Per strategy: success
    on our criterion (delivered within the position *and* heading tolerance, clean verdict) and
-   on Sharma's (the CG within the position tolerance at the end, heading free), each with its
+   on Sharma's (the CG, the object's centroid, within the position tolerance of the goal's
+   centroid at its first arrival there, §5's stopping rule, heading free, robots never
+   touching), each with its
    95 % Wilson interval; median transport time and contact impulse Σ|f|·dt with n and a 95 %
    bootstrap interval (over the runs each strategy delivered). Paired per (scenario, seed):
    McNemar's exact test on success, Wilcoxon's signed-rank test on time and impulse (runs both
@@ -164,7 +166,9 @@ def run_case(job: tuple) -> dict:
     clean = judge(res) == []
     ours = bool(res.get("transported")) and res.get("status") == "ok" and clean
     err = res.get("goal_error_m")
-    paper = clean and err is not None and err <= cfg.transport.tolerance
+    # Sharma's criterion: the CG (the centroid) within the tolerance of the goal's, at its
+    # first arrival (§5's stopping rule), heading free; never touching (a clean verdict)
+    paper = clean and res.get("goal_centroid_reached_s") is not None
     log(
         f"  {label} {sc.name} seed {seed} {strategy}: {'ok' if ours else 'NOT'} "
         f"(paper {'ok' if paper else 'NOT'}, {res.get('reason') or ''}) "
@@ -179,6 +183,8 @@ def run_case(job: tuple) -> dict:
         "reason": res.get("reason"),
         "goal_error_m": err,
         "goal_error_deg": res.get("goal_error_deg"),
+        "goal_centroid_error_m": res.get("goal_centroid_error_m"),
+        "goal_centroid_reached_s": res.get("goal_centroid_reached_s"),
         "transport_time_s": res.get("transport_time_s"),
         "impulse_ns": res.get("contact_impulse_ns"),
         "lateral_deviation_rms_m": res.get("lateral_deviation_rms_m"),

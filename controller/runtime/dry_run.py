@@ -130,7 +130,8 @@ class TransportScore:
         self.end_t: float | None = None
         self.route: np.ndarray | None = None
         self.route_length: float | None = None
-        self.path: list[np.ndarray] = []
+        self.path: list[np.ndarray] = []  # the object's centroid, world frame, every tick
+        self.path_t: list[float] = []
         self.lateral: list[float] = []
         self.forces: list[float] = []
         self.impulse = 0.0
@@ -156,6 +157,7 @@ class TransportScore:
         pose = world.object_pose()
         c = geometry.transform(self.centroid[None], pose)[0]
         self.path.append(c)
+        self.path_t.append(t)
         if self.route is not None and len(self.route) > 1:
             origin = pose[:2]
             d, _ = geometry.point_segment_distance(origin[None], self.route[:-1], self.route[1:])
@@ -181,6 +183,10 @@ class TransportScore:
         t = self.cfg.transport
         within = err <= t.tolerance and err_deg <= t.heading_tolerance_deg
         path = np.asarray(self.path).reshape(-1, 2)
+        goal_c = geometry.transform(self.centroid[None], np.asarray(goal, float))[0]
+        end_c = geometry.transform(self.centroid[None], pose)[0]
+        near = np.flatnonzero(np.linalg.norm(path - goal_c, axis=1) <= t.tolerance)
+        reached = round(self.path_t[near[0]] - self.start_t, 3) if near.size else None
         lat = np.asarray(self.lateral)
         f = np.asarray(self.forces)
         end = self.end_t if self.end_t is not None else None
@@ -197,6 +203,8 @@ class TransportScore:
             contact_force_max_n=float(f.max()) if len(f) else None,
             contact_impulse_ns=self.impulse,
             transport_object_min_clearance_m=None if math.isinf(self.clearance) else self.clearance,
+            goal_centroid_error_m=float(np.linalg.norm(end_c - goal_c)),
+            goal_centroid_reached_s=reached,
             carried=True,
         )
 

@@ -38,6 +38,12 @@ class TransportFigures:
     contact_force_max_n: float | None = None
     contact_impulse_ns: float | None = None
     transport_object_min_clearance_m: float | None = None
+    # m: the object's centroid (its CG, uniform density) from the centroid it has at the goal
+    # pose, at the end; Sharma et al.'s criterion judges the CG, not the polygon's frame origin
+    goal_centroid_error_m: float | None = None
+    # s from the transport's start to the centroid's first arrival within transport.tolerance
+    # of the goal's centroid (Sharma §5's stopping rule; null if it never came that near)
+    goal_centroid_reached_s: float | None = None
     carried: bool = False
 
     def to_json(self) -> dict[str, Any]:
