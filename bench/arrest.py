@@ -4,7 +4,14 @@ from ground truth, and the speed edge: the highest object speed arrested in open
 omni robots of 0.5 m/s.
 
     python bench/arrest.py [--only NAME ...] [--no-edge] [--no-suite] [--speeds 0.25,...]
-                           [--seeds 10] [--variants baseline,new] [--quick]
+                           [--seeds 10] [--variants baseline,new] [--quick] [--filter-off]
+
+``--filter-off`` (Sharma et al.'s claim that the projective paths of the approach need no
+safety filter): the suite twice in this process, on the same scenarios, with the safety filter
+on and then off (every robot's velocity as the mission asks, only the tracking law's limits;
+the filter is bypassed in this bench process alone, no config can turn it off); per run the
+outcome, the robots' closest approach to each other and to the object from the world's truth,
+and collisions (robots touching).
 
 The speed edge runs every seed of every speed once per variant, in this process: ``baseline``
 (the approach's rules before the interception of oncoming objects) and ``new``; each speed's
@@ -24,6 +31,8 @@ import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench import stats  # noqa: E402
 from controller.mission.factory import build_mission  # noqa: E402
+from controller.planning import safety  # noqa: E402
 from controller.runtime.dry_run import DryRun  # noqa: E402
 from tests.support.arrest_scenarios import (  # noqa: E402
     OPEN,
@@ -45,6 +55,56 @@ from tests.support.arrest_scenarios import (  # noqa: E402
 
 def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
+
+
+@contextmanager
+def filter_off() -> Iterator[None]:
+    """The safety filter bypassed in this process: every robot gets its nominal velocity (a
+    stale or held one zero), as the mission's planner asks it."""
+    real = safety.SafetyFilter.filter
+
+    def nominal(self, positions, u_nom, polygons, stale=None, **_kw):
+        u = np.array(u_nom, float)
+        if stale is not None:
+            u[np.asarray(stale, bool)] = 0.0
+        return safety.FilterResult(u, "off", np.zeros(self.n, bool), 0.0, None)
+
+    safety.SafetyFilter.filter = nominal
+    try:
+        yield
+    finally:
+        safety.SafetyFilter.filter = real
+
+
+def filter_pairs(wanted: list[ArrestScenario], out_dir: Path) -> dict:
+    """Each scenario with the filter on, then off; collisions and closest approaches."""
+    for sub in ("on", "off"):
+        (out_dir / sub).mkdir(parents=True, exist_ok=True)
+    on = [run_one(sc, out_dir / "on") for sc in wanted]
+    with filter_off():
+        off = [run_one(sc, out_dir / "off") for sc in wanted]
+
+    def brief(r: dict) -> dict:
+        gap = r["min_clearance_m"]
+        reason = (r.get("failure") or {}).get("reason")
+        return {
+            "outcome": r["outcome"],
+            "min_clearance_m": gap,
+            "object_min_clearance_m": r["object_min_clearance_m"],
+            "collision": bool(reason == "collision" or (gap is not None and gap < 0.0)),
+        }
+
+    runs = [
+        {"name": sc.name, "on": brief(a), "off": brief(b)}
+        for sc, a, b in zip(wanted, on, off, strict=True)
+    ]
+    return {
+        "runs": runs,
+        "collisions_on": sum(r["on"]["collision"] for r in runs),
+        "collisions_off": sum(r["off"]["collision"] for r in runs),
+        "arrests_on": sum(r["on"]["outcome"] == "arrest" for r in runs),
+        "arrests_off": sum(r["off"]["outcome"] == "arrest" for r in runs),
+    }
 
 
 def run_one(sc: ArrestScenario, out_dir: Path) -> dict:
@@ -212,6 +272,11 @@ def main() -> None:
     ap.add_argument(
         "--quick", action="store_true", help="a profile: 2 seeds at 0.40 and 0.45, no suite"
     )
+    ap.add_argument(
+        "--filter-off",
+        action="store_true",
+        help="the suite with the safety filter on, then off (Sharma's claim); nothing else",
+    )
     args = ap.parse_args()
     if args.quick:
         args.seeds, args.speeds, args.no_suite = 2, "0.40,0.45", True
@@ -221,6 +286,12 @@ def main() -> None:
     logging.basicConfig(level=logging.ERROR)
     out = tempfile.mkdtemp(prefix="arrest-bench-")
     wanted = [sc for sc in SCENARIOS if not args.only or sc.name in args.only]
+    if args.filter_off:
+        res = {"bench": "arrest_filter", "load_avg_1m": os.getloadavg()[0]}
+        res.update(filter_pairs(wanted, Path(out)))
+        res["load_avg_1m_end"] = os.getloadavg()[0]
+        print(json.dumps(res, indent=1))
+        return
     rows = [] if args.no_suite else [run_one(sc, Path(out)) for sc in wanted]
     held = [r["hold_displacement_m"] for r in rows if r["outcome"] == "arrest"]
     result = {

@@ -649,6 +649,39 @@ def arrest(r: dict) -> str:
     )
 
 
+def arrest_filter(r: dict) -> str:
+    """The arrest suite with the safety filter on and off (Sharma's collision-free claim)."""
+
+    def cm(x: float | None) -> str:
+        if x is None:
+            return "-"
+        return f"{x * 1e6:.0f} µm (touching)" if x < 0 else f"{x * 1e2:.1f} cm"
+
+    rows = []
+    for x in r["runs"]:
+        a, b = x["on"], x["off"]
+        rows.append([
+            f"`{x['name']}`", f"`{a['outcome']}`", cm(a["min_clearance_m"]),
+            f"`{b['outcome']}`", cm(b["min_clearance_m"]), cm(b["object_min_clearance_m"]),
+            "**yes**" if b["collision"] else "no",
+        ])  # fmt: skip
+    head = ["scenario", "filter on: outcome", "robots' closest", "filter off: outcome",
+            "robots' closest", "closest to the object", "robots touched (off)"]  # fmt: skip
+    n = len(r["runs"])
+    holds = r["collisions_off"] == 0
+    return (
+        f"The arrest suite ({n} runs) twice in one process, on the same scenarios: the safety "
+        "filter on, then bypassed (every robot's velocity as the approach plans it). The "
+        "closest approaches are from the world's truth (a negative gap: robots touching). "
+        f"Robots touched in **{r['collisions_off']} of {n}** runs with the filter off "
+        f"({r['collisions_on']} with it on); arrests {r['arrests_off']} off, {r['arrests_on']} "
+        f"on. Sharma et al.'s claim that the projective paths are collision-free without a "
+        f"filter {'holds on this suite' if holds else '**does not hold** on this suite'}. "
+        f"Load {r['load_avg_1m']:.1f} at the start, {r['load_avg_1m_end']:.1f} at the end.\n\n"
+        + _table(head, rows)
+    )
+
+
 def arrest_edge(r: dict) -> str:
     """The speed edge (``bench/arrest.py --no-suite``): per speed and approach rules, the seeds
     arrested in open space with a Wilson interval, the median arrest time, the paired count."""
@@ -813,8 +846,7 @@ def sitl(r: dict) -> str:
         f"{r['telemetry_hz']:.0f} Hz granted. From {r['speed_mps']} m/s to the firmware's "
         f"first LOCAL_POSITION_NED under {r['stopped_below_mps']} m/s, {r['tries']} tries "
         f"each. Goal under {goal:.0f} s with the default: {_met(best < goal)} "
-        f"({best:.2f} s).\n\n"
-        + _table(["stop setting", "stopped by", "median", "min–max"], rows)
+        f"({best:.2f} s).\n\n" + _table(["stop setting", "stopped by", "median", "min–max"], rows)
     )
 
 
@@ -845,6 +877,21 @@ def _claims(sec: dict, label: str) -> list[str]:
     return out
 
 
+def _sharma_criterion(r: dict) -> str:
+    """What the row's "Sharma" column measured: the centroid at its first arrival (rows with
+    ``goal_centroid_reached_s``), or, in older rows, the polygon frame's origin at the end."""
+    runs = r.get("closed_loop_runs") or r.get("robustness_runs") or []
+    if runs and "goal_centroid_reached_s" in runs[0]:
+        return (
+            "the CG, the object's centroid, within the position tolerance of the goal's at its "
+            "first arrival, heading free, clean verdict"
+        )
+    return (
+        "in this row measured at the polygon frame's origin, not the CG, at the end of the "
+        "run, heading free"
+    )
+
+
 def transport_compare(r: dict) -> str:
     from bench.transport_compare import table
 
@@ -870,7 +917,7 @@ def transport_compare(r: dict) -> str:
             else "no robustness set in this row. "
         )
         + "Success on our criterion (delivered within the position and heading tolerance, clean "
-        "verdict) and on Sharma's (the CG within the position tolerance, heading free), with "
+        f"verdict) and on Sharma's ({_sharma_criterion(r)}), with "
         "95 % Wilson intervals; medians over the runs a strategy delivered with bootstrap "
         "intervals; paired: McNemar's exact test on success, Wilcoxon on time and impulse, "
         "Holm across the table.\n\n"
@@ -1073,6 +1120,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "arrest": arrest,
     "arrest_edge_low": arrest_edge,
     "arrest_edge_high": arrest_edge,
+    "arrest_filter": arrest_filter,
     "approach": approach,
     "contact_lp": contact_lp,
     "estimation": estimation,
