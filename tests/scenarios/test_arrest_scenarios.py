@@ -4,7 +4,7 @@ arrest. Walls, corners, fast (0.3 and 0.4 m/s against robots of 0.5 m/s), evasiv
 objects (tests/support/arrest_scenarios.py, also run by bench/arrest.py).
 
 Each run reports its own measured verdict (``expect`` in tests/support/arrest_scenarios.py; of
-the six wall and corner runs three arrest, three are ``pinned``): an arrest (every contact robot
+the six wall and corner runs four arrest, two are ``pinned``): an arrest (every contact robot
 truly within 2 cm of the surface at the arrest, the object held within 5 cm from the start of
 the hold on, a clean verdict) or, at a wall or in a corner, the failure ``pinned`` saying
 where; none runs into a timeout."""
