@@ -27,6 +27,7 @@ stop, the others keep their nominal velocity (speed-capped), and the status says
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import osqp
@@ -375,7 +376,7 @@ class SafetyFilter:
         both = np.asarray(close, bool)[pi] & np.asarray(close, bool)[pj]
         return np.where(both, min(self.margin, self.close_margin), self.margin)
 
-    def _run(self):
+    def _run(self) -> Any:
         """osqp's solve; one that stopped at its iteration limit goes on from where it stopped
         (``MORE_ITER`` × longer) before its answer counts."""
         res = self._prob.solve(raise_error=False)
