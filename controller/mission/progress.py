@@ -162,7 +162,11 @@ def plan_route_job(box: JobOwned, cfg: FleetConfig, pose: np.ndarray) -> RouteRe
 
 
 def route_planner_for(cfg: FleetConfig) -> RoutePlanner:
-    """The object's route planner toward ``object.goal`` (C-space and cost-to-go table built)."""
+    """The object's route planner toward ``object.goal`` (C-space and cost-to-go table built),
+    keeping to the ways the whole fleet can push the object (``planning.pushability``: a route
+    the robots cannot push along is planned again with the object turned where they can)."""
+    from controller.planning.arrangement import TURN_MARGIN
+    from controller.planning.pushability import PushDirections
     from controller.planning.route import RoutePlanner
 
-    return RoutePlanner.from_config(cfg)
+    return RoutePlanner.from_config(cfg, push=PushDirections.from_config(cfg, TURN_MARGIN))

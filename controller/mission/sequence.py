@@ -47,6 +47,7 @@ class Cue(StrEnum):
     CANNOT_PUSH = "cannot_push"  # a new route segment the contacts cannot push along: new ones
     ARRANGED = "arranged"  # rearrange: every mover at its new contact
     RESET = "reset"  # rearrange: the set is given up (a mover blocked): another set
+    UNPUSHABLE = "unpushable"  # rearrange: no set pushes the (heavy) object this way: a new route
     STUCK = "stuck"  # transport: the local plans keep re-positioning without pushing
     OFF_ROUTE = "off_route"  # transport: the object left the route's corridor
     DELIVERED = "delivered"  # route, rearrange, transport: the object inside the goal tolerance
@@ -125,6 +126,7 @@ TRANSITIONS: dict[tuple[Phase, Cue], Phase] = {
     (Phase.ROUTE, Cue.CANNOT_PUSH): Phase.REARRANGE,
     (Phase.REARRANGE, Cue.ARRANGED): Phase.TRANSPORT,
     (Phase.REARRANGE, Cue.RESET): Phase.REARRANGE,
+    (Phase.REARRANGE, Cue.UNPUSHABLE): Phase.ROUTE,
     (Phase.REARRANGE, Cue.DELIVERED): Phase.DONE,
     (Phase.TRANSPORT, Cue.CAN_PUSH): Phase.TRANSPORT,  # the next segment, pushed as they are
     (Phase.TRANSPORT, Cue.CANNOT_PUSH): Phase.REARRANGE,  # the next segment, new contacts

@@ -1,8 +1,8 @@
 """TransportMission: carry the arrested object to ``object.goal`` (Sharma §4, Yamashita §3-4,
 Vass §4), in the same closed loop as the capture. Its phases (moved by ``mission.sequence``):
 
-- ``route``: the object's route (weighted A*, ``controller.planning.route``) from its estimate
-  to the goal, cut into subgoals (event ``route``); none: ``failed``/``no_route``, all stop.
+- ``route``: the object's route (weighted A*, ``controller.planning.route``, along the ways
+  the fleet can push) to the goal, in subgoals; none: ``no_route`` or ``too_heavy``, all stop.
 - ``rearrange``: when the contacts cannot push along the segment (the contact-force LP), a new
   set (Sharma's Eq. 5) and the robots nearest to it move there (``mission.rearrange``).
 - ``transport``: a local plan every interval (``transport.strategy``: simulated annealing,
@@ -189,12 +189,12 @@ class TransportMission:
         if got is None:
             return self._held(view, pose, events)
         if not got.ok:
-            return self._fail(
-                Reason.NO_ROUTE, f"the route planner failed: {got.error}", view, events
-            )
+            why = f"the route planner failed: {got.error}"
+            return self._fail(Reason.NO_ROUTE, why, view, events)
         res = got.value
         if not res.ok:
-            return self._fail(Reason.NO_ROUTE, res.reason, view, events)
+            why = Reason.TOO_HEAVY if res.too_heavy else Reason.NO_ROUTE
+            return self._fail(why, res.reason, view, events)
         self.way.begin(res, view.t)
         event = RouteEvent(
             t=view.t,
@@ -232,8 +232,8 @@ class TransportMission:
         self.rearranger.ask(view.t, self.way.direction(pose), self.grip.active())
 
     def _take_arrangement(self, view: FleetView, pose: np.ndarray, events: list) -> Intent | None:
-        """The new contacts, once they have come (None: go on with them); meanwhile the robots
-        hold; a set no robots can push with fails ``too_heavy`` before anyone pushes."""
+        """The new contacts, once come (None: go on with them; meanwhile the robots hold); a set
+        no robots can push with fails ``too_heavy``, or re-plans a push-limited route."""
         got = self.rearranger.take(view.t)
         if got is None:
             return self._held(view, pose, events)
@@ -241,6 +241,10 @@ class TransportMission:
             detail = f"the re-arrangement planner failed: {got.error}"
             return self._fail(Reason.STALLED, detail, view, events)
         if not got.value.feasible:
+            if self.way.route.push_limited and self.route_replans < self.s.max_route_replans:
+                self.route_replans += 1
+                self._cue(Cue.UNPUSHABLE, view.t, events)
+                return self._held(view, pose, events)
             return self._fail(Reason.TOO_HEAVY, got.value.detail, view, events)
         direction = self.way.direction(pose)
         self.grip.regrip(view, pose, got.value.points, got.value.normals)
@@ -363,6 +367,8 @@ class TransportMission:
             to_goal = self.way.remaining(pose)
         else:
             to_goal = float(np.linalg.norm(pose[:2] - np.asarray(self.cfg.object.goal)[:2]))
+        sub = float(self.way.subgoal)
+        progress = {"phase": str(self.phase), "to_goal_m": to_goal, "subgoal": sub}
         return Intent.of(
             vel,
             self.phase,
@@ -372,11 +378,7 @@ class TransportMission:
             overlap=float(self.cfg.max_robot_radius) if np.any(touch) else 0.0,
             cage=True,
             hold=hold,
-            progress={
-                "phase": str(self.phase),
-                "to_goal_m": to_goal,
-                "subgoal": float(self.way.subgoal),
-            },
+            progress=progress,
             object_push=None if twist is None else np.asarray(twist, float),
         )
 

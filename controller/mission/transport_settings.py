@@ -14,6 +14,7 @@ from controller.config import FleetConfig, TransportSection, configured, from_se
 from controller.mission.grip import GripSettings
 from controller.mission.progress import ProgressSettings
 from controller.mission.sequence import SequenceSettings
+from controller.planning.arrangement import TURN_MARGIN
 
 SEQUENCE = SequenceSettings(carry=True)  # the transport is the job carrying the object on
 _TRANSPORT = TransportSection()  # the config's defaults: the settings' defaults of its keys
@@ -38,7 +39,7 @@ class TransportSettings:
     settle_margin: float = 0.6  # the estimate must be this share of the tolerances from the goal
     accept_margin: float = 0.85  # ... or this share when the object stalls there
     stuck_plans: int = 3
-    turn_margin: float = 1.2  # a set chosen to turn the object produces this times the wrench
+    turn_margin: float = TURN_MARGIN  # a set chosen by the LP produces this times the wrench
     max_rearrangements: int = 8  # re-arrangements in a row without progress, then stalled
 
     @property

@@ -18,6 +18,7 @@ from controller.planning.contact_lp import GRAVITY, ContactForceLP, required_wre
 from controller.planning.transport import local_strategy
 
 TURN_SHARE = 0.3  # a segment whose turn takes more than this share of the unit twist turns
+TURN_MARGIN = 1.2  # a set chosen by the LP produces this times the wrench the segment needs
 
 
 @dataclass(frozen=True)

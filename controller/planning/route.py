@@ -65,7 +65,7 @@ import heapq
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -80,6 +80,9 @@ from controller.planning.cspace import (
     ObjectCSpace,
     build_object_cspace,
 )
+
+if TYPE_CHECKING:
+    from controller.planning.pushability import PushDirections
 
 FloatArray = NDArray[np.float64]
 INF = math.inf
@@ -106,7 +109,10 @@ class RouteResult:
     (turns in place add none); rotation_rad: total turning; manipulations: number of
     re-arrangements paid for; expanded: nodes expanded (N_open); generated: nodes pushed on the
     open list; reexpanded: expansions of an already expanded node; f_trace: f of each expansion
-    (only when asked for).
+    (only when asked for); too_heavy: no route exists along which the fleet can push the object
+    (the reason says the force needed and the best any set reaches), though one exists for the
+    object alone; push_limited: the route keeps to the ways the fleet can push (a heavy object:
+    the route without that limit asked for a push no set of the fleet makes).
     """
 
     status: str
@@ -124,6 +130,8 @@ class RouteResult:
     wg: float = 1.0
     wh: float = 1.0
     f_trace: FloatArray = field(default_factory=lambda: np.zeros(0))
+    too_heavy: bool = False
+    push_limited: bool = False
 
     @property
     def ok(self) -> bool:
@@ -157,6 +165,8 @@ class RouteResult:
             "heuristic": self.heuristic,
             "wg": self.wg,
             "wh": self.wh,
+            "too_heavy": self.too_heavy,
+            "push_limited": self.push_limited,
         }
 
 
@@ -396,6 +406,7 @@ class _Join:
     cost: float  # s, without manipulation charges
     seq: list[FloatArray]  # reference poses strictly between the exact pose and the state
     modes: tuple[int, ...]  # modes of its pieces in the order travelled (empty: no move at all)
+    push_angle: float | None = None  # its straight piece's direction in the object's frame (rad)
 
     @property
     def changes(self) -> int:
@@ -650,7 +661,8 @@ class _FastSearch:
         (their offsets, modes and costs are in :attr:`moves`)."""
         pl, free, margin = self.pl, self.free, self.margin
         k_bins, layer = pl.cspace.heading_bins, pl._layer
-        cands = [(d, c + pl._toff[d]) for d in range(8)]
+        ok = pl._push_ok[c // layer] if pl._push_ok is not None else [True] * 8
+        cands = [(d, c + pl._toff[d]) for d in range(8) if ok[d]]
         if k_bins > 1:
             k = c // layer
             cands.append(
@@ -798,13 +810,18 @@ class RoutePlanner:
 
     @classmethod
     def from_config(
-        cls, cfg: FleetConfig, goal: ArrayLike | None = None, cspace: ObjectCSpace | None = None
+        cls,
+        cfg: FleetConfig,
+        goal: ArrayLike | None = None,
+        cspace: ObjectCSpace | None = None,
+        push: PushDirections | None = None,
     ) -> RoutePlanner:
         """A planner toward ``goal`` (default ``object.goal``) for the config's world, obstacles,
         object and largest robot, with its ``[route]`` parameters; pass ``cspace`` (from
-        :func:`object_cspace`) to share one C-space between goals."""
+        :func:`object_cspace`) to share one C-space between goals, ``push`` to keep to the
+        ways the fleet can push the object."""
         cs = cspace if cspace is not None else object_cspace(cfg)
-        return cls(cs, cfg.object.goal if goal is None else goal, cfg.route)
+        return cls(cs, cfg.object.goal if goal is None else goal, cfg.route, push=push)
 
     def __init__(
         self,
@@ -813,6 +830,7 @@ class RoutePlanner:
         params: RouteSection,
         *,
         turn_bound: bool = True,
+        push: PushDirections | None = None,
     ):
         kind, wg, wh = params.heuristic, float(params.wg), float(params.wh)
         _check_weights(wg, wh)
@@ -831,6 +849,8 @@ class RoutePlanner:
         self.params = params
         self.kind, self.wg, self.wh = kind, wg, wh
         self.goal = _pose3(goal, "goal")
+        self.push = push
+        self._push_ok: list[list[bool]] | None = None  # per heading bin and move: pushable
         fr = cspace.frame
         self._w, self._h = fr.nx + 2, fr.ny + 2
         self._layer = self._w * self._h
@@ -914,7 +934,7 @@ class RoutePlanner:
                 s += step
         return None if best is None else best[1]
 
-    def _joins(self, pose: FloatArray, to_goal: bool) -> list[_Join]:
+    def _joins(self, pose: FloatArray, to_goal: bool, every: bool = False) -> list[_Join]:
         """Collision-free ways between an exact pose and the lattice states around it.
 
         Candidates: the two nearest heading bins at the pose's cell and its 8 neighbours. Each
@@ -922,7 +942,8 @@ class RoutePlanner:
         then the move at the bin's heading) or, if that collides, the move first (at the pose's
         heading, then the turn at the cell centre). Both pieces are checked exactly. ``seq`` runs
         from the exact pose to the lattice state; a goal's way is travelled backwards (``modes``
-        are in the order travelled).
+        are in the order travelled). Once the search keeps to the ways the fleet can push
+        (:meth:`_restrict`), only those, unless ``every``.
         """
         cs, p = self.cspace, self.params
         ref = cs.ref_pose(pose)
@@ -971,12 +992,98 @@ class RoutePlanner:
                 seq = [via2[i], *_split_turn(via2[i], float(turns[i]), max_turn)[:-1]]
             pieces = [MODE_ROTATE, "move"] if ok1[i] else ["move", MODE_ROTATE]
             sizes = {MODE_ROTATE: abs(float(turns[i])), "move": float(np.hypot(*steps[i]))}
-            move = _step_mode(-steps[i] if to_goal else steps[i])
+            v = -steps[i] if to_goal else steps[i]
+            move = _step_mode(v)
             modes = [move if q == "move" else q for q in pieces if sizes[q] > 1e-12]
-            out.append(
-                _Join(self._flat(k, iy, ix), cost, seq, tuple(modes[::-1] if to_goal else modes))
-            )
+            heading = float(target[i, 2]) if ok1[i] else float(ref[2])  # where it moves
+            angle = math.atan2(v[1], v[0]) - heading if sizes["move"] > 1e-12 else None
+            ordered = tuple(modes[::-1] if to_goal else modes)
+            out.append(_Join(self._flat(k, iy, ix), cost, seq, ordered, angle))
+        if self._push_ok is not None and not every:  # only ways the fleet can push
+            out = [j for j in out if self._pushable(j.push_angle)]
+            have = {j.state for j in out}
+            out += self._turned_joins(ref, cells[[self._flat(*c) not in have for c in cand]],
+                                      to_goal)  # fmt: skip
         return out
+
+    def _turned_joins(self, ref: FloatArray, cells: NDArray[np.int_], to_goal: bool) -> list[_Join]:
+        """Ways the fleet can push between an exact pose (``ref``, the C-space's reference
+        pose) and lattice states (``cells``: (k, iy, ix)) whose straight piece it cannot push
+        at either end's heading: a turn in place to a heading at which it can push the object
+        that way, the straight move, a turn to the lattice heading (the three pieces checked
+        exactly; for a goal travelled backwards). The pushable heading that turns least is
+        tried first, then the next (three at most)."""
+        cs, p, chk = self.cspace, self.params, self.cspace.checker
+        assert self.push is not None
+        xs, ys = cs.frame.centers()
+        max_turn = min(cs.step, math.pi / 4)
+        pushable = self.push.pushable_angles()
+        out: list[_Join] = []
+        for k, iy, ix in (tuple(int(v) for v in c) for c in cells):
+            step = np.array([xs[ix], ys[iy]]) - ref[:2]
+            length = float(np.hypot(*step))
+            if length <= 1e-12 or not pushable:
+                continue
+            v = -step if to_goal else step
+            bin_heading = ref[2] + geometry.wrap_angle(k * cs.step - ref[2])
+            tries = []
+            for a in pushable:
+                phi = ref[2] + geometry.wrap_angle(math.atan2(v[1], v[0]) - a - ref[2])
+                t1 = float(phi - ref[2])
+                t2 = float(geometry.wrap_angle(bin_heading - phi))
+                tries.append((abs(t1) + abs(t2), t1, t2, phi, a))
+            for _, t1, t2, phi, a in sorted(tries)[:3]:
+                via_a = np.array([ref[0], ref[1], phi])
+                via_b = np.array([xs[ix], ys[iy], phi])
+                ok = (
+                    chk.rotations_free(ref[None], np.array([t1]))[0]
+                    and chk.poses_free(via_a[None])[0]
+                    and chk.translations_free(via_a[None], step[None])[0]
+                    and chk.poses_free(via_b[None])[0]
+                    and chk.rotations_free(via_b[None], np.array([t2]))[0]
+                )
+                if not ok:
+                    continue
+                seq = [
+                    *_split_turn(ref, t1, max_turn),
+                    via_b,
+                    *_split_turn(via_b, t2, max_turn)[:-1],
+                ]
+                pieces = [(MODE_ROTATE, abs(t1)), (_step_mode(v), length), (MODE_ROTATE, abs(t2))]
+                modes = [m for m, size in pieces if size > 1e-12]
+                ordered = tuple(modes[::-1] if to_goal else modes)
+                cost = (abs(t1) + abs(t2)) / p.yaw_rate + length / p.speed
+                out.append(_Join(self._flat(k, iy, ix), cost, seq, ordered, a))
+                break
+        return out
+
+    # -- pushing (issue 34, item 9) --------------------------------------------------------------
+    def _pushable(self, angle: float | None) -> bool:
+        """Whether the fleet can push the object along ``angle`` (rad, object frame; None: no
+        straight move)."""
+        return angle is None or self.push is None or self.push.can_push(angle)
+
+    def _unpushable_move(self, wp: FloatArray) -> bool:
+        """Whether a route's waypoints ask for a straight move the fleet cannot push."""
+        step = np.diff(wp, axis=0)
+        for (dx, dy, dth), heading in zip(step, wp[:-1, 2], strict=True):
+            if abs(geometry.wrap_angle(dth)) > 1e-12:
+                continue  # a turn in place (the frame's origin swings round the reference)
+            if math.hypot(dx, dy) > 1e-9 and not self._pushable(math.atan2(dy, dx) - heading):
+                return True
+        return False
+
+    def _restrict(self) -> None:
+        """From now on the search moves the object only where the fleet can push it: each
+        lattice translation by the heading it is made at, and the start's and goal's ways."""
+        cs = self.cspace
+        angles = [math.atan2(dy, dx) for dx, dy in MOVES_8]
+        self._push_ok = [
+            [self._pushable(a - k * cs.step) for a in angles] for k in range(cs.heading_bins)
+        ]
+        if self._goal_joins:
+            self._goal_joins = {j.state: j for j in self._joins(self.goal, True)}
+        self._fast = None
 
     # -- heuristics ---------------------------------------------------------------------------
     def _heuristic(self, turn_bound: bool) -> _PotentialH | _CostToGoH:
@@ -1107,12 +1214,7 @@ class RoutePlanner:
             goal_labels = {int(labels[self._unpadded(c)]) for c in self._goal_joins}
             reach = [j for j in reach if int(labels[self._unpadded(j.state)]) in goal_labels]
         if not reach:
-            why = (
-                "start and goal lie in different free regions of the C-space"
-                if joins
-                else "no lattice state next to the start joins it without a collision"
-            )
-            return _no_path(f"goal unreachable: {why}", kind, wg, wh)
+            return self._unreached(start_p, bool(joins))
         reopen = reopens(wg, wh, self.params.reopen)
         if self._fast is not None and not reference:
             out = self._fast.run(reach, wg, wh, pathmax, reopen, max_expanded, trace)
@@ -1120,8 +1222,34 @@ class RoutePlanner:
             out = self._reference_search(reach, pathmax, reopen, max_expanded, trace)
         counts = out.counts()
         if out.path is None:
+            if self._push_ok is not None and not out.limited:
+                return self._too_heavy(**counts)
             return _no_path(out.reason(max_expanded), kind, wg, wh, **counts)
-        return self._result(start_p, out.path, out.cost, {j.state: j for j in reach}, counts)
+        res = self._result(start_p, out.path, out.cost, {j.state: j for j in reach}, counts)
+        if self.push is not None and self._push_ok is None and self._unpushable_move(res.waypoints):
+            # the fleet cannot push the object along this route: from now on, only the ways
+            # it can (a heavy object turned to present a face where enough robots fit)
+            self._restrict()
+            return self.plan(start_p, pathmax=pathmax, max_expanded=max_expanded, trace=trace,
+                             reference=reference)  # fmt: skip
+        return replace(res, push_limited=self._push_ok is not None)
+
+    def _unreached(self, start_p: FloatArray, joined: bool) -> RouteResult:
+        """No start state the search could begin from: why (``joined``: some joined)."""
+        if self._push_ok is not None and self._joins(start_p, False, every=True):
+            return self._too_heavy()
+        why = (
+            "start and goal lie in different free regions of the C-space"
+            if joined
+            else "no lattice state next to the start joins it without a collision"
+        )
+        return _no_path(f"goal unreachable: {why}", self.kind, self.wg, self.wh)
+
+    def _too_heavy(self, **counts: Any) -> RouteResult:
+        """No way the fleet can push the object: why, in figures (``PushDirections``)."""
+        assert self.push is not None
+        detail = self.push.too_heavy_detail()
+        return _no_path(detail, self.kind, self.wg, self.wh, too_heavy=True, **counts)
 
     def _reference_search(
         self, reach: list[_Join], pathmax: bool, reopen: bool, max_expanded: int, trace: bool
@@ -1227,7 +1355,8 @@ class _ObjectMoves:
         """(move, cell) of the moves from lattice cell c to free cells (not yet checked)."""
         pl = self.pl
         k_bins, layer = pl.cspace.heading_bins, pl._layer
-        out = [(d, c + pl._toff[d]) for d in range(8)]
+        ok = pl._push_ok[c // layer] if pl._push_ok is not None else [True] * 8
+        out = [(d, c + pl._toff[d]) for d in range(8) if ok[d]]
         if k_bins > 1:
             k = c // layer
             out.append((TURN_UP, c - (k_bins - 1) * layer if k == k_bins - 1 else c + layer))

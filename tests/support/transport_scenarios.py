@@ -107,6 +107,7 @@ def scenario_dict(sc: Scenario, port: int | None = None) -> dict[str, Any]:
 # the transport suite (tests/scenarios/test_transport_scenarios.py): each reachable scenario
 # delivers; the too-heavy crate and the unreachable goal fail at once, with their reasons
 LONG_CRATE = [[0.0, 0.0], [0.6, 0.0], [0.6, 1.2], [0.0, 1.2]]  # pushed along x: a 1.2 m back
+TRAPEZOID = [[0.0, 0.0], [1.2, 0.0], [0.9, 0.6], [0.3, 0.6]]
 
 ROOM = ((0.0, 0.0), (8.0, 6.0))
 PILLAR = ((3.6, 1.2), (4.0, 1.2), (4.0, 1.6), (3.6, 1.6))
@@ -166,14 +167,40 @@ SCENARIOS = [
         backend="pybullet",
         kinds="dddddd",
     ),  # fmt: skip
+    # floor friction 14.4 N, 40 % of the six robots' 36 N; along x on its 0.5 m face only two
+    # robots of 6 N fit: the route keeps to the ways the fleet can push (item 9 of issue 34)
+    Scenario(
+        "turned-crate-pybullet",
+        CRATE,
+        (1.5, 2.5, 0.0),
+        (4.5, 2.5, 0.0),
+        backend="pybullet",
+        mass=4.89,
+        floor_friction=0.3,
+    ),
+    # issue 34's heavy load: 47 N of floor friction for 8 robots of 15 N, of which only the
+    # trapezoid's 1.2 m base takes enough to push it: turned a quarter turn and back
+    Scenario(
+        "heavy-trapezoid-pybullet",
+        TRAPEZOID,
+        (1.5, 2.5, 0.0),
+        (5.0, 2.5, 0.0),
+        backend="pybullet",
+        kinds="oooooooo",
+        mass=12.0,
+        floor_friction=0.4,
+        max_force=15.0,
+        max_time=300.0,
+        patch={"capture": {"hold_force": 0.0}},
+    ),
 ]
-TOO_HEAVY = Scenario(  # floor friction 14.4 N, 40 % of the six robots' 36 N; pushed along x on
-    "too-heavy-pybullet",  # its 0.5 m face, where two robots of 6 N fit
+TOO_HEAVY = Scenario(  # floor friction 29.4 N, 82 % of the six robots' 36 N, but at no heading
+    "too-heavy-pybullet",  # do enough robots of 6 N fit on the faces that push it
     CRATE,
     (1.5, 2.5, 0.0),
     (4.5, 2.5, 0.0),
     backend="pybullet",
-    mass=4.89,
+    mass=10.0,
     floor_friction=0.3,
 )
 UNREACHABLE = Scenario(

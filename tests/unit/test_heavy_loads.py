@@ -15,7 +15,7 @@ import pytest
 from controller.events import by_kind
 from controller.planning.arrangement import plan_arrangement
 from tests.support.transport_mission import lp_feasible, mission, view
-from tests.support.transport_scenarios import CRATE, Scenario
+from tests.support.transport_scenarios import CRATE, Scenario, scenario_config
 
 LONG_CRATE = [[0.0, 0.0], [0.6, 0.0], [0.6, 1.2], [0.0, 1.2]]
 FLEET_N = 36.0  # six robots of 6 N
@@ -70,13 +70,12 @@ def test_a_push_a_larger_set_can_make_gets_that_set(polygon, share, twist):
     assert lp_feasible(m, a.points, a.normals, np.asarray(twist) * m.params.speed, 6.0)
 
 
-def test_a_crate_too_heavy_for_the_robots_that_fit_fails_too_heavy_before_anyone_pushes():
-    """Floor friction 40 % of the fleet's summed force (14.4 N of 36 N), the crate pushed along
-    x on its 0.5 m face where two robots fit: the transport fails ``too_heavy`` on its first
-    tick, nobody asked to push or move. Before, the fleet's summed force sufficed for the rule,
-    the set short of the friction was pushed, and it failed ``stalled`` after nine
-    re-arrangements."""
-    m, cfg, poses = mission(heavy(CRATE, 0.4))
+def test_a_crate_too_heavy_at_every_heading_fails_too_heavy_before_anyone_pushes():
+    """Floor friction 82 % of the fleet's summed force (29.4 N of 36 N): the fleet's force
+    would do, but at no heading do enough robots fit on the faces that push it (the LP over
+    every candidate contact proves it: no set reaches 100 %). The transport fails
+    ``too_heavy`` on its first tick, nobody asked to push or move, the proof in the detail."""
+    m, cfg, poses = mission(heavy(CRATE, 29.43 / FLEET_N))
     out = m.plan(view(cfg, 0.0, poses, cfg.object.start))
     assert (
         out.report.outcome.failed
@@ -84,5 +83,41 @@ def test_a_crate_too_heavy_for_the_robots_that_fit_fails_too_heavy_before_anyone
         and np.all(out.command.velocities == 0.0)
     )
     detail = by_kind(out.report.events)["failure"].detail
-    assert "needs 14.4 N" in detail and "36.0 N in all" in detail
-    assert m.pusher.plans == 0 and m.grip.relocations == 0 and m.rearranger.count == 1
+    assert "at any heading" in detail and "needs 29.4 N" in detail
+    assert "no set reaches more than" in detail  # the bound: a proof, not a search given up
+    assert m.pusher.plans == 0 and m.grip.relocations == 0 and m.rearranger.count == 0
+
+
+def test_a_crate_the_robots_cannot_push_along_the_route_gets_a_route_they_can():
+    """Floor friction 40 % of the fleet's summed force (14.4 N of 36 N), the goal along x, the
+    crate's 0.5 m face toward it (two robots fit there, 12 N): the route pushes the crate on
+    its 0.8 m face, diagonally on two faces or turned. Every straight move of the route is one
+    the fleet can push at the heading it is made at; the route of before (straight along x)
+    was not. (Before, the transport
+    failed ``too_heavy`` at once; the pybullet scenario ``turned-crate-pybullet`` delivers.)"""
+    from controller.mission.progress import route_planner_for
+    from controller.planning.route import RoutePlanner
+
+    cfg = scenario_config(heavy(CRATE, 0.4))
+    start = np.asarray(cfg.object.start, float)
+    plain = RoutePlanner.from_config(cfg).plan(start)
+    planner = route_planner_for(cfg)
+    turned = planner.plan(start)
+    assert plain.ok and turned.ok
+    push = planner.push
+    assert _moves(plain) and not all(push.can_push(a) for _, a in _moves(plain))
+    moves = _moves(turned)
+    assert moves and all(push.can_push(a) for _, a in moves)
+    # none of the way is pushed on the 0.5 m face alone (object-frame direction ±x)
+    assert all(abs(np.sin(a)) > 0.5 for _, a in moves)
+
+
+def _moves(route) -> list[tuple[float, float]]:
+    """(length m, object-frame direction rad) of a route's straight moves between subgoals."""
+    wp = route.waypoints
+    out = []
+    for a, b in zip(wp[:-1], wp[1:], strict=True):
+        if abs(b[2] - a[2]) < 1e-12 and np.hypot(*(b[:2] - a[:2])) > 1e-9:
+            d = b[:2] - a[:2]
+            out.append((float(np.hypot(*d)), float(np.arctan2(d[1], d[0]) - a[2])))
+    return out
