@@ -928,6 +928,149 @@ def transport_compare(r: dict) -> str:
     )
 
 
+def transport_varied(r: dict) -> str:
+    """The varied suite (issue 34, item 1): the comparison table, then per shape what Eq. 5
+    and the serpentine did."""
+    from bench.transport_compare import table
+
+    runs = r["varied_runs"]
+    groups = {g["scenario"]: g for g in r["eq5_groups"]}
+    strategies = r["size"]["strategies"]
+    rows = []
+    for sc in sorted({x["scenario"] for x in runs}, key=lambda n: int(n.split("-")[1])):
+        mine = {x["strategy"]: x for x in runs if x["scenario"] == sc}
+        g = groups[sc]
+        any_run = next(iter(mine.values()))
+        serp = mine.get("serpentine", {})
+        serp_counts = (
+            f"{serp['serpentine_two_group_plans']}/{serp['serpentine_plans']}, "
+            f"{serp['serpentine_switches']}"
+            if serp.get("serpentine_plans") is not None
+            else "–"
+        )
+        cells = []
+        for s in strategies:
+            x = mine.get(s)
+            if x is None:
+                cells.append("–")
+            else:
+                mark = "✓" if x["success"] else f"✗ `{x['reason'] or 'not_delivered'}`"
+                paper = " (CG ✓)" if x["success_paper"] and not x["success"] else ""
+                cells.append(mark + paper)
+        rows.append(
+            [
+                f"`{sc}`",
+                f"{g['robots']} ({any_run['kinds'].count('d')} diff)",
+                "yes" if any_run["heading_goal"] else "free",
+                f"{g['group_sizes'][0]} + {g['group_sizes'][1]}",
+                *cells,
+                serp_counts,
+            ]
+        )
+    head = ["scenario", "robots", "goal heading", "Eq. 5 groups", *[f"`{s}`" for s in strategies],
+            "serpentine: two-group plans, switches"]  # fmt: skip
+    two = sum(g["two_groups"] for g in r["eq5_groups"])
+    shapes_two = sorted({g["shape"] for g in r["eq5_groups"] if g["two_groups"]})
+    shapes_one = sorted({g["shape"] for g in r["eq5_groups"] if not g["two_groups"]})
+    claims = _claims(r["varied"], "varied")
+    return (
+        f"The varied suite: {r['size']['varied_scenarios']} scenarios drawn by "
+        "`bench/transport_loop.py`'s `draw_varied_suite` (seed 3141, never tuned on): eight "
+        "shapes in turn (crate, square, long crate, bar, L, T, diamond, trapezoid), 4-8 robots "
+        "omni or mixed, a straight goal 2.5-3.5 m away in any direction with the start's "
+        "heading, a quarter turn, or no heading target (heading tolerance 180°); one run per "
+        "scenario and strategy in lockstep on pybullet. Eq. 5's set for the straight line "
+        f"splits into Sharma's two groups in {two} of {len(r['eq5_groups'])} scenarios (shapes "
+        f"where it did: {', '.join(shapes_two)}; where it did not at least once: "
+        f"{', '.join(shapes_one) or 'none'}).\n\n"
+        + table(r)
+        + "\n\n"
+        + _table(head, rows)
+        + "\n\nWhich differences hold at 5 % (after Holm):\n\n"
+        + "\n".join(claims)
+    )
+
+
+def sa_random_starts(r: dict) -> str:
+    """Vass's claim (issue 34, item 7): SA against downhill from the same random starts."""
+    rows = []
+    for name, s in r["settings"].items():
+        rows.append(
+            [
+                f"`{name}`",
+                str(s["pairs"]),
+                f"{s['sa_lower']} / {s['downhill_lower']} / {s['ties']}",
+                f"{s['sign_test_p']:.2g} (Holm {s['sign_test_p_holm']:.2g})",
+                f"{s['wilcoxon_p']:.2g}",
+                f"{s['median_energy']['sa']:.1f} / {s['median_energy']['downhill']:.1f}",
+                f"{s['plans_with_infeasible_intervals']['sa']} / "
+                f"{s['plans_with_infeasible_intervals']['downhill']}",
+                f"{s['median_plan_ms']['sa']:.0f} / {s['median_plan_ms']['downhill']:.0f} ms",
+                f"**{s['verdict']}**",
+            ]
+        )
+    head = ["setting", "pairs", "SA lower / downhill lower / equal", "sign test p",
+            "Wilcoxon p", "median energy SA / downhill", "plans still infeasible somewhere",
+            "plan time", "favours"]  # fmt: skip
+    shapes = ", ".join(f"{k} {v}" for k, v in r["shapes"].items())
+    return (
+        f"Each pair: one planning problem and one random start matrix (`initial_actions = "
+        f'"random"`), planned by `sa` and by `downhill` from that same start; the lower energy '
+        f"wins. {sum(r['shapes'].values())} solvable problems drawn by seed {r['seed']} "
+        f"({shapes}; {r['rejected']} drawn problems that no plan from the LP's start could push "
+        "without an infeasible interval or a collision were drawn again). `default`: 100 "
+        "iterations, T0 0.3, cooling 0.95; `long`: 300 iterations, T0 1.0, cooling 0.985. The "
+        "rule, fixed before the run: a setting favours a planner when it wins more pairs and "
+        "the Holm-adjusted exact sign test gives p < 0.05.\n\n" + _table(head, rows)
+    )
+
+
+def heavy(r: dict) -> str:
+    """Heavy loads (issue 34, item 9): the route along the ways the fleet can push."""
+    rows = []
+    for name, c in r["cases"].items():
+        p, rp, rn = c["pushability"], c["route"]["plain"], c["route"]["pushed"]
+        loop = c.get("closed_loop")
+        run = "–"
+        if loop:
+            run = (
+                f"{'delivered' if loop['status'] == 'ok' else loop['reason']}, "
+                f"{loop['transport_time_s']:.0f} s, {loop['rearrangements']} re-arrangements, "
+                f"{loop['goal_error_m']:.2f} m / {loop['goal_error_deg']:.1f}°"
+            )
+        route = (
+            "too heavy at any heading"
+            if rn["too_heavy"]
+            else f"{rn['length_m']:.2f} m, {rn['rotation_deg']:.0f}° turned, "
+            f"{rn['manipulations']} re-arrangements"
+        )
+        rows.append(
+            [
+                f"`{name}`",
+                f"{c['need_n']:.1f} N of {c['fleet_n']:.0f} N",
+                f"{100 * p['best_share']:.0f} % ({p['best_robots']} robots)",
+                f"{100 * p['bound_share']:.0f} %",
+                f"{p['pushable_buckets']} of 72",
+                f"{rp['length_m']:.2f} m, {rp['rotation_deg']:.0f}°",
+                route,
+                f"{rn['first_plan_s']:.1f} s / {rn['replan_s'] * 1e3:.0f} ms "
+                f"(plain {rp['plan_s'] * 1e3:.0f} ms)",
+                run,
+            ]
+        )
+    head = ["object", "floor friction of the fleet's force", "best set",
+            "LP bound (every contact)", "directions it can push", "route without the limit",
+            "route along pushable ways", "first plan / re-plan", "pybullet run"]  # fmt: skip
+    return (
+        "Per object: the best share of the floor friction a set of contacts the transport "
+        "would ask for produces (every robot at the weakest's force), over 72 directions in the "
+        "object's frame; the LP bound over every candidate contact (under 100 %: no set of the "
+        "whole fleet moves it, at any heading); the directions that can be pushed with 10° of "
+        "heading slack; the route without and with the limit, and what the limit costs the "
+        "first plan (the 72 directions learned) and a re-plan.\n\n" + _table(head, rows)
+    )
+
+
 def _delivered(lab: dict) -> bool:
     """A lab run that exited 0 with a DELIVERED verdict (a lab of before the verdict decided
     the exit could exit 0 on a verdict that failed)."""
@@ -1146,6 +1289,9 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "transport": transport,
     "transport_loop": transport_loop,
     "transport_compare": transport_compare,
+    "transport_varied": transport_varied,
+    "sa_random_starts": sa_random_starts,
+    "heavy": heavy,
 }
 
 

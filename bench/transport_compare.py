@@ -51,13 +51,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench import stats  # noqa: E402
-from bench.transport_loop import draw_suite, sweep_suite  # noqa: E402
+from bench.transport_loop import draw_suite, draw_varied_suite, sweep_suite  # noqa: E402
 from controller.planning.transport import plan_local  # noqa: E402
 from controller.planning.transport_model import Rollout  # noqa: E402
 from controller.planning.transport_types import ACTIONS, TransportParams  # noqa: E402
 from tests.support.transport_cases import diamond_case, push_case  # noqa: E402
 
 STRATEGIES = ("sa", "downhill", "serpentine")
+#: the output's sets of runs and their labels in the table
+SECTIONS = (("closed_loop", "suite"), ("robustness", "robustness"), ("varied", "varied"))
 
 
 def log(msg: str) -> None:
@@ -189,6 +191,12 @@ def run_case(job: tuple) -> dict:
         "impulse_ns": res.get("contact_impulse_ns"),
         "lateral_deviation_rms_m": res.get("lateral_deviation_rms_m"),
         "rearrangements": res.get("rearrangements"),
+        "serpentine_plans": res.get("serpentine_plans"),
+        "serpentine_two_group_plans": res.get("serpentine_two_group_plans"),
+        "serpentine_switches": res.get("serpentine_switches"),
+        "robots": len(sc.kinds),
+        "kinds": sc.kinds,
+        "heading_goal": sc.patch.get("transport", {}).get("heading_tolerance_deg", 0) < 180,
         "missed_ticks": res.get("missed_ticks"),
         # a run whose lockstep missed a tick (lockstep_lost: three in a row) is not the
         # reproducible run: left out of the statistics, counted, re-run with --retry-invalid
@@ -248,6 +256,33 @@ def aggregate(rows: list[dict], strategies, rng: np.random.Generator) -> dict:
     _holm(pairs)
     out["paired"] = pairs
     return out
+
+
+def eq5_groups(sc) -> dict:
+    """Whether Eq. 5's pushing set for the scenario's straight line (as many pushers as
+    robots, Sharma §4.1, as the serpentine asks for it) splits into Sharma's two groups: the
+    serpentine can only alternate where both have members."""
+    from controller import geometry
+    from controller.planning.arrangement import pushing_set
+    from controller.planning.serpentine import split_groups
+    from tests.support.transport_scenarios import scenario_config
+
+    cfg = scenario_config(sc)
+    start, goal = np.asarray(sc.start, float), np.asarray(sc.goal, float)
+    d = goal[:2] - start[:2]
+    d /= np.linalg.norm(d)
+    local = geometry.rot(float(start[2])).T @ d
+    pts, nrm, _ = pushing_set(cfg, local, len(sc.kinds), np.random.default_rng(sc.seed))
+    c = geometry.centroid(geometry.ensure_ccw(cfg.object_polygon()))
+    groups = split_groups(-nrm, pts - c, local)  # in the object's frame
+    return {
+        "scenario": sc.name,
+        "shape": sc.name.split("-", 2)[2],
+        "robots": len(sc.kinds),
+        "pushers_forward": int(np.sum(groups >= 0)),
+        "group_sizes": [int(np.sum(groups == 0)), int(np.sum(groups == 1))],
+        "two_groups": bool(np.sum(groups == 0) and np.sum(groups == 1)),
+    }
 
 
 def _holm(pairs: dict) -> None:
@@ -337,7 +372,7 @@ def _ci(x: dict, key: str, unit: str = "") -> str:
 def table(out: dict) -> str:
     """The results page's comparison table (markdown) from this script's JSON."""
     lines = []
-    for sec, label in (("closed_loop", "suite"), ("robustness", "robustness")):
+    for sec, label in SECTIONS:
         if sec not in out:
             continue
         for s, r in out[sec].items():
@@ -374,7 +409,7 @@ def table(out: dict) -> str:
     )
     notes = [
         f"{label}: {len(out[sec].get('invalid_runs', []))} runs left out (lockstep ticks missed)"
-        for sec, label in (("closed_loop", "suite"), ("robustness", "robustness"))
+        for sec, label in SECTIONS
         if out.get(sec, {}).get("invalid_runs")
     ]
     return "\n".join([head, "|---|---|---|---|---|---|---|", *lines, *notes])
@@ -385,7 +420,7 @@ def merge(paths: list[str], strategies, rng: np.random.Generator) -> dict:
     aggregated again: the statistics of chunked runs are those of one run over all their seeds."""
     outs = [json.loads(Path(p).read_text()) for p in paths]
     merged: dict = {"bench": "transport_compare", "merged_from": paths}
-    for sec in ("closed_loop", "robustness"):
+    for sec, _ in SECTIONS:
         runs: dict = {}
         for o in outs:
             for r in o.get(f"{sec}_runs", []):
@@ -419,6 +454,9 @@ def main() -> None:
     ap.add_argument("--strategies", default=",".join(STRATEGIES))
     ap.add_argument("--backend", default="pybullet", choices=("pybullet", "ideal"))
     ap.add_argument("--sweep", type=int, default=0, help="robustness runs per strategy")
+    ap.add_argument(
+        "--varied", type=int, default=0, help="scenarios of the varied suite (one run each)"
+    )
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--planner-seeds", type=int, default=10)
     ap.add_argument("--minima-checks", type=int, default=40)
@@ -456,6 +494,7 @@ def main() -> None:
             "strategies": list(strategies),
             "backend": args.backend,
             "sweep_runs_per_strategy": args.sweep,
+            "varied_scenarios": args.varied,
             "planner_seeds": args.planner_seeds,
         },
     }
@@ -484,6 +523,15 @@ def main() -> None:
         rows = run_all(sweep, args.workers, rows_file, args.retry_invalid)
         out["robustness"] = aggregate(rows, strategies, rng)
         out["robustness_runs"] = rows
+    if args.varied:
+        varied = draw_varied_suite(args.varied)
+        out["eq5_groups"] = [eq5_groups(sc) for sc in varied]
+        jobs = [(dataclasses.replace(sc, backend=args.backend), strat, sc.seed, "varied")
+                for sc in varied for strat in strategies]  # fmt: skip
+        log(f"varied: {len(jobs)} runs ...")
+        rows = run_all(jobs, args.workers, rows_file, args.retry_invalid)
+        out["varied"] = aggregate(rows, strategies, rng)
+        out["varied_runs"] = rows
     out["wall_s"] = round(time.perf_counter() - t0, 1)
     out["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
     print(json.dumps(out, indent=1, default=lambda x: None if x is None else float(x)))

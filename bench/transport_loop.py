@@ -109,6 +109,72 @@ def sweep_suite(n: int, seed: int = SWEEP_SEED) -> list[Scenario]:
     return out
 
 
+VARIED_SEED = 3141  # the varied suite (issue 34, item 1): drawn once, never tuned on
+#: the varied suite's shapes (object frame, m): crates of three aspect ratios, a long bar, the
+#: L, a T, a diamond and a trapezoid
+SHAPES = {
+    "crate": CRATE,
+    "square": [[0.0, 0.0], [0.6, 0.0], [0.6, 0.6], [0.0, 0.6]],
+    "long-crate": [[0.0, 0.0], [1.2, 0.0], [1.2, 0.4], [0.0, 0.4]],
+    "bar": [[0.0, 0.0], [1.6, 0.0], [1.6, 0.25], [0.0, 0.25]],
+    "L": L_SHAPE,
+    "T": [[0.0, 0.0], [0.9, 0.0], [0.9, 0.3], [0.6, 0.3], [0.6, 0.8], [0.3, 0.8], [0.3, 0.3],
+          [0.0, 0.3]],
+    "diamond": [[0.4, 0.0], [0.8, 0.4], [0.4, 0.8], [0.0, 0.4]],
+    "trapezoid": [[0.0, 0.0], [1.0, 0.0], [0.75, 0.5], [0.25, 0.5]],
+}  # fmt: skip
+
+
+def draw_varied_suite(n: int, seed: int = VARIED_SEED) -> list[Scenario]:
+    """n open-floor scenarios that vary the geometry (issue 34, item 1): the shapes of
+    ``SHAPES`` in turn, each drawn a start heading, a fleet of 4-8 robots (omni only or
+    mixed omni and differential), a straight goal 2.5-3.5 m away at any direction, and a goal
+    heading: the start's, a quarter turn, or none (``transport.heading_tolerance_deg`` 180:
+    Sharma's straight-line goal without a heading target). The capture set is the minimal
+    closure (``capture.hold_force`` 0) so that four robots can hold every shape. A draw whose
+    object leaves the room (a long bar near a wall) is drawn again."""
+    rng = np.random.default_rng(seed)
+    names = list(SHAPES)
+    out: list[Scenario] = []
+    while len(out) < n:
+        sc = _varied(rng, len(out), names[len(out) % len(names)])
+        try:
+            scenario_config(sc)
+        except ValueError:
+            continue
+        out.append(sc)
+    return out
+
+
+def _varied(rng: np.random.Generator, k: int, name: str) -> Scenario:
+    """One draw of the varied suite (see :func:`draw_varied_suite`)."""
+    th0 = float(rng.uniform(-math.pi, math.pi))
+    robots = int(rng.integers(4, 9))
+    mixed = bool(rng.integers(2))
+    kinds = "".join("d" if mixed and i % 3 == 2 else "o" for i in range(robots))
+    ang = float(rng.uniform(-math.pi, math.pi))
+    dist = float(rng.uniform(2.5, 3.5))
+    x0, y0 = 4.0 - 0.5 * dist * math.cos(ang), 3.0 - 0.5 * dist * math.sin(ang)
+    x1, y1 = 4.0 + 0.5 * dist * math.cos(ang), 3.0 + 0.5 * dist * math.sin(ang)
+    goal_kind = ("same", "quarter", "free")[int(rng.integers(3))]
+    th1 = th0 + (math.pi / 2 if goal_kind == "quarter" else 0.0)
+    patch: dict = {"capture": {"hold_force": 0.0}}
+    if goal_kind == "free":
+        patch["transport"] = {"heading_tolerance_deg": 180.0}
+    return Scenario(
+        f"varied-{k}-{name}",
+        SHAPES[name],
+        (round(x0, 3), round(y0, 3), round(th0, 4)),
+        (round(x1, 3), round(y1, 3), round(math.remainder(th1, 2 * math.pi), 4)),
+        backend="pybullet",
+        kinds=kinds,
+        bounds=ROOM,
+        seed=300 + k,
+        max_time=240.0,
+        patch=patch,
+    )
+
+
 class PlanTimer:
     """Times every local plan of a run (wraps ``TransportPlanner.plan`` for the run's length:
     the controller runs in this process, on its own thread)."""

@@ -56,6 +56,9 @@ class Pusher:
         self.stuck = 0
         self.plan_energy: list[float] = []
         self.forces: list[float] = []
+        # serpentine (Sharma §4.3): plans, those with both groups manned, group switches
+        self.serpentine = {"plans": 0, "two_groups": 0, "switches": 0}
+        self._group: int | None = None  # the group the last serpentine plan pushed with
 
     def forget(self) -> None:
         """A new segment or arrangement: the local plan starts afresh (the planner's warm
@@ -64,6 +67,7 @@ class Pusher:
         self._reset = True
         self.last_plan = None
         self.plan_t = None
+        self._group = None  # new groups: a change of group is no switch
 
     def due(self, t: float) -> bool:
         """Whether a new plan is to be asked for (every interval of the last one)."""
@@ -131,6 +135,8 @@ class Pusher:
     def planned(self, view: FleetView, grip: Grip, events: list[Event]) -> None:
         """The event of the plan the grip now follows (who relocates, how far)."""
         plan = self.last_plan
+        if plan.serpentine_groups is not None:
+            self._count_serpentine(plan)
         moving = {
             view.ids[i]: float(np.sum(np.linalg.norm(np.diff(np.asarray(p), axis=0), axis=1)))
             for i, p in grip.moves.items()
@@ -146,6 +152,25 @@ class Pusher:
                 plan_age_s=round(lag, 6),
             )
         )
+
+    def _count_serpentine(self, plan: LocalPlan) -> None:
+        s = self.serpentine
+        s["plans"] += 1
+        s["two_groups"] += plan.serpentine_groups == 2
+        g = plan.serpentine_group
+        if g is not None:
+            s["switches"] += self._group is not None and g != self._group
+            self._group = g
+
+    def serpentine_summary(self) -> dict:
+        """The serpentine's counts for the run's summary (None for the other strategies)."""
+        on = local_strategy(self.params.strategy).groups
+        s = self.serpentine
+        return {
+            "serpentine_plans": s["plans"] if on else None,
+            "serpentine_two_group_plans": s["two_groups"] if on else None,
+            "serpentine_switches": s["switches"] if on else None,
+        }
 
     def give_up(self, plans: int) -> None:
         """Count the contacts as unable to push (``plans`` failed plans): a re-arrangement."""

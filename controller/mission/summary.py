@@ -57,6 +57,10 @@ class TransportSummary(_Flat):
     local_plans: int
     planned_force_mean_n: float | None
     transport_failure: dict[str, Any] | None
+    # serpentine only (else None): local plans, those with both groups manned, group switches
+    serpentine_plans: int | None = None
+    serpentine_two_group_plans: int | None = None
+    serpentine_switches: int | None = None
 
 
 @dataclass(frozen=True)

@@ -386,8 +386,7 @@ class TransportMission:
         return self.guard.apply(view, intent)
 
     def summary(self) -> TransportSummary:
-        f = np.asarray(self.pusher.forces) if self.pusher.forces else np.zeros(0)
-        route, fail = self.way.route, self.seq.state.failure
+        f, route, fail = np.asarray(self.pusher.forces), self.way.route, self.seq.state.failure
         return TransportSummary(
             transport_phase=str(self.phase),
             route_length_m=None if route is None else route.length_m,
@@ -397,4 +396,5 @@ class TransportMission:
             local_plans=self.pusher.plans,
             planned_force_mean_n=float(f.mean()) if len(f) else None,
             transport_failure=None if fail is None else fail.to_json(self.seq.state.since),
+            **self.pusher.serpentine_summary(),
         )

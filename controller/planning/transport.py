@@ -44,7 +44,7 @@ import numpy as np
 
 from controller import geometry
 from controller.planning.contact_lp import ContactForceLP
-from controller.planning.serpentine import serpentine
+from controller.planning.serpentine import serpentine, serpentine_groups
 from controller.planning.transport_model import Rollout, Trace, hold_matrix, lp_matrix
 from controller.planning.transport_types import (
     ACTIONS,
@@ -243,7 +243,9 @@ def _plan_serpentine(
     """``serpentine``: Sharma's two groups (:mod:`controller.planning.serpentine`)."""
     trace, group = serpentine(roll, state.serpentine_group)
     e = roll.energy(trace)
-    return make_plan(roll, trace, e, "ok", group=group)
+    plan = make_plan(roll, trace, e, "ok", group=group)
+    groups = serpentine_groups(roll)
+    return dataclasses.replace(plan, serpentine_groups=len({int(g) for g in groups if g >= 0}))
 
 
 def _annealer(downhill: bool) -> LocalPlanner:
@@ -285,6 +287,8 @@ class LocalStrategy:
     # the pushing set: Eq. 5 for every robot, alone (Sharma §4.1); else Eq. 5 confirmed by
     # the contact-force LP, or the LP's least-force set (``planning.arrangement``)
     eq5_alone: bool
+    # its plans say which of Sharma's two groups push (the run counts them and their switches)
+    groups: bool = False
 
 
 #: ``transport.strategy`` name -> its strategy. The valid names are
@@ -295,7 +299,7 @@ LOCAL_STRATEGIES = {
     for s in (
         LocalStrategy("sa", _annealer(downhill=False), True, False, False),
         LocalStrategy("downhill", _annealer(downhill=True), True, False, False),
-        LocalStrategy("serpentine", _plan_serpentine, False, True, True),
+        LocalStrategy("serpentine", _plan_serpentine, False, True, True, groups=True),
     )
 }
 #: name -> planner (as before the registry)

@@ -210,6 +210,7 @@ class LocalPlan:
     energy: the chosen matrix's :class:`Energy`; start_energy: that of the starting matrix;
     iterations, accepted: annealing statistics;
     serpentine_group: the group pushing in the first interval (serpentine; else None);
+    serpentine_groups: how many of the two groups have members (serpentine; else None);
     relocation_targets: robot index → object-frame point the scan picked (only for robots the
     plan considered relocating).
     """
@@ -234,6 +235,7 @@ class LocalPlan:
     accepted: int = 0
     serpentine_group: int | None = None
     relocation_targets: dict[int, FloatArray] = field(default_factory=dict)
+    serpentine_groups: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data for the ``plan/transport`` message and the MCAP log."""
@@ -261,4 +263,5 @@ class LocalPlan:
             "iterations": self.iterations,
             "accepted": self.accepted,
             "serpentine_group": self.serpentine_group,
+            "serpentine_groups": self.serpentine_groups,
         }

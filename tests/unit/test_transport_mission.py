@@ -212,3 +212,34 @@ def test_an_object_the_whole_fleet_cannot_push_fails_too_heavy_before_anyone_pus
         assert f"needs {need:.1f} N" in detail and "36.0 N in all" in detail
         assert (need <= 36.0) is fleet_ok
         assert m.pusher.plans == 0 and m.grip.relocations == 0  # nobody asked to push or to move
+
+
+def test_the_serpentine_counts_its_two_group_plans_and_switches():
+    """``fleet run --json`` says how many of the serpentine's local plans had both of Sharma's
+    groups manned and how often the pushing group switched (issue 34, item 1); a new segment
+    or arrangement starts the groups afresh (a change there is no switch); the other
+    strategies report None."""
+    import dataclasses
+
+    from controller.planning.transport import plan_local
+    from controller.planning.transport_types import TransportParams
+    from tests.support.transport_cases import diamond_case
+
+    plan = plan_local(
+        diamond_case(), TransportParams(strategy="serpentine"), np.random.default_rng(0)
+    )
+    assert plan.serpentine_groups == 2  # the diamond's two rear faces: one group each
+    sc = Scenario("serp", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0),
+                  patch={"transport": {"strategy": "serpentine"}})  # fmt: skip
+    m, _, _ = mission(sc)
+    p = m.pusher
+    for group, groups in ((0, 2), (0, 2), (1, 2), (1, 1), (0, 2)):
+        p._count_serpentine(dataclasses.replace(plan, serpentine_group=group,
+                                                serpentine_groups=groups))  # fmt: skip
+    p.forget()
+    p._count_serpentine(dataclasses.replace(plan, serpentine_group=1, serpentine_groups=2))
+    s = m.summary().to_json()
+    assert (s["serpentine_plans"], s["serpentine_two_group_plans"]) == (6, 5)
+    assert s["serpentine_switches"] == 2  # 0 → 1 and 1 → 0; not the one after forget()
+    m_sa, _, _ = mission(Scenario("sa", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0)))
+    assert m_sa.summary().to_json()["serpentine_plans"] is None
