@@ -973,8 +973,15 @@ def transport_varied(r: dict) -> str:
     shapes_two = sorted({g["shape"] for g in r["eq5_groups"] if g["two_groups"]})
     shapes_one = sorted({g["shape"] for g in r["eq5_groups"] if not g["two_groups"]})
     claims = _claims(r["varied"], "varied")
+    mu = r["size"].get("contact_friction")
+    friction = (
+        f"Contact friction {mu:g} between robots and object, in the world and in the "
+        "contact-force LP's friction cones (every other row: 0). "
+        if mu
+        else ""
+    )
     return (
-        f"The varied suite: {r['size']['varied_scenarios']} scenarios drawn by "
+        friction + f"The varied suite: {r['size']['varied_scenarios']} scenarios drawn by "
         "`bench/transport_loop.py`'s `draw_varied_suite` (seed 3141, never tuned on): eight "
         "shapes in turn (crate, square, long crate, bar, L, T, diamond, trapezoid), 4-8 robots "
         "omni or mixed, a straight goal 2.5-3.5 m away in any direction with the start's "
@@ -1290,6 +1297,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "transport_loop": transport_loop,
     "transport_compare": transport_compare,
     "transport_varied": transport_varied,
+    "transport_varied_friction": transport_varied,
     "sa_random_starts": sa_random_starts,
     "heavy": heavy,
 }

@@ -191,9 +191,10 @@ def run_case(job: tuple) -> dict:
         "impulse_ns": res.get("contact_impulse_ns"),
         "lateral_deviation_rms_m": res.get("lateral_deviation_rms_m"),
         "rearrangements": res.get("rearrangements"),
-        "serpentine_plans": res.get("serpentine_plans"),
-        "serpentine_two_group_plans": res.get("serpentine_two_group_plans"),
-        "serpentine_switches": res.get("serpentine_switches"),
+        # the mission's own figures (``mission`` in fleet run --json)
+        "serpentine_plans": (res.get("mission") or {}).get("serpentine_plans"),
+        "serpentine_two_group_plans": (res.get("mission") or {}).get("serpentine_two_group_plans"),
+        "serpentine_switches": (res.get("mission") or {}).get("serpentine_switches"),
         "robots": len(sc.kinds),
         "kinds": sc.kinds,
         "heading_goal": sc.patch.get("transport", {}).get("heading_tolerance_deg", 0) < 180,
@@ -256,6 +257,12 @@ def aggregate(rows: list[dict], strategies, rng: np.random.Generator) -> dict:
     _holm(pairs)
     out["paired"] = pairs
     return out
+
+
+def with_contact_friction(sc, mu: float):
+    """The scenario with ``object.contact_friction`` = mu (world and planners alike)."""
+    obj = {**sc.patch.get("object", {}), "contact_friction": mu}
+    return dataclasses.replace(sc, patch={**sc.patch, "object": obj})
 
 
 def eq5_groups(sc) -> dict:
@@ -457,6 +464,13 @@ def main() -> None:
     ap.add_argument(
         "--varied", type=int, default=0, help="scenarios of the varied suite (one run each)"
     )
+    ap.add_argument(
+        "--contact-friction",
+        type=float,
+        default=None,
+        help="object.contact_friction for every run (the world's robot-object friction and the "
+        "LP's friction cones; default: the scenarios' own, 0)",
+    )
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--planner-seeds", type=int, default=10)
     ap.add_argument("--minima-checks", type=int, default=40)
@@ -495,6 +509,7 @@ def main() -> None:
             "backend": args.backend,
             "sweep_runs_per_strategy": args.sweep,
             "varied_scenarios": args.varied,
+            "contact_friction": args.contact_friction,
             "planner_seeds": args.planner_seeds,
         },
     }
@@ -525,6 +540,8 @@ def main() -> None:
         out["robustness_runs"] = rows
     if args.varied:
         varied = draw_varied_suite(args.varied)
+        if args.contact_friction is not None:
+            varied = [with_contact_friction(sc, args.contact_friction) for sc in varied]
         out["eq5_groups"] = [eq5_groups(sc) for sc in varied]
         jobs = [(dataclasses.replace(sc, backend=args.backend), strat, sc.seed, "varied")
                 for sc in varied for strat in strategies]  # fmt: skip
