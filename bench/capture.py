@@ -35,6 +35,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")  # before numpy loads (a child may ask for the defaults)
 
 import argparse  # noqa: E402
+import dataclasses  # noqa: E402
 import json  # noqa: E402
 import resource  # noqa: E402
 import statistics  # noqa: E402
@@ -84,7 +85,11 @@ def problem_with(nodes: int):
     raise RuntimeError(f"no spacing gives {nodes} nodes")
 
 
-def random_polygons(count: int, rng: np.random.Generator):
+def random_polygons(count: int, rng: np.random.Generator, closure: str = "exact"):
+    """``count`` polygons with 14-30 candidate nodes whose exact form-closure optimum exists
+    (the same draws whatever ``closure``); ``closure = "paper"``: each judged under the
+    paper's constraints instead (§2.5: translation closure, moments both ways, one robot per
+    edge, spacing), its brute-force optimum under them."""
     out = []
     while len(out) < count:
         concave = len(out) % 2 == 1
@@ -105,6 +110,9 @@ def random_polygons(count: int, rng: np.random.Generator):
         bf, _ = brute_force_capture(poly, 0.05, params)
         if bf <= -1e19:
             continue
+        if closure == "paper":
+            params = dataclasses.replace(params, closure="paper")
+            bf, _ = brute_force_capture(poly, 0.05, params)
         out.append((poly, params, bf, k))
         log(f"polygon {len(out)}: {k} nodes, optimum {bf:.4g}")
     return out
@@ -184,11 +192,15 @@ def one_ga(name: str, prob, seed: int) -> float:
 
 
 def suite_figures(
-    count: int, ga_seeds: int, suite_seed: int = SUITE_SEED, gas: tuple[str, ...] = GAS
+    count: int,
+    ga_seeds: int,
+    suite_seed: int = SUITE_SEED,
+    gas: tuple[str, ...] = GAS,
+    closure: str = "exact",
 ) -> dict:
     """Hits on the fresh suite: pygad once per polygon (seed GA_SEED + i), ours, paper and
     ours_tied with ``ga_seeds`` seeds per polygon (GA_SEED + 1000 s + i; s = 0 is pygad's)."""
-    polys = random_polygons(count, np.random.default_rng(suite_seed))
+    polys = random_polygons(count, np.random.default_rng(suite_seed), closure)
     runs: dict[str, list[float]] = {name: [] for name in gas}
     seconds: dict[str, list[float]] = {name: [] for name in gas}
     repeat = {"ours": ga_seeds, "paper": ga_seeds, "ours_tied": ga_seeds}
@@ -202,7 +214,8 @@ def suite_figures(
                 seconds[name].append(time.perf_counter() - t0)
             found = ", ".join(f"{n} {v[-1]:.4g}" for n, v in runs.items())
             log(f"seed set {s}, polygon {i + 1}: optimum {bf:.4g}, {found}")
-    out: dict = {"polygons": len(polys), "seed": suite_seed, "nodes": [k for *_, k in polys]}
+    out: dict = {"polygons": len(polys), "seed": suite_seed, "nodes": [k for *_, k in polys],
+                 "closure": closure}  # fmt: skip
     for name in gas:
         per_seed = [
             figures(runs[name][j * len(polys) : (j + 1) * len(polys)], polys)
@@ -304,12 +317,19 @@ def main() -> None:
     ap.add_argument("--suite-only", action="store_true", help="only the optimum-hit suite")
     ap.add_argument("--suite-seed", type=int, default=SUITE_SEED, help="a fresh suite: new seed")
     ap.add_argument("--gas", default=",".join(GAS), help="GAs on the suite (comma-separated)")
+    ap.add_argument(
+        "--closure",
+        default="exact",
+        choices=("exact", "paper"),
+        help="the suite's constraints: exact form closure, or the paper's (§2.5)",
+    )
     args = ap.parse_args()
     if args.suite_only:
         load0 = os.getloadavg()
         suite = suite_figures(
-            args.polygons, args.ga_seeds, args.suite_seed, tuple(args.gas.split(","))
-        )
+            args.polygons, args.ga_seeds, args.suite_seed, tuple(args.gas.split(",")),
+            args.closure,
+        )  # fmt: skip
         load = {"start": load0, "end": os.getloadavg()}
         print(json.dumps({"bench": "capture", "load_average": load, "suite": suite}, indent=1))
         return
