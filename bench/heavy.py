@@ -75,7 +75,7 @@ def offline(name: str, sc) -> dict:
         "need_n": round(push.need, 1),
         "fleet_n": round(push.robots * push.weakest, 1),
         "pushability": {
-            "buckets_learned": len(push._cap),
+            "buckets_learned": push.learned,
             "best_share": round(share, 3),
             "best_angle_deg": round(math.degrees(angle)),
             "best_robots": robots,

@@ -58,6 +58,8 @@ from controller.planning.transport_types import ACTIONS, TransportParams  # noqa
 from tests.support.transport_cases import diamond_case, push_case  # noqa: E402
 
 STRATEGIES = ("sa", "downhill", "serpentine")
+#: the serpentine's counts a run reports (``fleet run --json``'s ``mission``)
+SERPENTINE_COUNTS = ("serpentine_plans", "serpentine_two_group_plans", "serpentine_switches")
 #: the output's sets of runs and their labels in the table
 SECTIONS = (("closed_loop", "suite"), ("robustness", "robustness"), ("varied", "varied"))
 
@@ -166,6 +168,7 @@ def run_case(job: tuple) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         res = DryRun(cfg, build_mission(cfg, "transport"), Path(tmp) / "run.mcap").run()
     clean = judge(res) == []
+    mission = res.get("mission") or {}
     ours = bool(res.get("transported")) and res.get("status") == "ok" and clean
     err = res.get("goal_error_m")
     # Sharma's criterion: the CG (the centroid) within the tolerance of the goal's, at its
@@ -192,9 +195,7 @@ def run_case(job: tuple) -> dict:
         "lateral_deviation_rms_m": res.get("lateral_deviation_rms_m"),
         "rearrangements": res.get("rearrangements"),
         # the mission's own figures (``mission`` in fleet run --json)
-        "serpentine_plans": (res.get("mission") or {}).get("serpentine_plans"),
-        "serpentine_two_group_plans": (res.get("mission") or {}).get("serpentine_two_group_plans"),
-        "serpentine_switches": (res.get("mission") or {}).get("serpentine_switches"),
+        **{k: mission.get(k) for k in SERPENTINE_COUNTS},
         "robots": len(sc.kinds),
         "kinds": sc.kinds,
         "heading_goal": sc.patch.get("transport", {}).get("heading_tolerance_deg", 0) < 180,

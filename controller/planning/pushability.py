@@ -56,6 +56,7 @@ class PushDirections:
     buckets: int = BUCKETS
     _cap: dict[int, tuple[float, int]] = field(default_factory=dict, repr=False)
     _bound: dict[int, float] = field(default_factory=dict, repr=False)
+    _bound_lp: _BoundLP | None = field(default=None, repr=False)
 
     @classmethod
     def from_config(cls, cfg: FleetConfig, margin: float = 1.2) -> PushDirections:
@@ -107,6 +108,12 @@ class PushDirections:
         near = range(math.floor(x - w + 1e-9), math.ceil(x + w - 1e-9) + 1)
         return all(self.capacity(self._angle(b))[0] >= 1.0 - 1e-9 for b in near)
 
+    @property
+    def learned(self) -> int:
+        """How many directions' sets have been computed so far (each an LP and its
+        reinforcement)."""
+        return len(self._cap)
+
     def pushable_angles(self) -> list[float]:
         """The buckets' angles (rad, object frame) the fleet can push the object along."""
         return [self._angle(b) for b in range(self.buckets) if self.can_push(self._angle(b))]
@@ -116,8 +123,9 @@ class PushDirections:
         ``angle`` (rad, object frame), at its bucket (see the module docstring)."""
         b = self._bucket(angle)
         if b not in self._bound:
-            self._bound[b] = _bound_lp(self.cfg, self.model, self._twist(b), self.robots,
-                                       self.weakest)  # fmt: skip
+            if self._bound_lp is None:
+                self._bound_lp = _BoundLP(self.cfg, self.model, self.robots, self.weakest)
+            self._bound[b] = self._bound_lp.share(self._twist(b))
         return self._bound[b]
 
     def best(self) -> tuple[float, float, int, float]:
@@ -155,60 +163,71 @@ class PushDirections:
         )
 
 
-def _bound_lp(cfg: FleetConfig, model, twist: FloatArray, robots: int, fmax: float) -> float:
-    """The largest s such that contacts at every candidate node produce s times the wrench
-    ``twist`` needs (see the module docstring); 0 when none produces it at all."""
-    from controller.planning.capture import candidate_nodes
+class _BoundLP:
+    """The LP of :meth:`PushDirections.bound` for one object and fleet: its contacts, their
+    wrench blocks and the force-limit rows built once; :meth:`share` solves it for a twist
+    (only the wrench column changes between directions)."""
 
-    r = cfg.max_robot_radius
-    poly = geometry.ensure_ccw(cfg.object_polygon())
-    cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
-    pts, out = cand.points, cand.normals
-    n = len(pts)
-    if n == 0:
-        return 0.0
-    rel = pts - model.centroid
-    push = -out  # robots push inward
-    tang = np.column_stack([-push[:, 1], push[:, 0]])
+    def __init__(self, cfg: FleetConfig, model, robots: int, fmax: float) -> None:
+        from controller.planning.capture import candidate_nodes
 
-    def wrench(f: FloatArray) -> FloatArray:
-        return np.vstack([f.T, rel[:, 0] * f[:, 1] - rel[:, 1] * f[:, 0]])
+        r = cfg.max_robot_radius
+        poly = geometry.ensure_ccw(cfg.object_polygon())
+        cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
+        self.model = model
+        pts, out = cand.points, cand.normals
+        n = self.n = len(pts)
+        rel = pts - model.centroid
+        push = -out  # robots push inward
+        tang = np.column_stack([-push[:, 1], push[:, 0]])
 
-    mu = float(model.contact_friction)
-    need = required_wrench(twist, model.mass, model.floor_friction, model.mean_radius)
-    # variables: normal forces (n), tangential + and - (n each, only with friction), s
-    blocks = [wrench(push)]
-    if mu > 0:
-        blocks += [wrench(tang), wrench(-tang)]
-    nv = n * len(blocks)
-    a_eq = np.hstack([*blocks, -need[:, None]])
-    rows, rhs = [], []
-    total = np.zeros(nv + 1)
-    total[:n] = 1.0
-    rows.append(total)
-    rhs.append(robots * fmax)
-    # nodes of one edge are collinear, their robots' centres as far apart as the nodes: at most
-    # one robot (one force limit) in every stretch of an edge shorter than a diameter
-    along = np.einsum("jik,jk->ji", pts[None] - pts[:, None], tang)  # [j, i]: i ahead of j
-    same = cand.edges[:, None] == cand.edges[None]
-    window = same & (along >= -1e-12) & (along < 2 * r - 1e-9)
-    for j in range(n):
-        row = np.zeros(nv + 1)
-        row[:n] = window[j]
-        rows.append(row)
-        rhs.append(fmax)
-    if mu > 0:
-        cone = np.zeros((n, nv + 1))
-        cone[:, :n] = -mu * np.eye(n)
-        cone[:, n : 2 * n] = np.eye(n)
-        cone[:, 2 * n : 3 * n] = np.eye(n)
-        rows.extend(cone)
-        rhs.extend([0.0] * n)
-    c = np.zeros(nv + 1)
-    c[-1] = -1.0
-    bounds = [(0.0, fmax)] * n + [(0.0, None)] * (nv - n) + [(0.0, None)]
-    res = linprog(c, A_ub=np.array(rows), b_ub=np.array(rhs), A_eq=a_eq, b_eq=np.zeros(3),
-                  bounds=bounds, method="highs")  # fmt: skip
-    if res.status != 0:
-        return 0.0
-    return float(res.x[-1])
+        def wrench(f: FloatArray) -> FloatArray:
+            return np.vstack([f.T, rel[:, 0] * f[:, 1] - rel[:, 1] * f[:, 0]])
+
+        mu = float(model.contact_friction)
+        # variables: normal forces (n), tangential + and - (n each, only with friction), s
+        blocks = [wrench(push)]
+        if mu > 0:
+            blocks += [wrench(tang), wrench(-tang)]
+        nv = n * len(blocks)
+        self.forces = np.hstack(blocks)
+        rows, rhs = [], []
+        total = np.zeros(nv + 1)
+        total[:n] = 1.0
+        rows.append(total)
+        rhs.append(robots * fmax)
+        # nodes of one edge are collinear, their robots' centres as far apart as the nodes: at
+        # most one robot (one force limit) in every stretch of an edge shorter than a diameter
+        along = np.einsum("jik,jk->ji", pts[None] - pts[:, None], tang)  # [j, i]: i ahead of j
+        same = cand.edges[:, None] == cand.edges[None]
+        window = same & (along >= -1e-12) & (along < 2 * r - 1e-9)
+        for j in range(n):
+            row = np.zeros(nv + 1)
+            row[:n] = window[j]
+            rows.append(row)
+            rhs.append(fmax)
+        if mu > 0:
+            cone = np.zeros((n, nv + 1))
+            cone[:, :n] = -mu * np.eye(n)
+            cone[:, n : 2 * n] = np.eye(n)
+            cone[:, 2 * n : 3 * n] = np.eye(n)
+            rows.extend(cone)
+            rhs.extend([0.0] * n)
+        self.a_ub, self.b_ub = np.array(rows), np.array(rhs)
+        self.c = np.zeros(nv + 1)
+        self.c[-1] = -1.0
+        self.bounds = [(0.0, fmax)] * n + [(0.0, None)] * (nv - n) + [(0.0, None)]
+
+    def share(self, twist: FloatArray) -> float:
+        """The largest s such that contacts at every candidate node produce s times the
+        wrench ``twist`` needs; 0 when none produces it at all."""
+        if self.n == 0:
+            return 0.0
+        m = self.model
+        need = required_wrench(twist, m.mass, m.floor_friction, m.mean_radius)
+        a_eq = np.hstack([self.forces, -need[:, None]])
+        res = linprog(self.c, A_ub=self.a_ub, b_ub=self.b_ub, A_eq=a_eq, b_eq=np.zeros(3),
+                      bounds=self.bounds, method="highs")  # fmt: skip
+        if res.status != 0:
+            return 0.0
+        return float(res.x[-1])
