@@ -333,3 +333,9 @@ def distance_around_convex(starts: ArrayLike, goals: ArrayLike, hull: ArrayLike)
     out = dist[:, n_h + len(s) :]
     straight = np.linalg.norm(s[:, None] - g[None], axis=-1)
     return np.where(np.isfinite(out), out, straight)
+
+
+def vertex_distance(points: ArrayLike, polygon: ArrayLike) -> FloatArray:
+    """Each point's distance to the polygon's nearest vertex (m)."""
+    d = np.asarray(points, float)[:, None, :] - np.asarray(polygon, float)[None]
+    return np.sqrt((d * d).sum(-1)).min(axis=1)

@@ -351,6 +351,26 @@ class RouteSection:
 
 
 @dataclass(frozen=True, kw_only=True)
+class ErrorModel:
+    """The errors the transport's plans allow for (Yamashita et al., Table 1's condition 2;
+    all 0: condition 1, plans that ignore them). ``position``: each robot's motion error,
+    ±x, ±y m (the paper's [0.04, 0.01]); ``mass`` and ``friction``: the object's mass and floor
+    friction known to ± that share (0.1); ``com``: its centre of mass known to ± that many m
+    along each axis (0.01)."""
+
+    # m, ±x and ±y: each robot's motion error; pushes keep its norm from every vertex and
+    # robots twice it apart (Yamashita's [0.04, 0.01])
+    position: Point = _rule((0.0, 0.0))
+    # share, ±: the object's mass; forces planned for the heaviest (0.1)
+    mass: float = _rule(0.0, min=0, max=0.9)
+    # share, ±: the floor friction; forces planned for the roughest (0.1)
+    friction: float = _rule(0.0, min=0, max=0.9)
+    # m, ± per axis: the centre of mass off the centroid; pushing sets make the torque either
+    # way (0.01)
+    com: float = _rule(0.0, min=0, max=1)
+
+
+@dataclass(frozen=True, kw_only=True)
 class TransportSection:
     """Carrying the arrested object (controller/planning/transport*.py). Weights k_* are the
     energy's K constants (Vass Eq. 3 plus route deviation and progress), per unit named."""
@@ -384,6 +404,9 @@ class TransportSection:
     k_progress: float = _rule(10.0, min=0, max=1e9)  # per m of progress along the route
     serpentine_deviation: float = _rule(0.15, gt=0, max=100)  # m, switch threshold at start
     serpentine_min_deviation: float = _rule(0.03, gt=0, max=100)  # m, near the goal
+    # the errors the plans allow for: margins at the contacts and between robots, forces for
+    # the heaviest, roughest object (Yamashita's condition 2); all 0: ignore them (condition 1)
+    errors: ErrorModel = _rule(ErrorModel())
 
 
 @dataclass(frozen=True, kw_only=True)

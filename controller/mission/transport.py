@@ -33,9 +33,8 @@ from controller.mission.sequence import Cue, Failure, Sequencer
 from controller.mission.summary import TransportSummary
 from controller.mission.transport_settings import SEQUENCE, TransportSettings
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase, Reason
-from controller.planning.arrangement import can_push
+from controller.planning.arrangement import can_push, planning_model
 from controller.planning.contact_lp import ContactForceLP
-from controller.planning.transport_model import ObjectModel
 from controller.planning.transport_types import TransportParams
 
 if TYPE_CHECKING:
@@ -77,9 +76,7 @@ class TransportMission:
         self.s = TransportSettings.from_config(cfg)
         self.n = len(cfg.robots)
         o = cfg.object
-        self.model = ObjectModel.build(
-            cfg.object_polygon(), o.mass, o.floor_friction, o.contact_friction, cfg.max_robot_radius
-        )
+        self.model = planning_model(cfg)  # the heaviest it may be, under transport.errors
         self.params = TransportParams.from_config(cfg.transport)
         self.planners = planners if planners is not None else InlinePlanners()
         # the route planner toward object.goal (its C-space and cost-to-go table take a second:
@@ -222,7 +219,9 @@ class TransportMission:
     def _can_push(self, pose: np.ndarray) -> bool:
         """Whether the robots in contact can push the object along the segment (the LP)."""
         twist = self.way.direction(pose) * self.params.speed
-        return can_push(self.lp, self.model, twist, *self.grip.contact_arrays())
+        return can_push(
+            self.lp, self.model, twist, *self.grip.contact_arrays(), self.params.com_error
+        )
 
     # --- rearrange ----------------------------------------------------------------------------
     def _start_rearrangement(self, view: FleetView, pose: np.ndarray, events: list[Event], cue):

@@ -8,7 +8,7 @@ passed generator. The transport mission asks for it off the control tick (a job 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -16,6 +16,7 @@ from controller import geometry
 from controller.config import FleetConfig
 from controller.planning.contact_lp import GRAVITY, ContactForceLP, required_wrench
 from controller.planning.transport import local_strategy
+from controller.planning.transport_model import robust_wrenches
 
 TURN_SHARE = 0.3  # a segment whose turn takes more than this share of the unit twist turns
 TURN_MARGIN = 1.2  # a set chosen by the LP produces this times the wrench the segment needs
@@ -38,6 +39,40 @@ class Arrangement:
     detail: str = ""
 
 
+def errors_of(cfg: FleetConfig) -> tuple[float, float]:
+    """The error model's (motion error m, the norm of ``transport.errors.position``; centre
+    of mass error m per axis): the plans' margins (0, 0: condition 1, errors ignored)."""
+    e = cfg.transport.errors
+    return math.hypot(*e.position), float(e.com)
+
+
+def planning_model(cfg: FleetConfig):
+    """The object as the transport's planners see it (``transport_model.ObjectModel``): the
+    config's, or under the error model (``transport.errors``, Yamashita's condition 2) the
+    heaviest and roughest it may be, pushes near a vertex not counted."""
+    from controller.planning.transport_model import ObjectModel
+
+    o, e = cfg.object, cfg.transport.errors
+    return ObjectModel.build(
+        cfg.object_polygon(),
+        o.mass * (1.0 + e.mass),
+        o.floor_friction * (1.0 + e.friction),
+        o.contact_friction,
+        cfg.max_robot_radius,
+        push_margin=errors_of(cfg)[0],
+    )
+
+
+def candidates(cfg: FleetConfig):
+    """The candidate contact nodes of the arrangement (``capture.candidate_nodes``): the
+    capture's, without those within the motion error of a vertex."""
+    from controller.planning.capture import candidate_nodes
+
+    poly = geometry.ensure_ccw(cfg.object_polygon())
+    c = cfg.capture
+    return candidate_nodes(poly, cfg.max_robot_radius, c.spacing, c.clearance, errors_of(cfg)[0])
+
+
 def can_push(
     lp: ContactForceLP,
     model,
@@ -45,20 +80,25 @@ def can_push(
     pts: np.ndarray,
     inward: np.ndarray,
     fmax: np.ndarray,
+    com_error: float = 0.0,
 ) -> bool:
     """Whether contacts (object-frame points, inward normals, force limits N) can move the
     object (``model``: ``transport_model.ObjectModel``) with ``twist`` (object frame, m/s and
-    rad/s of the centroid), by the contact-force LP."""
+    rad/s of the centroid), by the contact-force LP; wherever its centre of mass is within
+    ±``com_error`` m of the centroid, with one."""
     if not np.any(twist):
         return True
     if len(pts) == 0:
         return False
     w = required_wrench(twist, model.mass, model.floor_friction, model.mean_radius)
-    res = lp.solve(
-        pts - model.centroid, inward, fmax, np.ones(len(pts), bool), w,
-        model.contact_friction, model.mean_radius,
-    )  # fmt: skip
-    return res.status == "optimal"
+    for wrench in robust_wrenches(w, com_error):
+        res = lp.solve(
+            pts - model.centroid, inward, fmax, np.ones(len(pts), bool), wrench,
+            model.contact_friction, model.mean_radius,
+        )  # fmt: skip
+        if res.status != "optimal":
+            return False
+    return True
 
 
 def plan_arrangement(
@@ -97,7 +137,8 @@ def plan_arrangement(
         # more pushers while the LP says the set cannot push, up to every robot
         for n in range(first, robots + 1):
             pts, nrm, value = pushing_set(cfg, d, n, rng)
-            if can_push(lp, model, twist_v, pts, -nrm, np.full(len(pts), weakest)):
+            fmax = np.full(len(pts), weakest)
+            if can_push(lp, model, twist_v, pts, -nrm, fmax, errors_of(cfg)[1]):
                 return Arrangement(pts, nrm, value, n, "eq5")
     pts, nrm, value, n = wrench_set(cfg, model, twist_v, weakest, robots, turn_margin)
     need = float(np.hypot(*required_wrench(twist_v, model.mass, model.floor_friction, 1.0)[:2]))
@@ -124,13 +165,16 @@ def pushing_set(
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Sharma Eq. 5 along D: the ``n_push`` candidate nodes pushing hardest along D (points,
     outward normals, value)."""
-    from controller.planning.capture import CaptureParams, candidate_nodes, plan_push_arrangement
+    from controller.planning.capture import CaptureParams, plan_push_arrangement
 
     r = cfg.max_robot_radius
     poly = geometry.ensure_ccw(cfg.object_polygon())
+    err = errors_of(cfg)[0]
     params = CaptureParams.from_config(cfg.capture)
+    if err > 0:  # the error model: off the vertices, robots twice the motion error further apart
+        params = replace(params, edge_margin=err, clearance=params.clearance + 2.0 * err)
     idx, value = plan_push_arrangement(poly, r, d, n_push, params, rng)
-    cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
+    cand = candidates(cfg)
     return cand.points[idx], cand.normals[idx], float(value)
 
 
@@ -146,18 +190,19 @@ def wrench_set(
     ``turn_margin``) over every candidate node, reinforced (``planning.hold``) until it can
     produce that wrench within ``weakest`` N per contact with at most ``robots`` contacts;
     the value is that capacity."""
-    from controller.planning.capture import candidate_nodes
     from controller.planning.hold import least_force_set, reinforce
 
     r = cfg.max_robot_radius
-    poly = geometry.ensure_ccw(cfg.object_polygon())
-    cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
+    cand = candidates(cfg)
     centres = cand.points + r * cand.normals
     gap = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
-    conflict = gap < 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)
+    spare = max(cfg.capture.clearance, cfg.approach.safety_margin) + 2.0 * errors_of(cfg)[0]
+    conflict = gap < 2 * r + spare
     np.fill_diagonal(conflict, False)
     need = required_wrench(twist_v, model.mass, model.floor_friction, model.mean_radius)
     load = turn_margin * need
+    # under the error model, every centre of mass it allows (the two torque extremes)
+    loads = np.array([turn_margin * w for w in robust_wrenches(need, errors_of(cfg)[1])])
     start = least_force_set(cand.points, cand.normals, model.centroid, load, weakest, conflict)
     res = reinforce(
         cand.points,
@@ -167,7 +212,7 @@ def wrench_set(
         np.ones(len(cand.points), bool),
         conflict,
         weakest,
-        -load[None],
+        -loads,
         robots,
     )
     return cand.points[res.chosen], cand.normals[res.chosen], res.capacity, len(res.chosen)

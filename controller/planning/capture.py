@@ -93,6 +93,9 @@ class CaptureParams:
     generations: int = configured(_CAPTURE, "generations")
     closure: str = configured(_CAPTURE, "closure")
     ga: str = configured(_CAPTURE, "ga")
+    # m: nodes nearer a vertex than this are left out (the transport's error model: a robot
+    # off by its motion error still pushes the face, never the corner; 0 for the capture)
+    edge_margin: float = 0.0
 
     @classmethod
     def from_config(cls, c) -> CaptureParams:
@@ -115,9 +118,14 @@ class Candidates:
 
 
 def candidate_nodes(
-    polygon: FloatArray, robot_radius: float, spacing: float, clearance: float
+    polygon: FloatArray,
+    robot_radius: float,
+    spacing: float,
+    clearance: float,
+    edge_margin: float = 0.0,
 ) -> Candidates:
-    """Nodes along each edge of the (counter-clockwise) polygon, those a robot disc fits at."""
+    """Nodes along each edge of the (counter-clockwise) polygon, those a robot disc fits at;
+    with ``edge_margin`` (m), only those at least that far from every vertex."""
     poly = geometry.ensure_ccw(polygon)
     budget = capture_budget_error(poly, spacing)
     if budget:
@@ -135,6 +143,8 @@ def candidate_nodes(
     p, n, ed = np.concatenate(pts), np.concatenate(nrm), np.concatenate(edg)
     centres = p + (robot_radius + clearance) * n
     keep = ~geometry.discs_hit_polygon(centres, robot_radius, poly)
+    if edge_margin > 0:
+        keep &= geometry.vertex_distance(p, poly) >= edge_margin - 1e-12
     return Candidates(p[keep], n[keep], ed[keep], len(poly), len(p))
 
 
@@ -173,7 +183,9 @@ def make_problem(
     Raises ValueError naming ``capture.spacing`` past the node budget."""
     poly = geometry.ensure_ccw(polygon)
     if cand is None:
-        cand = candidate_nodes(poly, robot_radius, params.spacing, params.clearance)
+        cand = candidate_nodes(
+            poly, robot_radius, params.spacing, params.clearance, params.edge_margin
+        )
     c = geometry.centroid(poly)
     f = -cand.normals
     rel = cand.points - c

@@ -31,7 +31,6 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linprog
 
-from controller import geometry
 from controller.config import FleetConfig
 from controller.planning.contact_lp import required_wrench
 
@@ -61,13 +60,9 @@ class PushDirections:
     @classmethod
     def from_config(cls, cfg: FleetConfig, margin: float = 1.2) -> PushDirections:
         """For the config's object and whole fleet (its weakest robot's ``max_force``)."""
-        from controller.planning.transport_model import ObjectModel
+        from controller.planning.arrangement import planning_model
 
-        o = cfg.object
-        model = ObjectModel.build(
-            cfg.object_polygon(), o.mass, o.floor_friction, o.contact_friction,
-            cfg.max_robot_radius,
-        )  # fmt: skip
+        model = planning_model(cfg)  # under the error model, the heaviest the object may be
         weakest = min(r.max_force for r in cfg.robots)
         return cls(cfg, model, len(cfg.robots), float(weakest), margin)
 
@@ -169,11 +164,10 @@ class _BoundLP:
     (only the wrench column changes between directions)."""
 
     def __init__(self, cfg: FleetConfig, model, robots: int, fmax: float) -> None:
-        from controller.planning.capture import candidate_nodes
+        from controller.planning.arrangement import candidates
 
         r = cfg.max_robot_radius
-        poly = geometry.ensure_ccw(cfg.object_polygon())
-        cand = candidate_nodes(poly, r, cfg.capture.spacing, cfg.capture.clearance)
+        cand = candidates(cfg)
         self.model = model
         pts, out = cand.points, cand.normals
         n = self.n = len(pts)

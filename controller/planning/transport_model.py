@@ -106,6 +106,9 @@ class ObjectModel:
     normals: FloatArray  # (M, 2) outward unit normals
     arc: FloatArray  # (M,) arc length from vertex 0 (m)
     fit: NDArray[np.bool_]  # (M,) a robot disc of robot_radius fits at the node
+    # (M,) a push there counts: every node without an error model; with one, the fit nodes at
+    # least ``push_margin`` from every vertex (the robot pushes the face whatever its error)
+    pushable: NDArray[np.bool_]
     next_ccw: IntArray  # (M,) the next node counter-clockwise if a robot can slide there
     next_cw: IntArray
     relocation_nodes: IntArray  # (R,) fit nodes the relocation scan visits
@@ -123,11 +126,17 @@ class ObjectModel:
         node_spacing: float = 0.01,
         relocation_spacing: float = 0.1,
         lane_margin: float = 0.05,
+        push_margin: float = 0.0,
     ) -> ObjectModel:
-        """Precompute everything per object; ``robot_radius``: the fleet's largest (m)."""
+        """Precompute everything per object; ``robot_radius``: the fleet's largest (m);
+        ``push_margin``: m from a vertex within which a robot's push does not count (the
+        error model's motion error: the robot may be pushing the corner, or nothing)."""
         poly = geometry.ensure_ccw(np.asarray(polygon, float))
         pts, nrm, arc = _boundary_nodes(poly, node_spacing)
         fit = ~geometry.discs_hit_polygon(pts + (robot_radius + 1e-3) * nrm, robot_radius, poly)
+        pushable = np.ones(len(pts), bool)
+        if push_margin > 0:
+            pushable = fit & geometry.vertex_distance(pts, poly) >= push_margin - 1e-12
         m = len(pts)
         ccw = np.roll(np.arange(m), -1)
         cw = np.roll(np.arange(m), 1)
@@ -135,6 +144,10 @@ class ObjectModel:
         next_cw = np.where(fit & fit[cw], cw, np.arange(m))
         bins = np.floor(arc / relocation_spacing).astype(int)
         first = np.concatenate([[True], bins[1:] != bins[:-1]])
+        if push_margin > 0:  # the first pushable node of each bin (a bin's first may not be)
+            keep = np.flatnonzero(pushable)
+            first = np.zeros(len(pts), bool)
+            first[keep[np.concatenate([[True], bins[keep][1:] != bins[keep][:-1]])]] = True
         lane = _lane(poly, 3.0 * robot_radius + lane_margin)
         return cls(
             polygon=poly,
@@ -149,9 +162,10 @@ class ObjectModel:
             normals=nrm,
             arc=arc,
             fit=fit,
+            pushable=pushable,
             next_ccw=next_ccw,
             next_cw=next_cw,
-            relocation_nodes=np.flatnonzero(first & fit),
+            relocation_nodes=np.flatnonzero(first & fit & pushable),
             lane=lane,
             lane_arc=_cumulative(lane),
         )
@@ -168,6 +182,19 @@ class ObjectModel:
     def centre(self, node: int, radius: float) -> FloatArray:
         """Object-frame centre of a robot of ``radius`` touching the node."""
         return self.nodes[node] + radius * self.normals[node]
+
+
+def robust_wrenches(wrench: ArrayLike, com_error: float) -> list[FloatArray]:
+    """The wrenches (about the centroid) a set must make for the floor friction of ``wrench``
+    to be overcome wherever the centre of mass is within ±``com_error`` m per axis of the
+    centroid: friction acting at an offset c turns the torque by c × F, at most
+    com_error·(|Fx| + |Fy|) either way; the set of wrenches a set of contacts can make is
+    convex, so the two extremes cover every offset between. Without an error, ``wrench``."""
+    w = np.asarray(wrench, float)
+    dt = com_error * (abs(w[0]) + abs(w[1]))
+    if dt <= 0:
+        return [w]
+    return [w + [0.0, 0.0, dt], w - [0.0, 0.0, dt]]
 
 
 def _boundary_nodes(poly: FloatArray, spacing: float) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -486,6 +513,12 @@ class Rollout:
         self._centres_list = self._centres.tolist()
         self._pi, self._pj = np.triu_indices(self.k, 1)
         gap = self.radii[self._pi] + self.radii[self._pj] - params.contact_tolerance
+        pos0 = np.array([np.asarray(r.position, float) for r in robots]).reshape(self.k, 2)
+        if params.pose_error > 0 and self.k > 1:
+            # the error model: two robots each off by up to the motion error must keep twice it
+            # apart; a pair nearer than that at the plan's start may stay so, only not close in
+            start = np.linalg.norm(pos0[self._pi] - pos0[self._pj], axis=1)
+            gap = np.maximum(gap, np.minimum(gap + 2.0 * params.pose_error, start - 1e-6))
         self._pair_gap2 = np.maximum(gap, 0.0) ** 2
         self._bounds = None
         if state.bounds is not None:
@@ -500,7 +533,7 @@ class Rollout:
         nodes = tuple(
             -1 if r.contact is None else m.snap(r.contact[0], r.contact[1]) for r in robots
         )
-        pos = np.array([np.asarray(r.position, float) for r in robots]).reshape(self.k, 2)
+        pos = pos0
         start_pose = (float(cw[0]), float(cw[1]), th)
         s0, dev0, _ = self.route.locate(self._q(start_pose))
         self.start = _Sim(start_pose, nodes, pos, (None,) * self.k, s0, dev0)
@@ -585,16 +618,22 @@ class Rollout:
         hit = self._lp_cache.get(key)
         if hit is None:
             w = required_wrench(twist_obj, m.mass, m.floor_friction, m.mean_radius)
-            hit = self.lp.solve(
-                self._rel[nd],
-                -m.normals[nd],
-                self.fmax[push],
-                np.ones(len(push), bool),
-                w,
-                m.contact_friction,
-                m.mean_radius,
-            )
-            self.lp_calls += 1
+            hit = None
+            for wrench in robust_wrenches(w, self.params.com_error):
+                res = self.lp.solve(
+                    self._rel[nd],
+                    -m.normals[nd],
+                    self.fmax[push],
+                    np.ones(len(push), bool),
+                    wrench,
+                    m.contact_friction,
+                    m.mean_radius,
+                )
+                self.lp_calls += 1
+                if hit is None or not res.feasible or (hit.feasible and res.total > hit.total):
+                    hit = res  # the worst of them: infeasible if any is
+                if not res.feasible:
+                    break
             self._lp_cache[key] = hit
         return hit
 
@@ -691,7 +730,11 @@ class Rollout:
         att = [nodes[i] >= 0 and eff[i] in ATTACHED for i in range(self.k)]
         want = self.carrot_twist(sim) if override is None else override
         want = want * self._speed_scale(sim.pose[2], eff, nodes, att, want)
-        push = np.array([i for i in range(self.k) if eff[i] == PUSH and nodes[i] >= 0], np.int64)
+        ok = self.model.pushable
+        # a push within the error model's margin of a vertex counts for nothing (the robot may
+        # be on the corner, or past it): the object moves only if the others can move it
+        push = [i for i in range(self.k) if eff[i] == PUSH and nodes[i] >= 0 and ok[nodes[i]]]
+        push = np.array(push, np.int64)
         lp = self.forces(sim.pose[2], push, np.array(nodes, np.int64), want)
         moved = want if lp.feasible else np.zeros(3)
         dt = self.dt
@@ -899,7 +942,8 @@ def lp_matrix(roll: Rollout, intervals: int) -> IntArray:
     uphill); without an LP answer, :func:`hold_matrix`."""
     st = roll.start
     twist = roll.carrot_twist(st)
-    contact = np.array([i for i in range(roll.k) if st.nodes[i] >= 0], np.int64)
+    ok = roll.model.pushable
+    contact = np.array([i for i in range(roll.k) if st.nodes[i] >= 0 and ok[st.nodes[i]]], np.int64)
     force = np.zeros(roll.k)
     if len(contact) and np.any(twist):
         res = roll.forces(st.pose[2], contact, np.asarray(st.nodes, np.int64), twist)

@@ -21,6 +21,7 @@ rows are intervals and columns robots):
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -149,6 +150,10 @@ class TransportParams:
     k_progress: float = configured(_TRANSPORT, "k_progress")
     serpentine_deviation: float = configured(_TRANSPORT, "serpentine_deviation")
     serpentine_min_deviation: float = configured(_TRANSPORT, "serpentine_min_deviation")
+    # the error model (``transport.errors``, Yamashita's condition 2; 0: condition 1): m of a
+    # robot's motion error (the norm of errors.position) and of the centre of mass's (per axis)
+    pose_error: float = configured(_TRANSPORT, "errors", lambda e: math.hypot(*e.position))
+    com_error: float = configured(_TRANSPORT, "errors", lambda e: float(e.com))
     contact_tolerance: float = 0.01  # m: closer counts as touching, deeper as a collision
 
     def __post_init__(self) -> None:
