@@ -58,6 +58,9 @@ from controller.planning.transport_types import ACTIONS, TransportParams  # noqa
 from tests.support.transport_cases import diamond_case, push_case  # noqa: E402
 
 STRATEGIES = ("sa", "downhill", "serpentine")
+#: Yamashita et al.'s Table 1 (condition 2): the error model ``transport.errors`` plans with;
+#: a strategy named ``<strategy>+errors`` runs with it, the plain name without (condition 1)
+YAMASHITA_ERRORS = {"position": [0.04, 0.01], "mass": 0.1, "friction": 0.1, "com": 0.01}
 #: the serpentine's counts a run reports (``fleet run --json``'s ``mission``)
 SERPENTINE_COUNTS = ("serpentine_plans", "serpentine_two_group_plans", "serpentine_switches")
 #: the output's sets of runs and their labels in the table
@@ -161,7 +164,11 @@ def run_case(job: tuple) -> dict:
     from tests.support.transport_scenarios import scenario_config
 
     sc, strategy, seed, label = job
-    patch = {**sc.patch, "transport": {**sc.patch.get("transport", {}), "strategy": strategy}}
+    base, _, errors = strategy.partition("+")  # "sa+errors": Yamashita's condition 2
+    transport = {**sc.patch.get("transport", {}), "strategy": base}
+    if errors:
+        transport["errors"] = YAMASHITA_ERRORS
+    patch = {**sc.patch, "transport": transport}
     sc = dataclasses.replace(sc, patch=patch, seed=seed)
     cfg = scenario_config(sc)
     t0 = time.perf_counter()
@@ -194,6 +201,11 @@ def run_case(job: tuple) -> dict:
         "impulse_ns": res.get("contact_impulse_ns"),
         "lateral_deviation_rms_m": res.get("lateral_deviation_rms_m"),
         "rearrangements": res.get("rearrangements"),
+        # the truth about the robots the plan had pushing, and the robots' closest approach
+        "push_contact_losses": res.get("push_contact_losses"),
+        "push_contact_share": res.get("push_contact_share"),
+        "min_clearance_m": res.get("min_clearance_m"),
+        "verdict": [f["reason"] for f in judge(res)],
         # the mission's own figures (``mission`` in fleet run --json)
         **{k: mission.get(k) for k in SERPENTINE_COUNTS},
         "robots": len(sc.kinds),
@@ -232,6 +244,16 @@ def aggregate(rows: list[dict], strategies, rng: np.random.Generator) -> dict:
             ),
             "failures": sorted({str(r["reason"]) for r in mine if not r["success"]}),
         }
+        if any("push_contact_losses" in r for r in mine):  # rows from before lack them
+            losses = [r["push_contact_losses"] or 0 for r in mine]
+            out[s].update(
+                collisions=sum("collision" in (r.get("verdict") or []) for r in mine),
+                push_contact_losses=int(sum(losses)),
+                runs_with_contact_losses=sum(x > 0 for x in losses),
+                push_contact_share=stats.median(
+                    [r["push_contact_share"] for r in mine if r["push_contact_share"]], rng
+                ),
+            )
     pairs: dict = {}
     for i, a in enumerate(strategies):
         for b in strategies[i + 1 :]:
@@ -264,6 +286,21 @@ def with_contact_friction(sc, mu: float):
     """The scenario with ``object.contact_friction`` = mu (world and planners alike)."""
     obj = {**sc.patch.get("object", {}), "contact_friction": mu}
     return dataclasses.replace(sc, patch={**sc.patch, "object": obj})
+
+
+def with_world_errors(sc):
+    """The scenario's world off as Yamashita's Table 1 has it: robot motion errors (±0.04 m,
+    ±0.01 m), the object's mass and floor friction ×U(0.9, 1.1) and its CoM ±1 cm, drawn from
+    the scenario's seed (the controller is told the nominal object)."""
+    rng = np.random.default_rng([sc.seed, 5050])
+    sim = {
+        **sc.patch.get("sim", {}),
+        "robot_position_error": [0.04, 0.01],
+        "object_mass_scale": round(float(rng.uniform(0.9, 1.1)), 4),
+        "object_friction_scale": round(float(rng.uniform(0.9, 1.1)), 4),
+        "object_com_offset": [round(float(v), 4) for v in rng.uniform(-0.01, 0.01, 2)],
+    }
+    return dataclasses.replace(sc, patch={**sc.patch, "sim": sim})
 
 
 def eq5_groups(sc) -> dict:
@@ -472,6 +509,12 @@ def main() -> None:
         help="object.contact_friction for every run (the world's robot-object friction and the "
         "LP's friction cones; default: the scenarios' own, 0)",
     )
+    ap.add_argument(
+        "--world-errors",
+        action="store_true",
+        help="the varied suite's worlds off as the robustness runs' are: robot motion errors "
+        "±0.04 m, ±0.01 m, the object's mass and floor friction ×U(0.9, 1.1), CoM ±1 cm",
+    )
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--planner-seeds", type=int, default=10)
     ap.add_argument("--minima-checks", type=int, default=40)
@@ -511,6 +554,7 @@ def main() -> None:
             "sweep_runs_per_strategy": args.sweep,
             "varied_scenarios": args.varied,
             "contact_friction": args.contact_friction,
+            "world_errors": args.world_errors,
             "planner_seeds": args.planner_seeds,
         },
     }
@@ -541,6 +585,8 @@ def main() -> None:
         out["robustness_runs"] = rows
     if args.varied:
         varied = draw_varied_suite(args.varied)
+        if args.world_errors:
+            varied = [with_world_errors(sc) for sc in varied]
         if args.contact_friction is not None:
             varied = [with_contact_friction(sc, args.contact_friction) for sc in varied]
         out["eq5_groups"] = [eq5_groups(sc) for sc in varied]

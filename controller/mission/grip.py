@@ -122,6 +122,10 @@ class Grip:
         """(N,) robots holding a contact."""
         return np.array([self.contacts[i] is not None for i in range(self.n)])
 
+    def pushing(self) -> list[int]:
+        """The robots holding a contact with the plan's action ``push`` (indices)."""
+        return [i for i in range(self.n) if self.contacts[i] and self.actions[i] == "push"]
+
     def contact_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The contacts held: points, inward normals (object frame) and the robots' forces."""
         pts, nrm, fmax = [], [], []

@@ -366,8 +366,8 @@ class TransportMission:
             to_goal = self.way.remaining(pose)
         else:
             to_goal = float(np.linalg.norm(pose[:2] - np.asarray(self.cfg.object.goal)[:2]))
-        sub = float(self.way.subgoal)
-        progress = {"phase": str(self.phase), "to_goal_m": to_goal, "subgoal": sub}
+        progress = {"phase": str(self.phase), "to_goal_m": to_goal}
+        progress.update(subgoal=float(self.way.subgoal), pushing=self.grip.pushing())
         return Intent.of(
             vel,
             self.phase,

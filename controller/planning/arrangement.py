@@ -165,7 +165,7 @@ def pushing_set(
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Sharma Eq. 5 along D: the ``n_push`` candidate nodes pushing hardest along D (points,
     outward normals, value)."""
-    from controller.planning.capture import CaptureParams, plan_push_arrangement
+    from controller.planning.capture import CaptureParams, candidate_nodes, plan_push_arrangement
 
     r = cfg.max_robot_radius
     poly = geometry.ensure_ccw(cfg.object_polygon())
@@ -174,7 +174,7 @@ def pushing_set(
     if err > 0:  # the error model: off the vertices, robots twice the motion error further apart
         params = replace(params, edge_margin=err, clearance=params.clearance + 2.0 * err)
     idx, value = plan_push_arrangement(poly, r, d, n_push, params, rng)
-    cand = candidates(cfg)
+    cand = candidate_nodes(poly, r, params.spacing, params.clearance, params.edge_margin)
     return cand.points[idx], cand.normals[idx], float(value)
 
 

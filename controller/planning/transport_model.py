@@ -136,7 +136,7 @@ class ObjectModel:
         fit = ~geometry.discs_hit_polygon(pts + (robot_radius + 1e-3) * nrm, robot_radius, poly)
         pushable = np.ones(len(pts), bool)
         if push_margin > 0:
-            pushable = fit & geometry.vertex_distance(pts, poly) >= push_margin - 1e-12
+            pushable = fit & (geometry.vertex_distance(pts, poly) >= push_margin - 1e-12)
         m = len(pts)
         ccw = np.roll(np.arange(m), -1)
         cw = np.roll(np.arange(m), 1)
@@ -512,14 +512,7 @@ class Rollout:
         self._rel_list = self._rel.tolist()
         self._centres_list = self._centres.tolist()
         self._pi, self._pj = np.triu_indices(self.k, 1)
-        gap = self.radii[self._pi] + self.radii[self._pj] - params.contact_tolerance
         pos0 = np.array([np.asarray(r.position, float) for r in robots]).reshape(self.k, 2)
-        if params.pose_error > 0 and self.k > 1:
-            # the error model: two robots each off by up to the motion error must keep twice it
-            # apart; a pair nearer than that at the plan's start may stay so, only not close in
-            start = np.linalg.norm(pos0[self._pi] - pos0[self._pj], axis=1)
-            gap = np.maximum(gap, np.minimum(gap + 2.0 * params.pose_error, start - 1e-6))
-        self._pair_gap2 = np.maximum(gap, 0.0) ** 2
         self._bounds = None
         if state.bounds is not None:
             b = np.asarray(state.bounds, float)
@@ -535,6 +528,7 @@ class Rollout:
         )
         pos = pos0
         start_pose = (float(cw[0]), float(cw[1]), th)
+        self._pair_gap2 = self._pair_gaps(nodes, pos, cw, float(pose[2]))
         s0, dev0, _ = self.route.locate(self._q(start_pose))
         self.start = _Sim(start_pose, nodes, pos, (None,) * self.k, s0, dev0)
         self.s0 = s0
@@ -560,6 +554,23 @@ class Rollout:
         self.steps = 0
 
     # ------------------------------------------------------------------ helpers
+
+    def _pair_gaps(self, nodes, pos: FloatArray, cw: FloatArray, th: float) -> FloatArray:
+        """The squared centre distance under which a pair of robots collides: their radii
+        less the contact tolerance; under the error model (``pose_error``) twice the motion
+        error more, except for a pair nearer than that at the plan's start (where the model
+        puts them: robots in contact at their nodes), which may stay as near, not close in."""
+        p = self.params
+        gap = self.radii[self._pi] + self.radii[self._pj] - p.contact_tolerance
+        if p.pose_error > 0 and self.k > 1:
+            at = pos.copy()
+            rot = geometry.rot(th)
+            for i, n in enumerate(nodes):
+                if n >= 0:
+                    at[i] = cw + rot @ self._centres[i, n]
+            start = np.linalg.norm(at[self._pi] - at[self._pj], axis=1)
+            gap = np.maximum(gap, np.minimum(gap + 2.0 * p.pose_error, start - 1e-3))
+        return np.maximum(gap, 0.0) ** 2
 
     def _q(self, pose: tuple[float, float, float]) -> FloatArray:
         return np.array([pose[0], pose[1], self.model.mean_radius * pose[2]])
@@ -730,10 +741,16 @@ class Rollout:
         att = [nodes[i] >= 0 and eff[i] in ATTACHED for i in range(self.k)]
         want = self.carrot_twist(sim) if override is None else override
         want = want * self._speed_scale(sim.pose[2], eff, nodes, att, want)
-        ok = self.model.pushable
-        # a push within the error model's margin of a vertex counts for nothing (the robot may
-        # be on the corner, or past it): the object moves only if the others can move it
-        push = [i for i in range(self.k) if eff[i] == PUSH and nodes[i] >= 0 and ok[nodes[i]]]
+        ok, held = self.model.pushable, self.start.nodes
+        # a push within the error model's margin of a vertex counts for nothing (a robot sent
+        # there may reach the corner, or pass it): the object moves only if the others move it.
+        # The contact a robot holds at the plan's start counts: the margin is for contacts the
+        # plan moves a robot to (the held one is measured, its error already in it)
+        push = [
+            i
+            for i in range(self.k)
+            if eff[i] == PUSH and nodes[i] >= 0 and (ok[nodes[i]] or nodes[i] == held[i])
+        ]
         push = np.array(push, np.int64)
         lp = self.forces(sim.pose[2], push, np.array(nodes, np.int64), want)
         moved = want if lp.feasible else np.zeros(3)
@@ -942,8 +959,7 @@ def lp_matrix(roll: Rollout, intervals: int) -> IntArray:
     uphill); without an LP answer, :func:`hold_matrix`."""
     st = roll.start
     twist = roll.carrot_twist(st)
-    ok = roll.model.pushable
-    contact = np.array([i for i in range(roll.k) if st.nodes[i] >= 0 and ok[st.nodes[i]]], np.int64)
+    contact = np.array([i for i in range(roll.k) if st.nodes[i] >= 0], np.int64)
     force = np.zeros(roll.k)
     if len(contact) and np.any(twist):
         res = roll.forces(st.pose[2], contact, np.asarray(st.nodes, np.int64), twist)

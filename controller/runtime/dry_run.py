@@ -40,6 +40,7 @@ from controller.verdict import RULES, VerdictRules, judge  # noqa: F401 (their o
 from drivers.agent import Agent, AgentParams
 
 log = logging.getLogger(__name__)
+LOSS_AFTER = 0.5  # s a robot the plan has pushing may be off the object before it is a loss
 
 
 @dataclass
@@ -137,6 +138,14 @@ class TransportScore:
         self.impulse = 0.0
         self.clearance = math.inf
         self.delivered = False
+        # the robots the plan has pushing, against their true contacts: robot-ticks pushing,
+        # those touching, contacts lost while pushing (off LOSS_AFTER s), since when each is off
+        self.ids = [r.id for r in cfg.robots]
+        self.push_ticks = 0
+        self.push_touching = 0
+        self.contact_losses = 0
+        self.off_since: dict[int, float] = {}
+        self.lost_now: set[int] = set()
 
     def tick(self, t: float, dt: float, out, world) -> None:
         if out is None:
@@ -162,7 +171,9 @@ class TransportScore:
             origin = pose[:2]
             d, _ = geometry.point_segment_distance(origin[None], self.route[:-1], self.route[1:])
             self.lateral.append(float(d.min()))
-        f = list(world.contact_forces().values())
+        forces = world.contact_forces()
+        self._push_contacts(t, out.progress.get("pushing", ()), forces)
+        f = list(forces.values())
         self.forces += f
         self.impulse += float(sum(f)) * dt
         obstacles = self.cfg.obstacle_polygons()
@@ -171,6 +182,25 @@ class TransportScore:
             self.clearance,
             geometry.polygon_clearance(geometry.transform(self.poly, pose), obstacles, bounds),
         )
+
+    def _push_contacts(self, t: float, pushing, forces: dict[str, float]) -> None:
+        """Score the pushers' true contacts: a robot the plan has pushing that is off the
+        object for ``LOSS_AFTER`` s after touching it is a contact lost (once per loss)."""
+        for i in range(len(self.ids)):
+            if i not in pushing:
+                self.off_since.pop(i, None)
+                self.lost_now.discard(i)
+                continue
+            self.push_ticks += 1
+            if forces.get(self.ids[i], 0.0) > 0.0:
+                self.push_touching += 1
+                self.off_since.pop(i, None)
+                self.lost_now.discard(i)
+                continue
+            since = self.off_since.setdefault(i, t)
+            if t - since >= LOSS_AFTER and i not in self.lost_now:
+                self.lost_now.add(i)
+                self.contact_losses += 1
 
     def figures(self, world) -> TransportFigures:
         """The ``fleet run --json`` transport fields (None where nothing was carried)."""
@@ -205,6 +235,10 @@ class TransportScore:
             transport_object_min_clearance_m=None if math.isinf(self.clearance) else self.clearance,
             goal_centroid_error_m=float(np.linalg.norm(end_c - goal_c)),
             goal_centroid_reached_s=reached,
+            push_contact_share=(
+                round(self.push_touching / self.push_ticks, 4) if self.push_ticks else None
+            ),
+            push_contact_losses=self.contact_losses,
             carried=True,
         )
 

@@ -44,6 +44,10 @@ class TransportFigures:
     # s from the transport's start to the centroid's first arrival within transport.tolerance
     # of the goal's centroid (Sharma §5's stopping rule; null if it never came that near)
     goal_centroid_reached_s: float | None = None
+    # the robots the plan had pushing: the share of their ticks they truly touched the object,
+    # and how often one was off it for half a second while still pushing (a contact lost)
+    push_contact_share: float | None = None
+    push_contact_losses: int | None = None
     carried: bool = False
 
     def to_json(self) -> dict[str, Any]:
