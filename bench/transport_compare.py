@@ -61,6 +61,8 @@ STRATEGIES = ("sa", "downhill", "serpentine")
 #: Yamashita et al.'s Table 1 (condition 2): the error model ``transport.errors`` plans with;
 #: a strategy named ``<strategy>+errors`` runs with it, the plain name without (condition 1)
 YAMASHITA_ERRORS = {"position": [0.04, 0.01], "mass": 0.1, "friction": 0.1, "com": 0.01}
+#: ``<strategy>+<name>``: the error model the plans allow for (``pose``: the motion error only)
+ERROR_MODELS = {"errors": YAMASHITA_ERRORS, "pose": {"position": [0.04, 0.01]}}
 #: the serpentine's counts a run reports (``fleet run --json``'s ``mission``)
 SERPENTINE_COUNTS = ("serpentine_plans", "serpentine_two_group_plans", "serpentine_switches")
 #: the output's sets of runs and their labels in the table
@@ -167,7 +169,7 @@ def run_case(job: tuple) -> dict:
     base, _, errors = strategy.partition("+")  # "sa+errors": Yamashita's condition 2
     transport = {**sc.patch.get("transport", {}), "strategy": base}
     if errors:
-        transport["errors"] = YAMASHITA_ERRORS
+        transport["errors"] = ERROR_MODELS[errors]
     patch = {**sc.patch, "transport": transport}
     sc = dataclasses.replace(sc, patch=patch, seed=seed)
     cfg = scenario_config(sc)
@@ -276,6 +278,23 @@ def aggregate(rows: list[dict], strategies, rng: np.random.Generator) -> dict:
                 p[key]["median_ratio_a_over_b"] = (
                     round(float(np.median(ratios)), 3) if ratios else None
                 )
+            if all("push_contact_losses" in ra[k] and "push_contact_losses" in rb[k] for k in keys):
+                # every paired run (delivered or not): contacts lost, and runs with a collision
+                p["push_contact_losses"] = signed_rank(
+                    [(ra[k]["push_contact_losses"] or 0) - (rb[k]["push_contact_losses"] or 0)
+                     for k in keys]
+                )  # fmt: skip
+                hit = [
+                    int("collision" in (ra[k].get("verdict") or []))
+                    - int("collision" in (rb[k].get("verdict") or []))
+                    for k in keys
+                ]
+                p["collision"] = {
+                    "pairs": len(keys),
+                    "only_a": hit.count(1),
+                    "only_b": hit.count(-1),
+                    "mcnemar_p": stats.mcnemar(hit.count(1), hit.count(-1)),
+                }
             pairs[f"{a}_vs_{b}"] = p
     _holm(pairs)
     out["paired"] = pairs
@@ -333,9 +352,8 @@ def eq5_groups(sc) -> dict:
 def _holm(pairs: dict) -> None:
     """Holm's adjustment across every pairwise test of the table (success, time, impulse of
     each pair): each test gains ``p_holm``."""
-    tests = [
-        (p, key) for p in pairs.values() for key in ("success", "transport_time_s", "impulse_ns")
-    ]
+    keys = ("success", "transport_time_s", "impulse_ns", "push_contact_losses", "collision")
+    tests = [(p, key) for p in pairs.values() for key in keys if key in p]
     raw = [p[key].get("mcnemar_p", p[key].get("wilcoxon_p")) for p, key in tests]
     for (p, key), adj in zip(tests, stats.holm(raw), strict=True):
         p[key]["p_holm"] = None if adj is None else float(f"{adj:.3g}")
