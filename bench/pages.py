@@ -1027,19 +1027,21 @@ def transport_errors(r: dict) -> str:
             if st in ("paired", "invalid_runs"):
                 continue
             share = x["push_contact_share"]
+            mine = [y for y in r[f"{sec}_runs"] if y["strategy"] == st and y.get("valid", True)]
             rows.append(
                 [
                     label,
                     CONDITIONS[st.partition("+")[2]] + f" (`{st}`)",
                     f"{x['success']['k']}/{x['runs']}",
                     str(x["collisions"]),
+                    str(sum(y["rearrangements"] or 0 for y in mine)),
                     f"{x['push_contact_losses']} in {x['runs_with_contact_losses']} runs",
                     "–" if share["median"] is None else f"{100 * share['median']:.0f} %",
                     ", ".join(f"`{f}`" for f in x["failures"]) or "–",
                 ]
             )
-        claims += _claims(r[sec], label)
-        for pair, p in r[sec]["paired"].items():
+        said = _claims(r[sec], label)
+        for i, (pair, p) in enumerate(r[sec]["paired"].items()):
             a, b = pair.split("_vs_")
             q, c = p["push_contact_losses"], p["collision"]
             lost = (
@@ -1050,8 +1052,10 @@ def transport_errors(r: dict) -> str:
                 f"collisions: only `{a}` in {c['only_a']}, only `{b}` in {c['only_b']} (McNemar "
                 f"p {_p(c['mcnemar_p'])}, Holm {_p(c['p_holm'])})"
             )
-            claims.append(f"- {label}, `{a}` vs `{b}`: {lost}; {hit}.")
-    head = ["set", "condition", "delivered", "runs with a collision", "contacts lost",
+            said[i] = f"{said[i].rstrip('.')}; {lost}; {hit}."
+        claims += said
+    head = ["set", "condition", "delivered", "runs with a collision", "re-arrangements",
+            "contacts lost",
             "pushers touching (median share)", "failures"]  # fmt: skip
     model = ", ".join(f"{k} {v}" for k, v in YAMASHITA_ERRORS.items())
     return (
