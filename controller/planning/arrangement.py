@@ -46,6 +46,17 @@ def errors_of(cfg: FleetConfig) -> tuple[float, float]:
     return math.hypot(*e.position), float(e.com)
 
 
+def error_note(cfg: FleetConfig) -> str:
+    """What a too-heavy detail adds under the error model: the object it was planned for."""
+    e = cfg.transport.errors
+    if not (e.mass or e.friction):
+        return ""
+    return (
+        f" (planned for the object {100 * e.mass:g} % heavier and its floor friction "
+        f"{100 * e.friction:g} % higher, as transport.errors allows)"
+    )
+
+
 def planning_model(cfg: FleetConfig):
     """The object as the transport's planners see it (``transport_model.ObjectModel``): the
     config's, or under the error model (``transport.errors``, Yamashita's condition 2) the
@@ -157,6 +168,7 @@ def plan_arrangement(
     )
     if need <= fleet:
         detail += " but cannot all push on the faces that move it this way"
+    detail += error_note(cfg)
     return Arrangement(pts, nrm, value, n, "lp_capacity", feasible=False, detail=detail)
 
 

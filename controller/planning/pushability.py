@@ -134,6 +134,8 @@ class PushDirections:
     def too_heavy_detail(self) -> str:
         """Why no route can be pushed: the force needed, the best set's share at its best
         direction, and the LP bound over every contact (a proof when it is under 100 %)."""
+        from controller.planning.arrangement import error_note
+
         share, angle, n, top = self.best()
         text = (
             f"too heavy to push at any heading: the floor friction needs {self.need:.1f} N; the "
@@ -148,14 +150,16 @@ class PushDirections:
                 " it, as a turn short of its heading needs"
             )
         if top < 1.0:
-            return text + (
+            text += (
                 f"; with every robot on every face where one fits, no set reaches more than "
                 f"{100 * top:.0f} % (the LP over all candidate contacts)"
             )
-        return text + (
-            f"; the LP over all candidate contacts allows up to {100 * top:.0f} % (it ignores "
-            "how many robots fit where), more than any set the planner found"
-        )
+        else:
+            text += (
+                f"; the LP over all candidate contacts allows up to {100 * top:.0f} % (it "
+                "ignores how many robots fit where), more than any set the planner found"
+            )
+        return text + error_note(self.cfg)
 
 
 class _BoundLP:

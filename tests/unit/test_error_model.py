@@ -8,6 +8,7 @@ default): condition 1, plans as before."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -179,3 +180,25 @@ def test_the_arrangement_keeps_the_margins():
         d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
         d[np.diag_indices(len(d))] = np.inf
         assert d.min() >= 2 * r + spare + 2 * ERROR - 1e-9
+
+
+def test_an_object_too_heavy_only_for_the_error_model_says_so():
+    from controller.planning.pushability import PushDirections
+    from tests.support.transport_scenarios import CRATE, Scenario, scenario_config
+
+    # a crate whose floor friction needs 30 % of the six robots' 36 N: pushable as configured;
+    # planned 50 % heavier and rougher (2.25 times the force) no heading can be pushed
+    mass = 0.3 * 36.0 / (0.3 * 9.81)
+    sc = Scenario("heavy", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0), mass=mass, floor_friction=0.3)
+    def directions(scenario):  # 12 directions, not 72: the test's time
+        return replace(PushDirections.from_config(scenario_config(scenario)), buckets=12)
+
+    plain = directions(sc)
+    assert plain.best()[0] >= 1.0
+    patch = {"transport": {"errors": {"mass": 0.5, "friction": 0.5}}}
+    worst = directions(replace(sc, patch=patch))
+    assert worst.need == pytest.approx(2.25 * plain.need)
+    assert worst.best()[0] < 1.0
+    detail = worst.too_heavy_detail()
+    assert "50 % heavier" in detail and "transport.errors" in detail
+    assert "transport.errors" not in plain.too_heavy_detail()
