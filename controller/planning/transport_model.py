@@ -31,17 +31,22 @@ centroid's (x, y) distance from the path.
    speed·dt); scaled down so that no attached
    robot (push, follow, slide) must move faster than its max_speed (sliders: minus the slide).
 4. The LP: the pushers (action push, in contact) must make the limit-surface wrench of that
-   twist within their max_force. Feasible: the object moves by the twist for dt (heading by
-   ω·dt, centroid by v·dt). Infeasible: it stays where it is (Coulomb friction does not depend
-   on speed, so a slower push needs the same forces) and the interval counts as infeasible.
+   twist within their max_force. Under the error model (``TransportParams.pose_error``,
+   ``com_error``) a push at a node the plan moved the robot to within the motion error of a
+   vertex counts for nothing, and the wrench must be made for either extreme of the centre of
+   mass's offset (:func:`robust_wrenches`). Feasible: the object moves by the twist for dt
+   (heading by ω·dt, centroid by v·dt). Infeasible: it stays where it is (Coulomb friction
+   does not depend on speed, so a slower push needs the same forces) and the interval counts
+   as infeasible.
 5. Robots: push and follow keep their contact point (they move with the object); sliders move
    ``slide_speed``·dt along the boundary over nodes where they fit (they stop at a notch);
    idle robots stay put in the world: they lose contact if the object left them by more than
    ``contact_tolerance``, and are hit if it moved into them by more than that; travelling
    robots advance max_speed·dt along their path (object frame, carried along) and attach on
    arrival.
-6. Collisions at the interval's end: two robot discs overlapping, the object entering a robot,
-   a robot or the object touching an obstacle, a robot leaving the bounds.
+6. Collisions at the interval's end: two robot discs overlapping (under the error model:
+   nearer than twice the motion error, unless the pair started the plan nearer), the object
+   entering a robot, a robot or the object touching an obstacle, a robot leaving the bounds.
 
 **Energy** (Vass Eq. 3 with two route terms): E = K_c·(intervals with a collision) +
 K_e·(intervals whose LP is infeasible) + K_f·Σ|f| (N, every robot every interval) +
@@ -512,7 +517,6 @@ class Rollout:
         self._rel_list = self._rel.tolist()
         self._centres_list = self._centres.tolist()
         self._pi, self._pj = np.triu_indices(self.k, 1)
-        pos0 = np.array([np.asarray(r.position, float) for r in robots]).reshape(self.k, 2)
         self._bounds = None
         if state.bounds is not None:
             b = np.asarray(state.bounds, float)
@@ -526,7 +530,7 @@ class Rollout:
         nodes = tuple(
             -1 if r.contact is None else m.snap(r.contact[0], r.contact[1]) for r in robots
         )
-        pos = pos0
+        pos = np.array([np.asarray(r.position, float) for r in robots]).reshape(self.k, 2)
         start_pose = (float(cw[0]), float(cw[1]), th)
         self._pair_gap2 = self._pair_gaps(nodes, pos, cw, float(pose[2]))
         s0, dev0, _ = self.route.locate(self._q(start_pose))
