@@ -1079,6 +1079,58 @@ def transport_errors(r: dict) -> str:
     )
 
 
+def serpentine_traces(r: dict) -> str:
+    """Why the serpentine stalls, read from its logs (issue 34, item 2)."""
+    rows = []
+    for x in r["runs"]:
+        w = x.get("stall")
+        rows.append(
+            [
+                f"`{x['scenario']}`",
+                str(x["robots"]),
+                f"`{x['outcome']}`",
+                f"{x['first_lp_feasible']}/{x['plans']}",
+                str(x["two_groups"]),
+                f"{x['still']} ({x['still_pushing']})",
+                f"{x['planned_toward_m']:.2f} / {x['moved_toward_m']:.2f} m",
+                f"{x['planned_turn_deg']:.0f} / {x['turned_deg']:.0f}°",
+                f"{x['turn_deg']:.0f}°",
+                "–"
+                if w is None
+                else f"{w['plans']}: {w['still']} ({w['still_pushing']}); "
+                f"{w['planned_toward_m']:.2f} / "
+                f"{w['moved_toward_m']:.2f} m; {w['planned_turn_deg']:.0f} / "
+                f"{w['turned_deg']:.0f}°",
+            ]
+        )
+    head = ["scenario", "robots", "outcome", "first interval's LP feasible", "two groups manned",
+            "plans moving nothing (with a pusher)", "toward the goal: planned / true",
+            "turned: planned / true", "largest turn from the start",
+            "last stall window: plans, moving nothing (with a pusher); toward the goal; "
+            "turned"]  # fmt: skip
+    su = r["summary"]
+    a, w = su["all"], su["stall_windows"]
+    return (
+        f"Each of the varied suite's {r['size']['scenarios']} scenarios run once with "
+        '`transport.strategy = "serpentine"` in lockstep on pybullet, its log read back: per '
+        "local plan, whether the contact-force LP of its first interval has an answer, whether "
+        "both of Sharma's groups are manned, and what the first interval planned against what "
+        "the object truly did over it (the world's truth): distance gained toward the goal's "
+        "centroid, and turn. For a failed run, the same over the last `transport.stall_timeout` "
+        f"before the failure. Over all {a['plans']} plans: the first interval's LP feasible in "
+        f"{a['first_lp_feasible']}, both groups manned in {a['two_groups']}, the first "
+        f"interval moving nothing in {a['still']} ({a['still_pushing']} of them with a robot "
+        "told to push: the object's match on the route at the subgoal); toward the goal "
+        f"planned {a['planned_toward_m']:.1f} m, truly {a['moved_toward_m']:.1f} m; turned "
+        f"planned {a['planned_turn_deg']:.0f}°, truly {a['turned_deg']:.0f}°. Over the "
+        f"{w['runs']} failed runs' last windows ({w['plans']} plans): LP feasible in "
+        f"{w['first_lp_feasible']}, moving nothing in {w['still']} ({w['still_pushing']} with a "
+        f"pusher), toward the goal planned {w['planned_toward_m']:.2f} m, truly "
+        f"{w['moved_toward_m']:.2f} m; turned planned {w['planned_turn_deg']:.0f}°, truly "
+        f"{w['turned_deg']:.0f}°.\n\n" + _table(head, rows)
+    )
+
+
 def sa_random_starts(r: dict) -> str:
     """Vass's claim (issue 34, item 7): SA against downhill from the same random starts."""
     rows = []
@@ -1382,6 +1434,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "transport_varied_friction": transport_varied,
     "sa_random_starts": sa_random_starts,
     "transport_errors": transport_errors,
+    "serpentine_traces": serpentine_traces,
     "heavy": heavy,
 }
 

@@ -8,6 +8,9 @@ log kept; then the log is read back. Per run, over the local plans (``plan/trans
 - ``first_lp_feasible``: plans whose first interval's contact-force LP has an answer (the
   model says the pushing group can move the object as planned);
 - ``two_groups``: plans with both of Sharma's groups manned;
+- ``still``: plans whose first interval moves the object not at all (its twist is zero: the
+  active group has no robot in contact, or the object's match on the route is at the subgoal
+  already), and of those ``still_pushing`` with a robot told to push;
 - ``planned_m`` and ``moved_m``: how far the plans' first intervals said the centroid would go,
   summed, against how far it really went (the world's truth) over the same intervals; the same
   for the distance gained toward the goal's centroid (``*_toward_m``) and the turn (``*_deg``);
@@ -54,7 +57,7 @@ def _counts(plans: list[dict], track: np.ndarray, centroid: np.ndarray, goal: np
     distance, distance gained toward the goal's centroid, and turn."""
     from controller import geometry
 
-    feasible = two = 0
+    feasible = two = still = still_pushing = 0
     got = dict.fromkeys(("planned_m", "moved_m", "planned_toward_m", "moved_toward_m"), 0.0)
     got.update(planned_turn_deg=0.0, turned_deg=0.0)
 
@@ -69,6 +72,9 @@ def _counts(plans: list[dict], track: np.ndarray, centroid: np.ndarray, goal: np
         if len(poses) < 2 or poses[0][0] is None or poses[1][0] is None:
             continue
         t0, dt = p["t"], float(d["interval"])
+        if np.allclose(poses[0], poses[1], atol=1e-6):  # the first interval moves nothing
+            still += 1
+            still_pushing += "push" in (d.get("actions") or [[]])[0]
         for kind, (qa, qb) in (
             ("planned", poses[:2]),
             ("moved", (_truth_at(track, t0), _truth_at(track, t0 + dt))),
@@ -82,6 +88,8 @@ def _counts(plans: list[dict], track: np.ndarray, centroid: np.ndarray, goal: np
         "plans": len(plans),
         "first_lp_feasible": feasible,
         "two_groups": two,
+        "still": still,
+        "still_pushing": still_pushing,
         **{k: round(v, 3) for k, v in got.items()},
     }
 
@@ -137,7 +145,8 @@ def summary(runs: list[dict]) -> dict:
     """The counts over every run and over the stalled ones' last window."""
 
     def pool(rows: list[dict]) -> dict:
-        keys = ("plans", "first_lp_feasible", "two_groups", "planned_m", "moved_m",
+        keys = ("plans", "first_lp_feasible", "two_groups", "still", "still_pushing",
+                "planned_m", "moved_m",
                 "planned_toward_m", "moved_toward_m", "planned_turn_deg", "turned_deg")  # fmt: skip
         return {"runs": len(rows), **{k: round(sum(r[k] for r in rows), 2) for k in keys}}
 
