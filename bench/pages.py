@@ -1091,22 +1091,23 @@ def serpentine_traces(r: dict) -> str:
                 f"`{x['outcome']}`",
                 f"{x['first_lp_feasible']}/{x['plans']}",
                 str(x["two_groups"]),
-                f"{x['still']} ({x['still_pushing']})",
+                f"{x['still']}: {x['still_pushing']} + {x['still'] - x['still_pushing']}",
                 f"{x['planned_toward_m']:.2f} / {x['moved_toward_m']:.2f} m",
                 f"{x['planned_turn_deg']:.0f} / {x['turned_deg']:.0f}°",
                 f"{x['turn_deg']:.0f}°",
                 "–"
                 if w is None
-                else f"{w['plans']}: {w['still']} ({w['still_pushing']}); "
+                else f"{w['plans']}: {w['still_pushing']} + {w['still'] - w['still_pushing']}; "
                 f"{w['planned_toward_m']:.2f} / "
                 f"{w['moved_toward_m']:.2f} m; {w['planned_turn_deg']:.0f} / "
                 f"{w['turned_deg']:.0f}°",
             ]
         )
     head = ["scenario", "robots", "outcome", "first interval's LP feasible", "two groups manned",
-            "plans moving nothing (with a pusher)", "toward the goal: planned / true",
+            "plans moving nothing: at the subgoal + group empty",
+            "toward the goal: planned / true",
             "turned: planned / true", "largest turn from the start",
-            "last stall window: plans, moving nothing (with a pusher); toward the goal; "
+            "last stall window: plans: at the subgoal + group empty; toward the goal; "
             "turned"]  # fmt: skip
     su = r["summary"]
     a, w = su["all"], su["stall_windows"]
@@ -1119,13 +1120,16 @@ def serpentine_traces(r: dict) -> str:
         "centroid, and turn. For a failed run, the same over the last `transport.stall_timeout` "
         f"before the failure. Over all {a['plans']} plans: the first interval's LP feasible in "
         f"{a['first_lp_feasible']}, both groups manned in {a['two_groups']}, the first "
-        f"interval moving nothing in {a['still']} ({a['still_pushing']} of them with a robot "
-        "told to push: the object's match on the route at the subgoal); toward the goal "
+        f"interval moving nothing in {a['still']} ({a['still_pushing']} with the active group "
+        "in contact: the twist is zero because the object's match on the route is at the "
+        f"subgoal already; {a['still'] - a['still_pushing']} with no robot of the active group "
+        "in contact); toward the goal "
         f"planned {a['planned_toward_m']:.1f} m, truly {a['moved_toward_m']:.1f} m; turned "
         f"planned {a['planned_turn_deg']:.0f}°, truly {a['turned_deg']:.0f}°. Over the "
         f"{w['runs']} failed runs' last windows ({w['plans']} plans): LP feasible in "
-        f"{w['first_lp_feasible']}, moving nothing in {w['still']} ({w['still_pushing']} with a "
-        f"pusher), toward the goal planned {w['planned_toward_m']:.2f} m, truly "
+        f"{w['first_lp_feasible']}, moving nothing in {w['still']} ({w['still_pushing']} at the "
+        f"subgoal, {w['still'] - w['still_pushing']} with the group empty), toward the goal "
+        f"planned {w['planned_toward_m']:.2f} m, truly "
         f"{w['moved_toward_m']:.2f} m; turned planned {w['planned_turn_deg']:.0f}°, truly "
         f"{w['turned_deg']:.0f}°.\n\n" + _table(head, rows)
     )
