@@ -190,6 +190,7 @@ def test_an_object_too_heavy_only_for_the_error_model_says_so():
     # planned 50 % heavier and rougher (2.25 times the force) no heading can be pushed
     mass = 0.3 * 36.0 / (0.3 * 9.81)
     sc = Scenario("heavy", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0), mass=mass, floor_friction=0.3)
+
     def directions(scenario):  # 12 directions, not 72: the test's time
         return replace(PushDirections.from_config(scenario_config(scenario)), buckets=12)
 
