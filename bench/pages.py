@@ -1079,6 +1079,26 @@ def transport_errors(r: dict) -> str:
     )
 
 
+def error_model(r: dict) -> str:
+    """What planning with the error model costs per local plan (issue 34, item 5)."""
+
+    def cell(c: dict) -> str:
+        return f"{c['plan_ms_median']:.1f} ms (max {c['plan_ms_max']:.0f})"
+
+    rows = [
+        [str(x["robots"]), cell(x["condition_1"]), cell(x["condition_2"]), f"{x['time_ratio']:.2f}"]
+        for x in r["plans"]
+    ]
+    load = r["load_average"][0], r["load_average_end"][0]
+    return (
+        f"One `sa` plan with the default settings on the seeded push cases ({r['seeds']} seeds "
+        "per robot count), without the error model (condition 1) and with Yamashita's "
+        "(condition 2), in one process one after the other; the ratio is of the medians. Load "
+        f"average {load[0]:.1f} at the start, {load[1]:.1f} at the end.\n\n"
+        + _table(["robots", "condition 1", "condition 2", "ratio"], rows)
+    )
+
+
 def serpentine_traces(r: dict) -> str:
     """Why the serpentine stalls, read from its logs (issue 34, item 2)."""
     rows = []
@@ -1439,6 +1459,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "sa_random_starts": sa_random_starts,
     "transport_errors": transport_errors,
     "serpentine_traces": serpentine_traces,
+    "error_model": error_model,
     "heavy": heavy,
 }
 
