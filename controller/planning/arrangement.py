@@ -205,16 +205,17 @@ def wrench_set(
     from controller.planning.hold import least_force_set, reinforce
 
     r = cfg.max_robot_radius
+    err, com = errors_of(cfg)
     cand = candidates(cfg)
     centres = cand.points + r * cand.normals
     gap = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
-    spare = max(cfg.capture.clearance, cfg.approach.safety_margin) + 2.0 * errors_of(cfg)[0]
+    spare = max(cfg.capture.clearance, cfg.approach.safety_margin) + 2.0 * err
     conflict = gap < 2 * r + spare
     np.fill_diagonal(conflict, False)
     need = required_wrench(twist_v, model.mass, model.floor_friction, model.mean_radius)
     load = turn_margin * need
     # under the error model, every centre of mass it allows (the two torque extremes)
-    loads = np.array([turn_margin * w for w in robust_wrenches(need, errors_of(cfg)[1])])
+    loads = np.array([turn_margin * w for w in robust_wrenches(need, com)])
     start = least_force_set(cand.points, cand.normals, model.centroid, load, weakest, conflict)
     res = reinforce(
         cand.points,

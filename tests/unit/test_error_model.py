@@ -83,19 +83,20 @@ def _slide_toward(roll: Rollout, i: int, y_to: float) -> int:
     return SLIDE_RIGHT if down == lower else SLIDE_LEFT
 
 
-def _params(pose_error: float, roll_dt: float, slide: float) -> TransportParams:
-    """Params whose slide covers ``slide`` m in one interval of ``roll_dt`` s."""
-    return TransportParams(pose_error=pose_error, slide_speed=slide / roll_dt)
+def _sliding(margin: float, ys: list[float], slide: float) -> tuple[ObjectModel, Rollout]:
+    """The box with robots on its back edge at heights ``ys``, planned with the motion error
+    ``margin`` (0: none), a slide covering ``slide`` m in one interval."""
+    model = ObjectModel.build(BOX, 4.0, 0.2, 0.0, 0.1, push_margin=margin)
+    state = _box_state(model, ys)
+    dt = Rollout(state, TransportParams()).dt
+    return model, Rollout(state, TransportParams(pose_error=margin, slide_speed=slide / dt))
 
 
 @pytest.mark.parametrize("margin", [0.0, ERROR])
 def test_a_push_a_plan_sends_a_robot_to_near_a_vertex_counts_for_nothing(margin):
-    model = ObjectModel.build(BOX, 4.0, 0.2, 0.0, 0.1, push_margin=margin)
     # two pushers at heights 0.1 and −0.13: only both together balance the torque (the
     # centroid at 0); robot 1 slides 0.04 m down, to 0.03 m from the corner, then pushes
-    state = _box_state(model, [0.1, -0.13])
-    dt = Rollout(state, TransportParams()).dt
-    roll = Rollout(state, _params(margin, dt, 0.04))
+    model, roll = _sliding(margin, [0.1, -0.13], 0.04)
     row0 = [FOLLOW, _slide_toward(roll, 1, -0.2)]
     trace = roll.run(np.array([row0] + [[PUSH, PUSH]] * 2, np.int64))
     n1 = trace.sims[1].nodes[1]
@@ -118,12 +119,9 @@ def test_a_contact_held_near_a_vertex_at_the_plans_start_still_counts():
 
 @pytest.mark.parametrize("margin", [0.0, ERROR])
 def test_robots_a_plan_brings_within_twice_the_motion_error_collide(margin):
-    model = ObjectModel.build(BOX, 4.0, 0.2, 0.0, 0.1, push_margin=margin)
     # centres 0.3 m apart (radii 0.1 each): robot 1 slides 0.08 m up, to 0.22 m from robot 0:
     # clear of it by 0.02 m, under the 2 × 0.041 m the error model keeps
-    state = _box_state(model, [0.15, -0.15])
-    dt = Rollout(state, TransportParams()).dt
-    roll = Rollout(state, _params(margin, dt, 0.08))
+    _, roll = _sliding(margin, [0.15, -0.15], 0.08)
     trace = roll.run(np.array([[FOLLOW, _slide_toward(roll, 1, 0.2)]], np.int64))
     gap = np.linalg.norm(trace.sims[1].pos[0] - trace.sims[1].pos[1])
     assert 0.2 < gap < 0.2 + 2 * ERROR
