@@ -141,6 +141,7 @@ def run_one(sc: ArrestScenario, out_dir: Path) -> dict:
 EDGE_SPEEDS = "0.25,0.30,0.35,0.40,0.45,0.50"
 EDGE_SEEDS = 10
 WALL_CLEAR_M = 0.05  # m: an arrest counts only if the object never came this near a wall
+BRACE_SPEED = 0.3  # m/s: the brace variant braces objects this fast (60 % of the robots' 0.5)
 HOLD_MARGIN_S = 12.0  # s of sim time after the object would reach a wall: hold, arrest, settle
 
 
@@ -195,7 +196,10 @@ def rules(sc: ArrestScenario, variant: str) -> ArrestScenario:
     "oncoming"``) or ``baseline`` (``"classic"``, the default: an interception only of targets
     slower than the robot, the goal's velocity ridden on at any distance)."""
     rule = "oncoming" if variant == "new" else "classic"
-    patch = {**sc.patch, "approach": {**sc.patch.get("approach", {}), "intercept": rule}}
+    approach = {**sc.patch.get("approach", {}), "intercept": rule}
+    if variant == "brace":  # the default rules with braces for objects at 0.3 m/s and faster
+        approach["brace_speed"] = BRACE_SPEED
+    patch = {**sc.patch, "approach": approach}
     return dataclasses.replace(sc, patch=patch)
 
 
@@ -281,8 +285,8 @@ def main() -> None:
     if args.quick:
         args.seeds, args.speeds, args.no_suite = 2, "0.40,0.45", True
     variants = [x for x in args.variants.split(",") if x]
-    if set(variants) - {"baseline", "new"}:
-        ap.error(f"--variants: expected baseline and/or new, got {args.variants!r}")
+    if set(variants) - {"baseline", "new", "brace"}:
+        ap.error(f"--variants: expected baseline, new and/or brace, got {args.variants!r}")
     logging.basicConfig(level=logging.ERROR)
     out = tempfile.mkdtemp(prefix="arrest-bench-")
     wanted = [sc for sc in SCENARIOS if not args.only or sc.name in args.only]

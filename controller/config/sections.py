@@ -329,6 +329,10 @@ class ApproachSection:
     # speed edge 0.30 -> 0.35 m/s, bench/arrest.py; not the default: with it the default job's
     # transport had two robots touch, 10 um, in pybullet)
     intercept: str = _rule("classic", choices=("classic", "oncoming"))
+    # m/s: an object this fast or faster is braced: the robots of its leading face that are
+    # ahead of it wait at their contact points where it will be, holding their ground, and
+    # stop it for the rest (controller/mission/brace.py); 0: never
+    brace_speed: float = _rule(0.0, min=0, max=100)
     prediction_horizon: float = _rule(0.5, min=0, max=10)
     safety_margin: float = _rule(0.05, min=0, max=1)
     max_accel: float = _rule(1.0, gt=0, max=100)

@@ -39,6 +39,7 @@ import numpy as np
 from controller import geometry
 from controller.config import FleetConfig
 from controller.events import ArrestEvent
+from controller.mission.brace import brace_masks, plan_braces
 from controller.mission.capture_phase import (
     CLOSED,
     CaptureSettings,
@@ -65,6 +66,7 @@ from controller.planning.approach import (
 )
 from controller.planning.roadmap import plan_detours
 
+BRACE_FIX_S = 2.0  # s before the object meets a brace: its meeting point stops moving
 STATION_SLACK = 0.02  # m beyond the safety filter's margin a station keeps from walls, obstacles
 
 
@@ -119,6 +121,9 @@ class CaptureMission:
         # alone (no job's sequencer): its own, at approach (its first tick announces it)
         self.seq = self.sequencer if self.sequencer is not None else Sequencer(Phase.APPROACH)
         self.heading: np.ndarray | None = None
+        self.brace = np.zeros(len(self.points), bool)  # the robots bracing a fast object
+        self.brace_at = np.full((len(self.points), 2), np.nan)  # where each waits (world)
+        self.brace_pts = np.full((len(self.points), 2), np.nan)  # its contact (object frame)
         self._detours_planned = False
         self._detour_job = PlanSlot(self.planners or InlinePlanners(), "detour")
         self._detour_robots: list[int] = []
@@ -260,8 +265,28 @@ class CaptureMission:
         if phase == Phase.APPROACH:
             speed = self.s.speed_margin * self.max_speed[a]
             oncoming = self.cfg.approach.intercept == "oncoming"
-            t = interception_times(centers[a], tgt, vel, speed, self.s.intercept_horizon, oncoming)
-            goal[a] = tgt + vel * np.diag(t)[:, None]
+            ovel = np.zeros(3) if view.object_velocity is None else view.object_velocity
+            brace_speed = self.cfg.approach.brace_speed
+            if not self.brace.any() and 0 < brace_speed <= float(np.hypot(*ovel[:2])):
+                self.brace, self.brace_pts = plan_braces(  # robots ahead wait in its path
+                    self.object_poly, float(self.radii.max()), self.cfg.approach.safety_margin,
+                    self.s.creep_gap, pose, centers[a], ovel,
+                )  # fmt: skip
+            b = self.brace
+            nose = goals.touch.copy()
+            nose[b] = geometry.transform(self.brace_pts[b], pose)
+            tgt = np.where(b[:, None], nose, tgt)
+            vel = np.where(b[:, None], self.point_velocity(view, pose, nose), vel)
+            t = np.diag(interception_times(
+                centers[a], tgt, vel, speed, self.s.intercept_horizon, oncoming
+            )).copy()  # fmt: skip
+            t[b] = t[b].max(initial=0.0)  # the braces meet the object together, side by side
+            goal[a] = tgt + vel * t[:, None]
+            # a brace's meeting point is fixed in the world once the object is near: it waits
+            fix = b & np.isnan(self.brace_at[:, 0]) & (t < BRACE_FIX_S)
+            self.brace_at[fix] = goal[a[fix]]
+            held = b & ~np.isnan(self.brace_at[:, 0])
+            goal[a[held]], gvel[a[b]] = self.brace_at[held], 0.0
         for i, wps in list(self.waypoints.items()):
             while wps and np.linalg.norm(centers[i] - wps[0]) < self.s.waypoint_reached:
                 wps.pop(0)
@@ -279,8 +304,7 @@ class CaptureMission:
         """Sharma Table I velocities (N, 2): robots closing in may reach the object."""
         polys = self.obstacles + [geometry.transform(self.object_poly, pose)]
         avoid = np.ones((self.n, len(polys)), bool)
-        if self.phase != Phase.APPROACH:
-            avoid[self.assignment, -1] = False
+        avoid[self.assignment, -1] = self.phase == Phase.APPROACH and ~self.brace
         active = self.assigned & ~view.stale & view.present
         if self.heading is None:
             th = view.poses[:, 2]
@@ -360,17 +384,20 @@ class CaptureMission:
         ]
         failure, failed = self.seq.state.failure, self.phase == Phase.FAILED
         closed = self.phase in CLOSED
+        touch, braced = brace_masks(
+            self.n, self.assignment, self.brace, m.gap, 2 * self.s.creep_gap
+        )
         return Intent.of(
             vel,
             self.phase,
             events,
             object_pose=pose,
-            touch=self.assigned if self.phase != Phase.APPROACH else None,
+            touch=self.assigned if self.phase != Phase.APPROACH else touch,
             # a caging robot's barrier never pushes it off the object's estimate: the physics
             # keeps it out; it holds its ground
             overlap=float(self.radii.max()) if closed else 0.0,
-            cage=closed,
-            hold=self._caged(),
+            cage=closed or touch is not None,
+            hold=self._caged() if self.phase != Phase.APPROACH else braced,
             done=self.phase == Phase.DONE,
             failed=failed,
             reason=failure.reason if failed and failure else "",

@@ -302,7 +302,7 @@ class CaptureJob:
     def _reassign(self, view: FleetView) -> list:
         """A better assignment during the approach (``mission.assign``): a new approach, with
         the same timeout."""
-        if self.inner.phase != Phase.APPROACH:
+        if self.inner.phase != Phase.APPROACH or self.inner.brace.any():  # braces stay
             return []
         new, events = self.reassigner.look(
             self.cfg, self.capture, view, self.assignment, self.roster.available
