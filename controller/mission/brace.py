@@ -88,9 +88,10 @@ def plan_braces(
     velocity: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The braces for an object (``polygon`` object frame, at ``pose``) moving with world
-    ``velocity``: (M,) which of the assigned robots (``robots`` (M, 2)) brace, and (M, 2) the
-    object-frame disc centres they touch it at, ``gap`` m off its surface (NaN for the others);
-    ``margin``: m between braces beyond their discs."""
+    ``velocity``: (M,) which of the assigned robots (``robots`` (M, 2)) brace, and (M, 4) the
+    object-frame contact point and outward normal each takes instead of its capture point (NaN
+    for the others); ``margin``: m between braces beyond their discs; ``gap``: m off the
+    surface they are matched to the robots at."""
     th = float(pose[2])
     local = geometry.rot(th).T @ np.asarray(velocity[:2], float)
     pts, nrm = brace_points(polygon, radius, margin, local)
@@ -98,6 +99,6 @@ def plan_braces(
     world = geometry.transform(centres, pose)
     mid = geometry.transform(geometry.centroid(geometry.ensure_ccw(polygon))[None], pose)[0]
     k = choose_braces(robots, mid, velocity, world)
-    at = np.full((len(robots), 2), np.nan)
-    at[k >= 0] = centres[k[k >= 0]]
+    at = np.full((len(robots), 4), np.nan)
+    at[k >= 0] = np.hstack([pts, nrm])[k[k >= 0]]
     return k >= 0, at

@@ -123,7 +123,7 @@ class CaptureMission:
         self.heading: np.ndarray | None = None
         self.brace = np.zeros(len(self.points), bool)  # the robots bracing a fast object
         self.brace_at = np.full((len(self.points), 2), np.nan)  # where each waits (world)
-        self.brace_pts = np.full((len(self.points), 2), np.nan)  # its contact (object frame)
+        self.brace_pts = np.full((len(self.points), 4), np.nan)  # its contact, normal (object)
         self._detours_planned = False
         self._detour_job = PlanSlot(self.planners or InlinePlanners(), "detour")
         self._detour_robots: list[int] = []
@@ -180,6 +180,9 @@ class CaptureMission:
         # a station the walls leave no room for (a point beside a wall the object touches) is
         # reached as near as the robot can get: the shortfall widens its arrival tolerance
         shortfall = np.maximum(out - static, 0.0)
+        b = self.brace  # a brace's contact is where it braces the object, in every phase
+        pts[b] = geometry.transform(self.brace_pts[b, :2], pose)
+        nrm[b] = self.brace_pts[b, 2:] @ geometry.rot(float(pose[2])).T
         touch = pts + (r + self.s.station_gap)[:, None] * nrm
         preload = pts + (r - self.s.preload_depth)[:, None] * nrm
         return Goals(pts, nrm, pts + nrm * out[:, None], touch, preload, shortfall)
@@ -272,11 +275,11 @@ class CaptureMission:
                     self.object_poly, float(self.radii.max()), self.cfg.approach.safety_margin,
                     self.s.creep_gap, pose, centers[a], ovel,
                 )  # fmt: skip
+                goals = self.goals(pose)
+                tgt = goals.stations
             b = self.brace
-            nose = goals.touch.copy()
-            nose[b] = geometry.transform(self.brace_pts[b], pose)
-            tgt = np.where(b[:, None], nose, tgt)
-            vel = np.where(b[:, None], self.point_velocity(view, pose, nose), vel)
+            tgt = np.where(b[:, None], goals.touch, tgt)
+            vel = np.where(b[:, None], self.point_velocity(view, pose, goals.touch), vel)
             t = np.diag(interception_times(
                 centers[a], tgt, vel, speed, self.s.intercept_horizon, oncoming
             )).copy()  # fmt: skip
