@@ -341,6 +341,7 @@ class CaptureMission:
         dist = np.linalg.norm(xy - tgt, axis=1)
         if self.phase == Phase.APPROACH:
             dist = np.maximum(dist - goals.shortfall, 0.0)
+            dist[self.brace & (gap < 2 * self.s.creep_gap)] = 0.0  # a brace touching: there
         self.last_distance = dist  # read by the capture job (a robot stuck on its way)
         return Measures(view.t, dist, goals.preload, gap, world, bool(self.waypoints))
 

@@ -174,7 +174,8 @@ class CaptureJob:
             )
             return self.transport.plan(view).after(intent.report.events)
         reach = self.reach
-        if not self._replan_job.pending and reach.blocked(
+        bracing = self.inner.phase == Phase.APPROACH and self.inner.brace.any()
+        if not self._replan_job.pending and not bracing and reach.blocked(
             view, self.inner.phase, self.capture, self.inner.last_distance, self.inner
         ):
             reach.restart()
