@@ -1,104 +1,173 @@
-"""Braces for a fast object (issue 34, item 10): while the fleet approaches an object moving
-at ``approach.brace_speed`` or faster, robots ahead of it wait in its path at contact points
-that can hold it back and, touching, stand still (commanded exactly zero, their barrier holding
-its ground). The points are the least-force set of frictionless contacts that resists a push
-along the object's motion with no turn (``planning.hold.least_force_set``): on a face square to
-the motion one robot, on a face at a slant two (one on the face, one on the side it would slide
-toward). The object's drive cannot push robots that hold their ground, so it stops, and the
-rest of the fleet, which could not catch it from behind, closes in on an object at rest. The
-braces meet it together, and stay braces for the rest of the approach (the object they stopped
-is slow: letting go would free it); the job hands the capture points to no other robots while
-they brace.
+"""Braces for a fast object (issue 34, item 10): an object moving at ``approach.brace_speed``
+or faster is one robots of the robots' speed cannot catch from behind. The robots ahead of it
+wait in its path instead, at contact points that stop it: the least-force set of
+frictionless contacts that resists a push along its motion with no turn
+(``planning.hold.least_force_set`` over the GA's candidate nodes; a single brace would let it
+slide past). They meet it together and, touching, stand still (commanded exactly zero: their
+barrier holds its ground). The object's drive cannot push robots that hold their ground, so it
+stops, and the rest of the fleet closes in on an object at rest.
 
-Pure: arrays in, arrays out.
+The braces are capture points: the job plans the capture set again with the brace nodes fixed
+in it (``braced_capture``: the GA's points clear of them kept, reinforced until the set holds),
+so no robot's contact lies beside a brace, and the braces stay where the set needs them
+through close-in and hold. While robots brace, the job hands their points to no other robot.
+
+``Braces`` keeps which points brace and where their robots wait, for one approach.
 """
 
 from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from controller import geometry
-from controller.planning.capture import candidate_nodes
-from controller.planning.hold import least_force_set
+from controller.config import FleetConfig
+from controller.mission.assign import COST_HORIZON_FACTOR, assign, interception_costs
+from controller.mission.types import FleetView
+from controller.planning.approach import interception_times
+from controller.planning.capture_set import CaptureSet, reinforce_set
+from controller.planning.hold import contact_wrenches, least_force_set
 
+#: s before the object meets a brace: its meeting point stops following the prediction (a
+#: robot that waits holds its ground; one that keeps adjusting is pushed)
+FIX_S = 2.0
 #: at most this many braces: the rest of the fleet approaches as before
-MAX_BRACES = 3
+MAX_BRACES = 4
+#: rad either side of the object's motion the braces also resist (a brace set that only
+#: balances the push exactly lets an object that turns a little slide past)
+SPREAD = 0.3
 
 
-def brace_points(
-    polygon: np.ndarray, radius: float, margin: float, direction: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Object-frame contact points and outward normals (K, 2), K ≤ ``MAX_BRACES``, that
-    together resist a push of the object (its ``polygon``, CCW, object frame) along
-    ``direction`` (object frame) with no turn: the least-force set of candidate nodes a robot
-    disc of ``radius`` fits at, a diameter and ``margin`` apart (the safety filter's)."""
-    poly = geometry.ensure_ccw(np.asarray(polygon, float))
-    apart = 2.0 * radius + margin
-    cand = candidate_nodes(poly, radius, apart, 1e-3)
-    centres = cand.points + radius * cand.normals
-    gap = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
-    conflict = gap < apart - 1e-9
-    np.fill_diagonal(conflict, False)
-    d = np.asarray(direction, float) / max(float(np.linalg.norm(direction)), 1e-12)
-    load = np.array([-d[0], -d[1], 0.0])  # the contacts push back against the drive
-    pick = least_force_set(
-        cand.points, cand.normals, geometry.centroid(poly), load, 10.0, conflict
-    )[:MAX_BRACES]
-    return cand.points[pick], cand.normals[pick]
-
-
-def choose_braces(
-    robots: np.ndarray, centre: np.ndarray, velocity: np.ndarray, targets: np.ndarray
+def brace_nodes(
+    candidates: np.ndarray,
+    normals: np.ndarray,
+    centroid: np.ndarray,
+    direction: np.ndarray,
+    conflict: np.ndarray,
 ) -> np.ndarray:
-    """(M,) index of the brace target each assigned robot (``robots`` (M, 2)) takes, −1 for
-    none: robots ahead of the object (past its ``centre`` along ``velocity``) to the world
-    ``targets`` (K, 2), the nearest overall (an assignment)."""
-    out = np.full(len(robots), -1)
-    d = np.asarray(velocity[:2], float) / max(float(np.hypot(*velocity[:2])), 1e-12)
-    ahead = np.flatnonzero((np.asarray(robots, float) - np.asarray(centre, float)) @ d > 0)
-    if len(ahead) == 0 or len(targets) == 0:
-        return out
-    cost = np.linalg.norm(robots[ahead][:, None] - np.asarray(targets)[None], axis=-1)
-    rows, cols = linear_sum_assignment(cost)
-    out[ahead[rows]] = cols
-    return out
+    """Indices of candidate contact nodes (``candidates``, outward ``normals`` (K, 2), object
+    frame, about ``centroid``) that brace an object pushed along ``direction`` (object frame):
+    the least-force set of frictionless contacts that resists the push with no turn, at most
+    ``MAX_BRACES``, clear of each other (``conflict``). Empty when fewer than two do it (a
+    single brace lets the object slide past)."""
+    th = float(np.arctan2(direction[1], direction[0]))
+    pick: list[int] = []
+    for dev in (0.0, -SPREAD, SPREAD):  # the push's direction and either side of it
+        load = np.array([-np.cos(th + dev), -np.sin(th + dev), 0.0])  # pushing back
+        for j in least_force_set(candidates, normals, centroid, load, 10.0, conflict):
+            if int(j) not in pick and not conflict[j, pick].any() and len(pick) < MAX_BRACES:
+                pick.append(int(j))
+    return np.asarray(pick, int) if len(pick) >= 2 else np.zeros(0, int)
 
 
-def brace_masks(
-    n: int, assignment: np.ndarray, brace: np.ndarray, gap: np.ndarray, tolerance: float
-) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """(N,) robots bracing (allowed to touch the object, holding their ground) and (N,) those
-    of them touching it (within ``tolerance`` m of its surface: commanded exactly zero), or
-    None where there are none."""
-    touch = np.zeros(n, bool)
-    touch[assignment[brace]] = True
-    still = np.zeros(n, bool)
-    still[assignment[brace & (gap < tolerance)]] = True
-    return (touch if touch.any() else None), (still if still.any() else None)
+def braced_capture(
+    cfg: FleetConfig, capture: CaptureSet, view: FleetView, available: np.ndarray
+) -> tuple[CaptureSet, np.ndarray, np.ndarray] | None:
+    """The capture set with braces for the fast object of ``view``: the brace nodes
+    (``brace_nodes``) fixed in it, the GA's points clear of them kept, reinforced until it
+    holds ``capture.hold_force`` with the ``available`` robots; each brace's robot the one
+    ahead of the object that meets it soonest (waiting on its path), the other points assigned
+    as at the start. The set, which of its points brace (M,), and the assignment (M,); None
+    when no brace set exists, no robot ahead meets one within the assignment's horizon, or no
+    set holds with the braces in it."""
+    pose = np.asarray(view.object_pose, float)
+    ovel = np.asarray(view.object_velocity, float)[:2]
+    d = ovel / max(float(np.hypot(*ovel)), 1e-12)
+    cand, nrm = capture.candidates, capture.candidate_normals
+    r = cfg.max_robot_radius
+    centres = cand + r * nrm
+    apart = 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)  # as the GA
+    conflict = np.linalg.norm(centres[:, None] - centres[None], axis=-1) < apart
+    np.fill_diagonal(conflict, False)
+    c = geometry.centroid(geometry.ensure_ccw(cfg.object_polygon()))
+    nodes = brace_nodes(cand, nrm, c, geometry.rot(float(pose[2])).T @ d, conflict)
+    if len(nodes) == 0:
+        return None
+    # the braces' robots: ahead of the object, meeting their contacts soonest on its path
+    xy = view.poses[:, :2]
+    touch = geometry.transform(centres[nodes], pose)
+    speed = np.array([rb.max_speed for rb in cfg.robots])
+    horizon = max(cfg.approach.intercept_horizon, 1.0) * COST_HORIZON_FACTOR  # as assign's
+    t = interception_times(xy, touch, np.broadcast_to(ovel, touch.shape), speed, horizon)
+    mid = geometry.transform(c[None], pose)[0]
+    t[:, ((xy - mid) @ d <= 0) | ~available] = horizon
+    rows, cols = linear_sum_assignment(t)
+    if len(rows) < len(nodes) or (t[rows, cols] >= horizon).any():
+        return None
+    # the rest of the set planned around the braces, their contacts fixed in it (as walls)
+    free = ~conflict[:, nodes].any(axis=1)
+    free[nodes] = False
+    rest = int(available.sum()) - len(nodes)
+    keep = np.array([i for i in capture.chosen if free[i]], int)[: max(rest, 0)]
+    fixed = contact_wrenches(cand[nodes], nrm[nodes], c)
+    res = reinforce_set(cfg, cand, nrm, keep, free, fixed, robots=rest)
+    if not res.holds:
+        return None
+    chosen = np.r_[nodes, res.chosen].astype(int)
+    new = dataclasses.replace(
+        capture,
+        points=cand[chosen],
+        normals=nrm[chosen],
+        chosen=chosen,
+        hold_capacity=res.capacity if cfg.capture.hold_force > 0 else None,
+        reinforced=res.added,
+    )
+    braces = np.isin(chosen, nodes)
+    costs = interception_costs(cfg, new, view)
+    big = 1e6 * (1.0 + costs.max(initial=0.0))
+    for k, j in zip(rows, cols, strict=True):  # the brace rows: their robot only
+        row = int(np.flatnonzero(chosen == nodes[k])[0])
+        costs[row] = big
+        costs[row, j] = 0.0
+        costs[~braces, j] = big  # and that robot for no other point
+    return new, braces, assign(costs, available)
 
 
-def plan_braces(
-    polygon: np.ndarray,
-    radius: float,
-    margin: float,
-    gap: float,
-    pose: np.ndarray,
-    robots: np.ndarray,
-    velocity: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The braces for an object (``polygon`` object frame, at ``pose``) moving with world
-    ``velocity``: (M,) which of the assigned robots (``robots`` (M, 2)) brace, and (M, 4) the
-    object-frame contact point and outward normal each takes instead of its capture point (NaN
-    for the others); ``margin``: m between braces beyond their discs; ``gap``: m off the
-    surface they are matched to the robots at."""
-    th = float(pose[2])
-    local = geometry.rot(th).T @ np.asarray(velocity[:2], float)
-    pts, nrm = brace_points(polygon, radius, margin, local)
-    centres = pts + (radius + gap) * nrm
-    world = geometry.transform(centres, pose)
-    mid = geometry.transform(geometry.centroid(geometry.ensure_ccw(polygon))[None], pose)[0]
-    k = choose_braces(robots, mid, velocity, world)
-    at = np.full((len(robots), 4), np.nan)
-    at[k >= 0] = np.hstack([pts, nrm])[k[k >= 0]]
-    return k >= 0, at
+@dataclass
+class Braces:
+    """Which capture points' robots brace (``on`` (M,)) and where each waits (``at`` (M, 2),
+    world; NaN until the object is ``FIX_S`` away)."""
+
+    m: int
+    on: np.ndarray = field(init=False)
+    at: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.on = np.zeros(self.m, bool)
+        self.at = np.full((self.m, 2), np.nan)
+
+    def any(self) -> bool:
+        return bool(self.on.any())
+
+    def meet(
+        self, tgt: np.ndarray, vel: np.ndarray, t: np.ndarray, release: np.ndarray
+    ) -> np.ndarray:
+        """Goal positions (M, 2) for robots aimed at ``tgt`` moving with ``vel`` (M, 2), met
+        after ``t`` (M,) s: the braces meet the object together (at the latest of their
+        times), and wait at that point once it is ``FIX_S`` away. ``release`` (M,): braces
+        that aim again (off the object it stopped, which may have turned as it stopped)."""
+        t = np.asarray(t, float).copy()
+        b = self.on
+        t[b] = t[b].max(initial=0.0)
+        goal = tgt + vel * t[:, None]
+        self.at[release] = np.nan
+        fix = b & np.isnan(self.at[:, 0]) & (t < FIX_S)
+        self.at[fix] = goal[fix]
+        held = b & ~np.isnan(self.at[:, 0])
+        goal[held] = self.at[held]
+        return goal
+
+    def masks(
+        self, n: int, assignment: np.ndarray, gap: np.ndarray, tolerance: float
+    ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """(N,) robots bracing (allowed to touch the object) and (N,) those of them touching
+        it (within ``tolerance`` m of its surface: commanded exactly zero), or None where there
+        are none."""
+        touch = np.zeros(n, bool)
+        touch[assignment[self.on]] = True
+        still = np.zeros(n, bool)
+        still[assignment[self.on & (gap < tolerance)]] = True
+        return (touch if touch.any() else None), (still if still.any() else None)

@@ -39,7 +39,7 @@ import numpy as np
 from controller import geometry
 from controller.config import FleetConfig
 from controller.events import ArrestEvent
-from controller.mission.brace import brace_masks, plan_braces
+from controller.mission.brace import Braces
 from controller.mission.capture_phase import (
     CLOSED,
     CaptureSettings,
@@ -66,7 +66,6 @@ from controller.planning.approach import (
 )
 from controller.planning.roadmap import plan_detours
 
-BRACE_FIX_S = 2.0  # s before the object meets a brace: its meeting point stops moving
 STATION_SLACK = 0.02  # m beyond the safety filter's margin a station keeps from walls, obstacles
 
 
@@ -121,9 +120,7 @@ class CaptureMission:
         # alone (no job's sequencer): its own, at approach (its first tick announces it)
         self.seq = self.sequencer if self.sequencer is not None else Sequencer(Phase.APPROACH)
         self.heading: np.ndarray | None = None
-        self.brace = np.zeros(len(self.points), bool)  # the robots bracing a fast object
-        self.brace_at = np.full((len(self.points), 2), np.nan)  # where each waits (world)
-        self.brace_pts = np.full((len(self.points), 4), np.nan)  # its contact, normal (object)
+        self.braces = Braces(len(self.points))  # robots bracing a fast object (brace.py)
         self._detours_planned = False
         self._detour_job = PlanSlot(self.planners or InlinePlanners(), "detour")
         self._detour_robots: list[int] = []
@@ -180,9 +177,6 @@ class CaptureMission:
         # a station the walls leave no room for (a point beside a wall the object touches) is
         # reached as near as the robot can get: the shortfall widens its arrival tolerance
         shortfall = np.maximum(out - static, 0.0)
-        b = self.brace  # a brace's contact is where it braces the object, in every phase
-        pts[b] = geometry.transform(self.brace_pts[b, :2], pose)
-        nrm[b] = self.brace_pts[b, 2:] @ geometry.rot(float(pose[2])).T
         touch = pts + (r + self.s.station_gap)[:, None] * nrm
         preload = pts + (r - self.s.preload_depth)[:, None] * nrm
         return Goals(pts, nrm, pts + nrm * out[:, None], touch, preload, shortfall)
@@ -269,27 +263,24 @@ class CaptureMission:
             speed = self.s.speed_margin * self.max_speed[a]
             oncoming = self.cfg.approach.intercept == "oncoming"
             ovel = np.zeros(3) if view.object_velocity is None else view.object_velocity
-            brace_speed = self.cfg.approach.brace_speed
-            if not self.brace.any() and 0 < brace_speed <= float(np.hypot(*ovel[:2])):
-                self.brace, self.brace_pts = plan_braces(  # robots ahead wait in its path
-                    self.object_poly, float(self.radii.max()), self.cfg.approach.safety_margin,
-                    self.s.creep_gap, pose, centers[a], ovel,
-                )  # fmt: skip
-                goals = self.goals(pose)
-                tgt = goals.stations
-            b = self.brace
+            b = self.braces.on
             tgt = np.where(b[:, None], goals.touch, tgt)
             vel = np.where(b[:, None], self.point_velocity(view, pose, goals.touch), vel)
-            t = np.diag(interception_times(
-                centers[a], tgt, vel, speed, self.s.intercept_horizon, oncoming
-            )).copy()  # fmt: skip
-            t[b] = t[b].max(initial=0.0)  # the braces meet the object together, side by side
-            goal[a] = tgt + vel * t[:, None]
-            # a brace's meeting point is fixed in the world once the object is near: it waits
-            fix = b & np.isnan(self.brace_at[:, 0]) & (t < BRACE_FIX_S)
-            self.brace_at[fix] = goal[a[fix]]
-            held = b & ~np.isnan(self.brace_at[:, 0])
-            goal[a[held]], gvel[a[b]] = self.brace_at[held], 0.0
+            t = np.diag(
+                interception_times(centers[a], tgt, vel, speed, self.s.intercept_horizon, oncoming)
+            )
+            if b.any():  # a brace waits in the object's path, whatever the rule for the others
+                t = np.where(
+                    b,
+                    np.diag(
+                        interception_times(centers[a], tgt, vel, speed, self.s.intercept_horizon)
+                    ),
+                    t,
+                )
+            stopped = 2 * float(np.hypot(*ovel[:2])) < self.cfg.approach.brace_speed
+            loose = b & (stopped & (self.gaps(view) > 2 * self.s.creep_gap))
+            goal[a] = self.braces.meet(tgt, vel, t, loose)
+            gvel[a[b]] = 0.0
         for i, wps in list(self.waypoints.items()):
             while wps and np.linalg.norm(centers[i] - wps[0]) < self.s.waypoint_reached:
                 wps.pop(0)
@@ -307,7 +298,7 @@ class CaptureMission:
         """Sharma Table I velocities (N, 2): robots closing in may reach the object."""
         polys = self.obstacles + [geometry.transform(self.object_poly, pose)]
         avoid = np.ones((self.n, len(polys)), bool)
-        avoid[self.assignment, -1] = self.phase == Phase.APPROACH and ~self.brace
+        avoid[self.assignment, -1] = self.phase == Phase.APPROACH and ~self.braces.on
         active = self.assigned & ~view.stale & view.present
         if self.heading is None:
             th = view.poses[:, 2]
@@ -341,7 +332,10 @@ class CaptureMission:
         dist = np.linalg.norm(xy - tgt, axis=1)
         if self.phase == Phase.APPROACH:
             dist = np.maximum(dist - goals.shortfall, 0.0)
-            dist[self.brace & (gap < 2 * self.s.creep_gap)] = 0.0  # a brace touching: there
+            touching = self.braces.on & (gap < 2 * self.s.creep_gap)
+            dist[touching] = 0.0  # a brace touching: there
+            if touching.any():  # the rest may stand off by the filter's margin to a brace
+                dist = np.maximum(dist - 2 * self.cfg.approach.safety_margin, 0.0)
         self.last_distance = dist  # read by the capture job (a robot stuck on its way)
         return Measures(view.t, dist, goals.preload, gap, world, bool(self.waypoints))
 
@@ -388,9 +382,7 @@ class CaptureMission:
         ]
         failure, failed = self.seq.state.failure, self.phase == Phase.FAILED
         closed = self.phase in CLOSED
-        touch, braced = brace_masks(
-            self.n, self.assignment, self.brace, m.gap, 2 * self.s.creep_gap
-        )
+        touch, braced = self.braces.masks(self.n, self.assignment, m.gap, 2 * self.s.creep_gap)
         return Intent.of(
             vel,
             self.phase,

@@ -12,6 +12,7 @@ import numpy as np
 
 from controller.config import FleetConfig
 from controller.mission.assign import Reassigner, assign, interception_costs
+from controller.mission.brace import braced_capture
 from controller.mission.capture import CaptureMission
 from controller.mission.capture_phase import CaptureSettings
 from controller.mission.grip import CONTACT_REACH, touching
@@ -174,9 +175,13 @@ class CaptureJob:
             )
             return self.transport.plan(view).after(intent.report.events)
         reach = self.reach
-        bracing = self.inner.phase == Phase.APPROACH and self.inner.brace.any()
-        if not self._replan_job.pending and not bracing and reach.blocked(
-            view, self.inner.phase, self.capture, self.inner.last_distance, self.inner
+        bracing = self.inner.phase == Phase.APPROACH and self.inner.braces.any()
+        if (
+            not self._replan_job.pending
+            and not bracing
+            and reach.blocked(
+                view, self.inner.phase, self.capture, self.inner.last_distance, self.inner
+            )
         ):
             reach.restart()
             pose = np.asarray(view.object_pose, float)
@@ -303,7 +308,21 @@ class CaptureJob:
     def _reassign(self, view: FleetView) -> list:
         """A better assignment during the approach (``mission.assign``): a new approach, with
         the same timeout."""
-        if self.inner.phase != Phase.APPROACH or self.inner.brace.any():  # braces stay
+        if self.inner.phase != Phase.APPROACH:
+            return []
+        if self.inner.braces.any():  # braces stay (brace.py)
+            return []
+        ovel = view.object_velocity
+        fast = ovel is not None and 0 < self.cfg.approach.brace_speed <= np.hypot(*ovel[:2])
+        braced = (
+            braced_capture(self.cfg, self.capture, view, self.roster.available) if fast else None
+        )
+        if braced is not None:  # a new approach, with the same timeout
+            t0 = self.inner.state.t0
+            self.capture, braces, self.assignment = braced
+            self.inner = self._mission(view)
+            self.inner.keep_clock(t0)
+            self.inner.braces.on[:] = braces
             return []
         new, events = self.reassigner.look(
             self.cfg, self.capture, view, self.assignment, self.roster.available

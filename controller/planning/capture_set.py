@@ -51,7 +51,7 @@ def plan_capture_set(
     chosen = np.asarray(plan.chosen, int)
     capacity, added = None, 0
     if cfg.capture.hold_force > 0:
-        res = _reinforce(cfg, plan.candidates, plan.normals, chosen, robots=max_robots)
+        res = reinforce_set(cfg, plan.candidates, plan.normals, chosen, robots=max_robots)
         if not res.holds:
             raise CapturePlanError(_cannot_hold(cfg, res))
         chosen, capacity, added = res.chosen, res.capacity, res.added
@@ -78,7 +78,7 @@ def _cannot_hold(cfg: FleetConfig, res) -> str:
     )
 
 
-def _reinforce(
+def reinforce_set(
     cfg: FleetConfig,
     cand: np.ndarray,
     nrm: np.ndarray,
@@ -144,7 +144,7 @@ def replan_pinned(
     local_push = pushes @ geometry.rot(float(pose[2])) if len(pushes) else pushes
     fixed = push_wrenches(local, local_push, geometry.centroid(poly))
     chosen = np.array([i for i in capture.chosen if allowed[i]], int)
-    res = _reinforce(
+    res = reinforce_set(
         cfg, capture.candidates, capture.candidate_normals, chosen, allowed, fixed, robots
     )
     if not res.holds or len(res.chosen) == 0 or (robots is not None and len(res.chosen) > robots):
@@ -208,7 +208,7 @@ def _repair(
 
     allowed = np.ones(len(kept.candidates), bool)
     allowed[list(exclude)] = False
-    res = _reinforce(
+    res = reinforce_set(
         cfg, kept.candidates, kept.candidate_normals, kept.chosen, allowed, robots=robots
     )
     if not res.holds or len(res.chosen) > robots:
