@@ -36,6 +36,9 @@ from controller.planning.hold import contact_wrenches, least_force_set
 FIX_S = 2.0
 #: at most this many braces: the rest of the fleet approaches as before
 MAX_BRACES = 4
+#: s between the job's looks for braces (each an LP over the candidate nodes and a
+#: reinforcement)
+BRACE_PERIOD = 0.5
 #: rad either side of the object's motion the braces also resist (a brace set that only
 #: balances the push exactly lets an object that turns a little slide past)
 SPREAD = 0.3
@@ -66,15 +69,21 @@ def brace_nodes(
 def braced_capture(
     cfg: FleetConfig, capture: CaptureSet, view: FleetView, available: np.ndarray
 ) -> tuple[CaptureSet, np.ndarray, np.ndarray] | None:
-    """The capture set with braces for the fast object of ``view``: the brace nodes
+    """The capture set with braces for the object of ``view`` when it moves at
+    ``approach.brace_speed`` or faster (None otherwise): the brace nodes
     (``brace_nodes``) fixed in it, the GA's points clear of them kept, reinforced until it
     holds ``capture.hold_force`` with the ``available`` robots; each brace's robot the one
     ahead of the object that meets it soonest (waiting on its path), the other points assigned
     as at the start. The set, which of its points brace (M,), and the assignment (M,); None
     when no brace set exists, no robot ahead meets one within the assignment's horizon, or no
     set holds with the braces in it."""
-    pose = np.asarray(view.object_pose, float)
+    brace_speed = cfg.approach.brace_speed
+    if view.object_velocity is None or brace_speed <= 0:
+        return None
     ovel = np.asarray(view.object_velocity, float)[:2]
+    if float(np.hypot(*ovel)) < brace_speed:
+        return None
+    pose = np.asarray(view.object_pose, float)
     d = ovel / max(float(np.hypot(*ovel)), 1e-12)
     cand, nrm = capture.candidates, capture.candidate_normals
     r = cfg.max_robot_radius
@@ -171,3 +180,19 @@ class Braces:
         still = np.zeros(n, bool)
         still[assignment[self.on & (gap < tolerance)]] = True
         return (touch if touch.any() else None), (still if still.any() else None)
+
+
+class BraceWatch:
+    """The job's look for braces during the approach, every ``BRACE_PERIOD`` s."""
+
+    def __init__(self) -> None:
+        self.last_t = -np.inf
+
+    def look(
+        self, cfg: FleetConfig, capture: CaptureSet, view: FleetView, roster
+    ) -> tuple[CaptureSet, np.ndarray, np.ndarray] | None:
+        """``braced_capture`` for the robots the ``roster`` has available, or None."""
+        if view.t < self.last_t + BRACE_PERIOD:
+            return None
+        self.last_t = view.t
+        return braced_capture(cfg, capture, view, roster.available)

@@ -48,8 +48,9 @@ from controller.mission.capture_phase import (
     advance,
     entered,
 )
+from controller.mission.detours import Detours
 from controller.mission.guard import SafetyStage
-from controller.mission.planners import InlinePlanners, Planners, PlanSlot
+from controller.mission.planners import InlinePlanners, Planners
 from controller.mission.sequence import Cue, Sequencer
 from controller.mission.summary import CaptureSummary
 from controller.mission.types import Event, FleetView, Intent, MissionOutput, Phase
@@ -64,7 +65,6 @@ from controller.planning.approach import (
     separate_stations,
     static_free_distance,
 )
-from controller.planning.roadmap import plan_detours
 
 STATION_SLACK = 0.02  # m beyond the safety filter's margin a station keeps from walls, obstacles
 
@@ -121,10 +121,8 @@ class CaptureMission:
         self.seq = self.sequencer if self.sequencer is not None else Sequencer(Phase.APPROACH)
         self.heading: np.ndarray | None = None
         self.braces = Braces(len(self.points))  # robots bracing a fast object (brace.py)
-        self._detours_planned = False
-        self._detour_job = PlanSlot(self.planners or InlinePlanners(), "detour")
-        self._detour_robots: list[int] = []
-        self.detour_hold: np.ndarray | None = None  # robots held until their detours come
+        planners = self.planners or InlinePlanners()
+        self.detours = Detours(cfg, self.s, planners, self.obstacles, self.radii)  # stage 3
         self.last_distance: np.ndarray | None = None
         # stations keep the discs this far from walls and obstacles (what the safety filter
         # lets a robot reach, with a station gap to spare)
@@ -181,57 +179,6 @@ class CaptureMission:
         preload = pts + (r - self.s.preload_depth)[:, None] * nrm
         return Goals(pts, nrm, pts + nrm * out[:, None], touch, preload, shortfall)
 
-    # --- stage 3: detours around static obstacles (planned once, off the tick) -------------
-    def blocked(self, centers: np.ndarray, stations: np.ndarray) -> list[tuple[int, int]]:
-        """(capture point, robot) of the robots whose straight line to their station crosses
-        an obstacle grown by their radius (a cheap test, on the tick)."""
-        out = []
-        for m, i in enumerate(self.assignment):
-            r = self.radii[i] + self.s.detour_clearance
-            grown = [envelope(p, r, 8) for p in self.obstacles]
-            seg = np.linspace(centers[i], stations[m], self.s.detour_samples)
-            if any(geometry.points_in_polygon(seg, g).any() for g in grown):
-                out.append((m, int(i)))
-        return out
-
-    def ask_detours(self, view: FleetView, centers: np.ndarray, stations: np.ndarray) -> None:
-        """The blocked robots' routes asked of the planner port (kind ``detour``: a robot
-        roadmap and A* over it); they hold until the routes come (``detour_hold``)."""
-        self._detours_planned = True
-        blocked = self.blocked(centers, stations)
-        if not blocked:
-            return
-        rr = float(self.radii.max()) + self.cfg.approach.safety_margin + self.s.detour_clearance
-        robots = [i for _, i in blocked]
-        starts = np.array([centers[i] for i in robots])
-        goals = np.array([stations[m] for m, _ in blocked])
-        self.detour_hold = np.zeros(self.n, bool)
-        self.detour_hold[robots] = True
-        self._detour_job.request(
-            view.t,
-            plan_detours,
-            self.cfg.bounds_array(),
-            self.obstacles,
-            rr,
-            self.cfg.route.robot_resolution,
-            starts,
-            goals,
-            self.s.detour_spacing,
-        )
-        self._detour_robots = robots
-
-    def take_detours(self, t: float) -> None:
-        """The detour routes, once they came: each blocked robot follows its waypoints (a
-        robot with no route found goes straight, the safety filter keeping it off)."""
-        got = self._detour_job.take(t)
-        if got is None:
-            return
-        if got.ok:
-            for i, wps in zip(self._detour_robots, got.value, strict=True):
-                if wps:
-                    self.waypoints[i] = wps
-        self.detour_hold = None
-
     # --- stage 4: targets and feed-forward of the phase --------------------------------------
     def point_velocity(self, view: FleetView, pose: np.ndarray, xy: np.ndarray) -> np.ndarray:
         """World velocities (M, 2) of points riding on the object (its twist at them)."""
@@ -266,19 +213,12 @@ class CaptureMission:
             b = self.braces.on
             tgt = np.where(b[:, None], goals.touch, tgt)
             vel = np.where(b[:, None], self.point_velocity(view, pose, goals.touch), vel)
-            t = np.diag(
-                interception_times(centers[a], tgt, vel, speed, self.s.intercept_horizon, oncoming)
-            )
+            h = self.s.intercept_horizon
+            t = np.diag(interception_times(centers[a], tgt, vel, speed, h, oncoming))
             if b.any():  # a brace waits in the object's path, whatever the rule for the others
-                t = np.where(
-                    b,
-                    np.diag(
-                        interception_times(centers[a], tgt, vel, speed, self.s.intercept_horizon)
-                    ),
-                    t,
-                )
-            stopped = 2 * float(np.hypot(*ovel[:2])) < self.cfg.approach.brace_speed
-            loose = b & (stopped & (self.gaps(view) > 2 * self.s.creep_gap))
+                t = np.where(b, np.diag(interception_times(centers[a], tgt, vel, speed, h)), t)
+            loose = b & (self.gaps(view) > 2 * self.s.creep_gap)  # stopped: braces aim again
+            loose &= 2 * float(np.hypot(*ovel[:2])) < self.cfg.approach.brace_speed
             goal[a] = self.braces.meet(tgt, vel, t, loose)
             gvel[a[b]] = 0.0
         for i, wps in list(self.waypoints.items()):
@@ -360,14 +300,14 @@ class CaptureMission:
             events += self.seq.report(view.t, cue).events
         pose = self.goal_pose(view)
         goals = self.goals(pose)
-        if not self._detours_planned:
-            self.ask_detours(view, view.poses[:, :2], goals.stations)
-        if self._detour_job.pending:
-            self.take_detours(view.t)
+        if not self.detours.planned:  # detours around static obstacles (planned once)
+            self.detours.ask(view, self.assignment, view.poses[:, :2], goals.stations)
+        if self.detours.job.pending:
+            self.detours.take(view.t, self.waypoints)
         goal, gvel, tgt = self.targets(view, pose, goals)
         vel = self.projective(view, goal, gvel, pose)
-        if self.detour_hold is not None:  # the blocked robots wait for their routes
-            vel[self.detour_hold] = 0.0
+        if self.detours.hold is not None:  # the blocked robots wait for their routes
+            vel[self.detours.hold] = 0.0
         m = self.measures(view, tgt, goals)
         report = advance(self.state, m, self.s, self.phase)
         step = self.seq.report(m.t, report.cue, report.failure)

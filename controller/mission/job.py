@@ -12,7 +12,7 @@ import numpy as np
 
 from controller.config import FleetConfig
 from controller.mission.assign import Reassigner, assign, interception_costs
-from controller.mission.brace import braced_capture
+from controller.mission.brace import BraceWatch
 from controller.mission.capture import CaptureMission
 from controller.mission.capture_phase import CaptureSettings
 from controller.mission.grip import CONTACT_REACH, touching
@@ -96,6 +96,8 @@ class CaptureJob:
         self._lost_retries = 0  # re-plans after a loss asked again for want of an answer
         self.outage = OutageWatch(cfg.fleet.outage_grace)
         self.assignment: np.ndarray | None = None
+        self.braces = 0  # robots that braced
+        self.brace_watch = BraceWatch()  # braces for a fast object (brace.py)
         self.inner: CaptureMission | None = None  # the capture stage, once started
         self.roster = Roster(self.n)
         self.reach = Reach(cfg)
@@ -176,12 +178,8 @@ class CaptureJob:
             return self.transport.plan(view).after(intent.report.events)
         reach = self.reach
         bracing = self.inner.phase == Phase.APPROACH and self.inner.braces.any()
-        if (
-            not self._replan_job.pending
-            and not bracing
-            and reach.blocked(
-                view, self.inner.phase, self.capture, self.inner.last_distance, self.inner
-            )
+        if not (self._replan_job.pending or bracing) and reach.blocked(
+            view, self.inner.phase, self.capture, self.inner.last_distance, self.inner
         ):
             reach.restart()
             pose = np.asarray(view.object_pose, float)
@@ -308,30 +306,24 @@ class CaptureJob:
     def _reassign(self, view: FleetView) -> list:
         """A better assignment during the approach (``mission.assign``): a new approach, with
         the same timeout."""
-        if self.inner.phase != Phase.APPROACH:
+        if self.inner.phase != Phase.APPROACH or self.inner.braces.any():  # braces stay
             return []
-        if self.inner.braces.any():  # braces stay (brace.py)
-            return []
-        ovel = view.object_velocity
-        fast = ovel is not None and 0 < self.cfg.approach.brace_speed <= np.hypot(*ovel[:2])
-        braced = (
-            braced_capture(self.cfg, self.capture, view, self.roster.available) if fast else None
-        )
-        if braced is not None:  # a new approach, with the same timeout
-            t0 = self.inner.state.t0
-            self.capture, braces, self.assignment = braced
-            self.inner = self._mission(view)
-            self.inner.keep_clock(t0)
-            self.inner.braces.on[:] = braces
-            return []
-        new, events = self.reassigner.look(
-            self.cfg, self.capture, view, self.assignment, self.roster.available
-        )
+        braced, events = self.brace_watch.look(self.cfg, self.capture, view, self.roster), []
+        if braced is not None:
+            self.capture, braces, new = braced
+        else:
+            braces = None
+            new, events = self.reassigner.look(
+                self.cfg, self.capture, view, self.assignment, self.roster.available
+            )
         if new is not None:
             t0 = self.inner.state.t0
             self.assignment = new
             self.inner = self._mission(view)
             self.inner.keep_clock(t0)
+            if braces is not None:
+                self.inner.braces.on[:] = braces
+                self.braces = int(braces.sum())
         return events
 
     def _start(self, view: FleetView, pinned: bool) -> Intent:
@@ -401,20 +393,6 @@ class CaptureJob:
         carry = None if self.transport is None else self.transport.summary()
         if self.capture is None:  # entered at route
             return JobSummary(transport=carry)
-        ids = [r.id for r in self.cfg.robots]
-        plan = CapturePlanSummary(
-            capture_points=len(self.capture.points),
-            capture_objective=self.capture.objective,
-            form_closure=self.capture.form_closure,
-            hold_capacity=self.capture.hold_capacity,
-            reinforced_points=self.capture.reinforced,
-            assigned=None if self.assignment is None else [ids[i] for i in self.assignment],
-            reassignments=self.reassigner.count,
-            wall_replans=self.reach.replans,
-            unreachable_nodes=len(self.reach.unreachable),
-            robots_lost=[ids[i] for i in self.roster.lost],
-            outages=self.outage.outages,
-            loss_replans=self.loss_replans,
-        )
+        plan = CapturePlanSummary.of(self)
         inner = None if self.inner is None else self.inner.summary()
         return JobSummary(plan, inner, carry)

@@ -79,6 +79,28 @@ class CapturePlanSummary(_Flat):
     robots_lost: list[str]
     outages: int
     loss_replans: int
+    braces: int = 0  # robots that braced a fast object (approach.brace_speed)
+
+    @classmethod
+    def of(cls, job) -> CapturePlanSummary:
+        """The figures of a ``mission.job.CaptureJob`` that planned a capture."""
+        ids = [r.id for r in job.cfg.robots]
+        cap, a = job.capture, job.assignment
+        return cls(
+            capture_points=len(cap.points),
+            capture_objective=cap.objective,
+            form_closure=cap.form_closure,
+            hold_capacity=cap.hold_capacity,
+            reinforced_points=cap.reinforced,
+            assigned=None if a is None else [ids[i] for i in a],
+            reassignments=job.reassigner.count,
+            wall_replans=job.reach.replans,
+            unreachable_nodes=len(job.reach.unreachable),
+            robots_lost=[ids[i] for i in job.roster.lost],
+            outages=job.outage.outages,
+            loss_replans=job.loss_replans,
+            braces=job.braces,
+        )
 
 
 @dataclass(frozen=True)

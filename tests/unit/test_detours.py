@@ -76,7 +76,7 @@ def test_a_blocked_robot_holds_until_its_detour_comes_off_the_tick(no_roadmap_on
     assert out.phase == Phase.APPROACH
     asked = [k for k, (kind, _, _) in port.jobs.items() if kind == "detour"]
     assert len(asked) == 1, port.jobs  # one job for every blocked robot
-    held = j.inner.detour_hold
+    held = j.inner.detours.hold
     assert held is not None and held.any() and not held.all()
     # while the route is on its way: the blocked robots hold, the others approach
     for _ in range(3):
@@ -89,7 +89,7 @@ def test_a_blocked_robot_holds_until_its_detour_comes_off_the_tick(no_roadmap_on
     assert port.run("detour") == 1
     t += DT
     out = step(j, view(j, t, poses))
-    assert j.inner.detour_hold is None
+    assert j.inner.detours.hold is None
     routed = [i for i in np.flatnonzero(held) if j.inner.waypoints.get(int(i))]
     assert routed, "no blocked robot got a route"
     for i in routed:  # each heads for its first waypoint, not through the obstacle
