@@ -77,11 +77,8 @@ def braced_capture(
     as at the start. The set, which of its points brace (M,), and the assignment (M,); None
     when no brace set exists, no robot ahead meets one within the assignment's horizon, or no
     set holds with the braces in it."""
-    brace_speed = cfg.approach.brace_speed
-    if view.object_velocity is None or brace_speed <= 0:
-        return None
-    ovel = np.asarray(view.object_velocity, float)[:2]
-    if float(np.hypot(*ovel)) < brace_speed:
+    ovel = np.zeros(2) if view.object_velocity is None else np.asarray(view.object_velocity)[:2]
+    if not 0 < cfg.approach.brace_speed <= float(np.hypot(*ovel)):
         return None
     pose = np.asarray(view.object_pose, float)
     d = ovel / max(float(np.hypot(*ovel)), 1e-12)
@@ -95,17 +92,11 @@ def braced_capture(
     nodes = brace_nodes(cand, nrm, c, geometry.rot(float(pose[2])).T @ d, conflict)
     if len(nodes) == 0:
         return None
-    # the braces' robots: ahead of the object, meeting their contacts soonest on its path
-    xy = view.poses[:, :2]
-    touch = geometry.transform(centres[nodes], pose)
-    speed = np.array([rb.max_speed for rb in cfg.robots])
-    horizon = max(cfg.approach.intercept_horizon, 1.0) * COST_HORIZON_FACTOR  # as assign's
-    t = interception_times(xy, touch, np.broadcast_to(ovel, touch.shape), speed, horizon)
     mid = geometry.transform(c[None], pose)[0]
-    t[:, ((xy - mid) @ d <= 0) | ~available] = horizon
-    rows, cols = linear_sum_assignment(t)
-    if len(rows) < len(nodes) or (t[rows, cols] >= horizon).any():
+    robots = brace_robots(cfg, view, geometry.transform(centres[nodes], pose), mid, available)
+    if robots is None:
         return None
+    rows, cols = robots
     # the rest of the set planned around the braces, their contacts fixed in it (as walls)
     free = ~conflict[:, nodes].any(axis=1)
     free[nodes] = False
@@ -133,6 +124,25 @@ def braced_capture(
         costs[row, j] = 0.0
         costs[~braces, j] = big  # and that robot for no other point
     return new, braces, assign(costs, available)
+
+
+def brace_robots(
+    cfg: FleetConfig, view: FleetView, touch: np.ndarray, mid: np.ndarray, available: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Which robot braces at each of the world contacts ``touch`` (K, 2) of the object of
+    ``view`` (its centroid at ``mid``): (rows, robots), the ``available`` robots ahead of it
+    that meet those contacts soonest, waiting on its path; None when some contact has no robot
+    that meets it within the assignment's horizon."""
+    ovel = np.asarray(view.object_velocity, float)[:2]
+    xy = view.poses[:, :2]
+    speed = np.array([rb.max_speed for rb in cfg.robots])
+    horizon = max(cfg.approach.intercept_horizon, 1.0) * COST_HORIZON_FACTOR  # as assign's
+    t = interception_times(xy, touch, np.broadcast_to(ovel, touch.shape), speed, horizon)
+    t[:, ((xy - mid) @ ovel <= 0) | ~available] = horizon  # behind it, or away
+    rows, cols = linear_sum_assignment(t)
+    if len(rows) < len(touch) or (t[rows, cols] >= horizon).any():
+        return None
+    return rows, cols
 
 
 @dataclass

@@ -97,6 +97,7 @@ class CaptureMission:
     planners: Planners | None = None  # the port the detours are asked of (None: at once)
     # the job's phase, read here and reported into (None: one of its own, a capture alone)
     sequencer: Sequencer | None = None
+    bracing: np.ndarray | None = None  # (M,) the points whose robots brace (brace.py)
 
     def __post_init__(self) -> None:
         cfg = self.cfg
@@ -121,6 +122,8 @@ class CaptureMission:
         self.seq = self.sequencer if self.sequencer is not None else Sequencer(Phase.APPROACH)
         self.heading: np.ndarray | None = None
         self.braces = Braces(len(self.points))  # robots bracing a fast object (brace.py)
+        if self.bracing is not None:
+            self.braces.on[:] = self.bracing
         planners = self.planners or InlinePlanners()
         self.detours = Detours(cfg, self.s, planners, self.obstacles, self.radii)  # stage 3
         self.last_distance: np.ndarray | None = None

@@ -319,11 +319,9 @@ class CaptureJob:
         if new is not None:
             t0 = self.inner.state.t0
             self.assignment = new
-            self.inner = self._mission(view)
+            self.inner = self._mission(view, braces)
             self.inner.keep_clock(t0)
-            if braces is not None:
-                self.inner.braces.on[:] = braces
-                self.braces = int(braces.sum())
+            self.braces = self.braces if braces is None else int(braces.sum())
         return events
 
     def _start(self, view: FleetView, pinned: bool) -> Intent:
@@ -339,7 +337,7 @@ class CaptureJob:
         event = capture_event(self.capture, robots, away, pinned)
         return self.inner.plan(view).after([event])
 
-    def _mission(self, view: FleetView):
+    def _mission(self, view: FleetView, braces: np.ndarray | None = None):
         settings = CaptureSettings.from_config(self.cfg)
         if self.cfg.object.goal is not None:  # the arrested object is carried, not let go
             settings = dataclasses.replace(settings, settle_s=math.inf)
@@ -352,6 +350,7 @@ class CaptureJob:
             settings=settings,
             planners=self.planners,
             sequencer=self.seq,
+            bracing=braces,
         )
 
     def _await_pinned(self, view: FleetView, intent: Intent) -> Intent:
