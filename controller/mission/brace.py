@@ -21,27 +21,79 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
+from scipy.optimize import Bounds, LinearConstraint, linear_sum_assignment, milp
 
 from controller import geometry
 from controller.config import FleetConfig
 from controller.mission.assign import COST_HORIZON_FACTOR, assign, interception_costs
+from controller.mission.planners import Planners, PlanSlot
 from controller.mission.types import FleetView
 from controller.planning.approach import interception_times
 from controller.planning.capture_set import CaptureSet, reinforce_set
-from controller.planning.hold import contact_wrenches, least_force_set
+from controller.planning.hold import contact_wrenches
 
 #: s before the object meets a brace: its meeting point stops following the prediction (a
 #: robot that waits holds its ground; one that keeps adjusting is pushed)
 FIX_S = 2.0
 #: at most this many braces: the rest of the fleet approaches as before
 MAX_BRACES = 4
+#: N a brace's contact may carry per N of the object's push (a bound for the brace LP)
+FORCE_CAP = 10.0
 #: s between the job's looks for braces (each an LP over the candidate nodes and a
 #: reinforcement)
 BRACE_PERIOD = 0.5
 #: rad either side of the object's motion the braces also resist (a brace set that only
 #: balances the push exactly lets an object that turns a little slide past)
 SPREAD = 0.3
+
+
+def _clear_set(
+    candidates: np.ndarray,
+    normals: np.ndarray,
+    centroid: np.ndarray,
+    loads: np.ndarray,
+    allowed: np.ndarray,
+    conflict: np.ndarray,
+) -> np.ndarray:
+    """At most ``MAX_BRACES`` of the ``allowed`` nodes, no two in ``conflict``, that produce
+    each of ``loads`` (L, 3) with the least sum of their largest forces: a mixed-integer LP (a
+    capacity c_i per node, each load's forces within them, a node used or not). Empty when no
+    such set produces the loads."""
+    idx = np.flatnonzero(allowed)
+    n, nl = len(idx), len(loads)
+    if n == 0:
+        return np.zeros(0, int)
+    w = contact_wrenches(candidates[idx], normals[idx], centroid)
+    # variables: capacities c (n), each load's forces f_k (L n), whether a node is used z (n)
+    k = nl * n
+
+    def row(c=None, f=None, z=None, m: int = n) -> np.ndarray:
+        blocks = [np.zeros((m, n)) if c is None else c, np.zeros((m, k)) if f is None else f]
+        return np.hstack(blocks + [np.zeros((m, n)) if z is None else z])
+
+    eye, loads_flat = np.eye(n), np.ravel(loads)
+    rows = [
+        LinearConstraint(row(f=np.kron(np.eye(nl), w), m=3 * nl), loads_flat, loads_flat),
+        LinearConstraint(row(c=np.tile(-eye, (nl, 1)), f=np.eye(k), m=k), -np.inf, 0.0),  # f ≤ c
+        LinearConstraint(row(c=eye, z=-FORCE_CAP * eye), -np.inf, 0.0),  # c only if used
+        LinearConstraint(row(z=np.ones((1, n)), m=1), 0, MAX_BRACES),
+    ]
+    pairs = np.argwhere(np.triu(conflict[np.ix_(idx, idx)], 1))
+    if len(pairs):  # no two robot discs in conflict
+        clash = np.zeros((len(pairs), n))
+        clash[np.arange(len(pairs)), pairs[:, 0]] = 1
+        clash[np.arange(len(pairs)), pairs[:, 1]] = 1
+        rows.append(LinearConstraint(row(z=clash, m=len(pairs)), 0, 1))
+    res = milp(
+        np.r_[np.ones(n), np.zeros(k), 1e-3 * np.ones(n)],
+        constraints=rows,
+        integrality=np.r_[np.zeros(n + k), np.ones(n)],
+        bounds=Bounds(0.0, np.r_[np.full(n + k, FORCE_CAP), np.ones(n)]),
+    )
+    if res.status != 0 or res.x is None:
+        return np.zeros(0, int)
+    used = res.x[n + k :] > 0.5
+    return idx[used]
 
 
 def brace_nodes(
@@ -53,17 +105,15 @@ def brace_nodes(
 ) -> np.ndarray:
     """Indices of candidate contact nodes (``candidates``, outward ``normals`` (K, 2), object
     frame, about ``centroid``) that brace an object pushed along ``direction`` (object frame):
-    the least-force set of frictionless contacts that resists the push with no turn, at most
-    ``MAX_BRACES``, clear of each other (``conflict``). Empty when fewer than two do it (a
-    single brace lets the object slide past)."""
-    th = float(np.arctan2(direction[1], direction[0]))
-    pick: list[int] = []
-    for dev in (0.0, -SPREAD, SPREAD):  # the push's direction and either side of it
-        load = np.array([-np.cos(th + dev), -np.sin(th + dev), 0.0])  # pushing back
-        for j in least_force_set(candidates, normals, centroid, load, 10.0, conflict):
-            if int(j) not in pick and not conflict[j, pick].any() and len(pick) < MAX_BRACES:
-                pick.append(int(j))
-    return np.asarray(pick, int) if len(pick) >= 2 else np.zeros(0, int)
+    frictionless contacts that resist the push with no turn, and a push ``SPREAD`` either side
+    of it, with the least force, clear of each other (``conflict``), none on a face the object
+    moves away from (it would leave that brace behind). Empty when fewer than two
+    do it (a single brace lets the object slide past) or it takes more than ``MAX_BRACES``."""
+    th = float(np.arctan2(direction[1], direction[0])) + np.array([0.0, -SPREAD, SPREAD])
+    loads = -np.stack([np.cos(th), np.sin(th), np.zeros(3)], axis=1)  # pushing back
+    ahead = normals @ np.array([np.cos(th[0]), np.sin(th[0])]) > -1e-9  # no trailing face
+    pick = _clear_set(candidates, normals, centroid, loads, ahead, conflict)
+    return pick if 2 <= len(pick) <= MAX_BRACES else np.zeros(0, int)
 
 
 def braced_capture(
@@ -193,16 +243,26 @@ class Braces:
 
 
 class BraceWatch:
-    """The job's look for braces during the approach, every ``BRACE_PERIOD`` s."""
+    """The job's look for braces during the approach, off the tick (a job of kind ``capture``
+    on the planner port: the brace set is a mixed-integer LP of tens of ms), at most every
+    ``BRACE_PERIOD`` s while the object is fast."""
 
-    def __init__(self) -> None:
+    def __init__(self, planners: Planners) -> None:
         self.last_t = -np.inf
+        self.job = PlanSlot(planners, "capture")
 
     def look(
-        self, cfg: FleetConfig, capture: CaptureSet, view: FleetView, roster
+        self, cfg: FleetConfig, capture: CaptureSet, view: FleetView, available: np.ndarray
     ) -> tuple[CaptureSet, np.ndarray, np.ndarray] | None:
-        """``braced_capture`` for the robots the ``roster`` has available, or None."""
-        if view.t < self.last_t + BRACE_PERIOD:
-            return None
-        self.last_t = view.t
-        return braced_capture(cfg, capture, view, roster.available)
+        """A ``braced_capture`` asked before, once it came and its robots are all still
+        ``available`` (N,); else None (and a new one asked when it is time)."""
+        got = self.job.take(view.t)
+        if got is not None and got.ok and got.value is not None:
+            if available[got.value[2]].all():  # no robot of it lost meanwhile
+                return got.value
+        ovel = view.object_velocity
+        fast = ovel is not None and 0 < cfg.approach.brace_speed <= float(np.hypot(*ovel[:2]))
+        if fast and not self.job.pending and view.t >= self.last_t + BRACE_PERIOD:
+            self.last_t = view.t
+            self.job.request(view.t, braced_capture, cfg, capture, view, available.copy())
+        return None

@@ -97,7 +97,7 @@ class CaptureJob:
         self.outage = OutageWatch(cfg.fleet.outage_grace)
         self.assignment: np.ndarray | None = None
         self.braces = 0  # robots that braced
-        self.brace_watch = BraceWatch()  # braces for a fast object (brace.py)
+        self.brace_watch = BraceWatch(planners or InlinePlanners())  # braces (brace.py)
         self.inner: CaptureMission | None = None  # the capture stage, once started
         self.roster = Roster(self.n)
         self.reach = Reach(cfg)
@@ -308,7 +308,10 @@ class CaptureJob:
         the same timeout."""
         if self.inner.phase != Phase.APPROACH or self.inner.braces.any():  # braces stay
             return []
-        braced, events = self.brace_watch.look(self.cfg, self.capture, view, self.roster), []
+        braced, events = (
+            self.brace_watch.look(self.cfg, self.capture, view, self.roster.available),
+            [],
+        )
         if braced is not None:
             self.capture, braces, new = braced
         else:
