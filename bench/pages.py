@@ -26,7 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bench.stats import wilson  # noqa: E402
+from bench.stats import mcnemar, wilson  # noqa: E402
 
 ROWS = ROOT / "bench" / "rows"
 PAGES = ROOT / "docs" / "results"
@@ -718,7 +718,11 @@ def arrest_edge(r: dict) -> str:
             ]
         rows.append(row)
     head = ["object speed"]
-    label = {"baseline": '`"classic"` (default)', "new": '`"oncoming"`'}
+    label = {
+        "baseline": '`"classic"` (default)',
+        "new": '`"oncoming"`',
+        "brace": "braces (`brace_speed = 0.3`)",
+    }
     for name in variants:
         head += [f"{label.get(name, name)}: arrested (Wilson 95 %)", "median arrest (sim)"]
     edges = "; ".join(
@@ -732,10 +736,13 @@ def arrest_edge(r: dict) -> str:
     )
     paired = ""
     if "paired" in e:
-        p = e["paired"]
+        p, (a, b) = e["paired"], variants[:2]
+        only_a, only_b = p.get(f"{a}_only", 0), p.get(f"{b}_only", 0)
+        pv = mcnemar(only_a, only_b)
         paired = (
-            f' Paired on the same seeds: {p.get("new_only", 0)} arrested by `"oncoming"` only, '
-            f"{p.get('baseline_only', 0)} by the default only, {p['both']} by both."
+            f" Paired on the same seeds: {only_b} arrested by {label.get(b, b)} only, "
+            f"{only_a} by {label.get(a, a)} only, {p['both']} by both"
+            + (f" (McNemar's exact p = {pv:.2g})." if pv is not None else ".")
         )
     top = max(speeds)
     reached = any(
@@ -1427,6 +1434,7 @@ RENDER: dict[str, Callable[[dict], str]] = {
     "arrest": arrest,
     "arrest_edge_low": arrest_edge,
     "arrest_edge_high": arrest_edge,
+    "arrest_edge_brace": arrest_edge,
     "arrest_filter": arrest_filter,
     "approach": approach,
     "contact_lp": contact_lp,

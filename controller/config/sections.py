@@ -329,9 +329,10 @@ class ApproachSection:
     # speed edge 0.30 -> 0.35 m/s, bench/arrest.py; not the default: with it the default job's
     # transport had two robots touch, 10 um, in pybullet)
     intercept: str = _rule("classic", choices=("classic", "oncoming"))
-    # m/s: an object this fast or faster is braced: the robots of its leading face that are
-    # ahead of it wait at their contact points where it will be, holding their ground, and
-    # stop it for the rest (controller/mission/brace.py); 0: never
+    # m/s: an object this fast or faster is braced: 2-4 robots ahead of it wait on its path at
+    # contacts that stop it (the capture set planned again around them), hold their ground,
+    # and the rest close in on it at rest (controller/mission/brace.py); 0: never. About 60 %
+    # of the robots' max_speed (0.3 for robots of 0.5 m/s: bench/arrest.py, variant brace)
     brace_speed: float = _rule(0.0, min=0, max=100)
     prediction_horizon: float = _rule(0.5, min=0, max=10)
     safety_margin: float = _rule(0.05, min=0, max=1)

@@ -107,11 +107,12 @@ def brace_nodes(
     frame, about ``centroid``) that brace an object pushed along ``direction`` (object frame):
     frictionless contacts that resist the push with no turn, and a push ``SPREAD`` either side
     of it, with the least force, clear of each other (``conflict``), none on a face the object
-    moves away from (it would leave that brace behind). Empty when fewer than two
-    do it (a single brace lets the object slide past) or it takes more than ``MAX_BRACES``."""
+    moves away from more steeply than that (it would leave the brace behind). Empty when fewer
+    than two do it (a single brace lets the object slide past) or more than ``MAX_BRACES``."""
     th = float(np.arctan2(direction[1], direction[0])) + np.array([0.0, -SPREAD, SPREAD])
     loads = -np.stack([np.cos(th), np.sin(th), np.zeros(3)], axis=1)  # pushing back
-    ahead = normals @ np.array([np.cos(th[0]), np.sin(th[0])]) > -1e-9  # no trailing face
+    # no face the object moves away from faster than a push SPREAD off its motion would
+    ahead = normals @ np.array([np.cos(th[0]), np.sin(th[0])]) > -np.sin(SPREAD) - 1e-9
     pick = _clear_set(candidates, normals, centroid, loads, ahead, conflict)
     return pick if 2 <= len(pick) <= MAX_BRACES else np.zeros(0, int)
 

@@ -74,3 +74,50 @@ def test_arrest_holds_or_fails_with_its_reason(sc, tmp_path):
         assert res["status"] == "failed" and res["phase"] == "failed" and not res["arrested"]
         assert "wall" in failure["detail"] and "object at" in failure["detail"]
         assert res["object_min_clearance_m"] < 0.3
+
+
+def _run_edge(speed: float, seed: int, variant: str, out: Path) -> dict:
+    """``bench/arrest.py``'s speed-edge case (``seed`` at ``speed`` m/s) with ``variant``'s
+    approach rules, in a process of its own with numpy held to AVX2: its result."""
+    code = (
+        "import json, sys\n"
+        "from pathlib import Path\n"
+        "from bench.arrest import edge_case, rules\n"
+        "from controller.mission.factory import build_mission\n"
+        "from controller.runtime.dry_run import DryRun\n"
+        "from tests.support.arrest_scenarios import arrest_config\n"
+        "sc, _ = edge_case(float(sys.argv[1]), int(sys.argv[2]))\n"
+        "cfg = arrest_config(rules(sc, sys.argv[3]))\n"
+        "res = DryRun(cfg, build_mission(cfg), Path(sys.argv[4]), max_time=sc.max_time).run()\n"
+        "print(json.dumps(res, default=str))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code, str(speed), str(seed), variant, str(out)],
+        cwd=ROOT,
+        env=dict(os.environ, NPY_DISABLE_CPU_FEATURES=SIMD_HELD, PYTHONPATH=str(ROOT)),
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow
+def test_braces_arrest_an_object_at_045_m_s_in_open_space_where_the_default_rules_cannot(
+    tmp_path,
+):
+    """Issue 34 item 10: robots of 0.5 m/s against an object at 0.45 m/s. With the default
+    rules the robots cannot catch it from behind and it reaches the far wall; with braces
+    (``approach.brace_speed = 0.3``) robots ahead wait on its path, stop it, and the rest
+    arrest it in open space (no wall re-plan, never within 5 cm of a wall, by the truth)."""
+    base = _run_edge(0.45, 3, "baseline", tmp_path / "baseline.mcap")
+    assert base["object_min_clearance_m"] < 0.05  # the default rules: it reaches a wall
+    res = _run_edge(0.45, 3, "brace", tmp_path / "brace.mcap")
+    assert res["arrested"] and res["status"] == "ok", res.get("failure")
+    assert judge(res) == [], res["verdict"]
+    assert res["mission"]["braces"] >= 2
+    assert res["mission"]["wall_replans"] == 0
+    assert res["object_min_clearance_m"] > 1.0  # stopped in open space, far from any wall
+    gaps = res["contact_gaps_at_arrest_m"]
+    assert gaps and max(gaps.values()) <= 0.02, gaps  # touching, by the physics
