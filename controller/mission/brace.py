@@ -125,9 +125,10 @@ def braced_capture(
     (``brace_nodes``) fixed in it, the GA's points clear of them kept, reinforced until it
     holds ``capture.hold_force`` with the ``available`` robots; each brace's robot the one
     ahead of the object that meets it soonest (waiting on its path), the other points assigned
-    as at the start. The set, which of its points brace (M,), and the assignment (M,); None
-    when no brace set exists, no robot ahead meets one within the assignment's horizon, or no
-    set holds with the braces in it."""
+    as at the start. The set (its ``hold_capacity`` what it holds with the braces force-limited
+    too: it may be below 1), which of its points brace (M,), and the assignment (M,); None when
+    no brace set exists, no robot ahead meets one within the assignment's horizon, or the rest
+    cannot hold the object even with the braces fixed."""
     ovel = np.zeros(2) if view.object_velocity is None else np.asarray(view.object_velocity)[:2]
     if not 0 < cfg.approach.brace_speed <= float(np.hypot(*ovel)):
         return None
@@ -148,24 +149,10 @@ def braced_capture(
     if robots is None:
         return None
     rows, cols = robots
-    # the rest of the set planned around the braces, their contacts fixed in it (as walls)
-    free = ~conflict[:, nodes].any(axis=1)
-    free[nodes] = False
-    rest = int(available.sum()) - len(nodes)
-    keep = np.array([i for i in capture.chosen if free[i]], int)[: max(rest, 0)]
-    fixed = contact_wrenches(cand[nodes], nrm[nodes], c)
-    res = reinforce_set(cfg, cand, nrm, keep, free, fixed, robots=rest)
-    if not res.holds:
+    new = _set_around(cfg, capture, nodes, conflict, c, int(available.sum()))
+    if new is None:
         return None
-    chosen = np.r_[nodes, res.chosen].astype(int)
-    new = dataclasses.replace(
-        capture,
-        points=cand[chosen],
-        normals=nrm[chosen],
-        chosen=chosen,
-        hold_capacity=res.capacity if cfg.capture.hold_force > 0 else None,
-        reinforced=res.added,
-    )
+    chosen = new.chosen
     braces = np.isin(chosen, nodes)
     costs = interception_costs(cfg, new, view)
     big = 1e6 * (1.0 + costs.max(initial=0.0))
@@ -175,6 +162,43 @@ def braced_capture(
         costs[row, j] = 0.0
         costs[~braces, j] = big  # and that robot for no other point
     return new, braces, assign(costs, available)
+
+
+def _set_around(
+    cfg: FleetConfig,
+    capture: CaptureSet,
+    nodes: np.ndarray,
+    conflict: np.ndarray,
+    centroid: np.ndarray,
+    robots: int,
+) -> CaptureSet | None:
+    """The capture set of ``robots`` points with the brace ``nodes`` first: the rest planned
+    around the braces with their contacts fixed in it (as walls are), then, the braces taken
+    as the force-limited robots they are, the rest moved while that raises what the whole set
+    holds (its ``hold_capacity``). None when the rest cannot hold it even with the braces
+    fixed."""
+    cand, nrm = capture.candidates, capture.candidate_normals
+    free = ~conflict[:, nodes].any(axis=1)
+    free[nodes] = False
+    rest = robots - len(nodes)
+    keep = np.array([i for i in capture.chosen if free[i]], int)[: max(rest, 0)]
+    fixed = contact_wrenches(cand[nodes], nrm[nodes], centroid)
+    res = reinforce_set(cfg, cand, nrm, keep, free, fixed, robots=rest)
+    if not res.holds:
+        return None
+    whole = reinforce_set(
+        cfg, cand, nrm, np.r_[nodes, res.chosen].astype(int), free, robots=robots,
+        locked=len(nodes),
+    )  # fmt: skip
+    chosen = whole.chosen
+    return dataclasses.replace(
+        capture,
+        points=cand[chosen],
+        normals=nrm[chosen],
+        chosen=chosen,
+        hold_capacity=whole.capacity if cfg.capture.hold_force > 0 else None,
+        reinforced=res.added + whole.added,
+    )
 
 
 def brace_robots(

@@ -86,25 +86,45 @@ def reinforce_set(
     allowed: np.ndarray | None = None,
     fixed: np.ndarray | None = None,
     robots: int | None = None,
+    locked: int = 0,
 ):
     """The GA's set reinforced to hold ``capture.hold_force`` (a set that only has to close the
     object, ``hold_force`` 0, is held to a token load), with at most ``robots`` points (None:
-    the fleet)."""
-    from controller.planning.hold import disturbances, reinforce
+    the fleet); the first ``locked`` points of ``chosen`` stay."""
+    from controller.planning.hold import reinforce
 
-    poly = geometry.ensure_ccw(cfg.object_polygon())
-    c = geometry.centroid(poly)
+    c, load, weakest = _hold_load(cfg)
     r = cfg.max_robot_radius
     centres = cand + r * nrm
     d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
     conflict = d < 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)  # as the GA
     np.fill_diagonal(conflict, False)
-    force = cfg.capture.hold_force or TOKEN_LOAD
-    load = disturbances(force, force * np.sqrt(geometry.polar_moment_per_mass(poly)))
-    weakest = min(rb.max_force for rb in cfg.robots)
     ok = np.ones(len(cand), bool) if allowed is None else allowed
     n = len(cfg.robots) if robots is None else robots
-    return reinforce(cand, nrm, c, chosen, ok, conflict, weakest, load, n, fixed=fixed)
+    return reinforce(
+        cand, nrm, c, chosen, ok, conflict, weakest, load, n, fixed=fixed, locked=locked
+    )
+
+
+def _hold_load(cfg: FleetConfig) -> tuple[np.ndarray, np.ndarray, float]:
+    """The object's centroid, the disturbances a capture set must hold (``capture.hold_force``;
+    a token load when 0) and the weakest robot's force."""
+    from controller.planning.hold import disturbances
+
+    poly = geometry.ensure_ccw(cfg.object_polygon())
+    force = cfg.capture.hold_force or TOKEN_LOAD
+    load = disturbances(force, force * np.sqrt(geometry.polar_moment_per_mass(poly)))
+    return geometry.centroid(poly), load, min(rb.max_force for rb in cfg.robots)
+
+
+def set_capacity(cfg: FleetConfig, points: np.ndarray, normals: np.ndarray) -> float:
+    """The share of ``capture.hold_force`` robots at ``points`` (object frame, outward
+    ``normals``) resist in the worst direction with the weakest robot's force (≥ 1 holds)."""
+    from controller.planning.hold import contact_wrenches, holding_capacity
+
+    c, load, weakest = _hold_load(cfg)
+    w = contact_wrenches(points, normals, c)
+    return holding_capacity(w, np.full(len(points), weakest), load)
 
 
 TOKEN_LOAD = 0.05  # N: the load a closure-only set (capture.hold_force 0) must hold

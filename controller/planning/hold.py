@@ -104,6 +104,7 @@ def reinforce(
     robots: int,
     max_passes: int = 4,
     fixed: FloatArray | None = None,
+    locked: int = 0,
 ) -> Reinforced:
     """Add candidate nodes (indices into ``points``) to ``chosen`` until the set holds ``load``
     (capacity ≥ 1) or it has ``robots`` points; if it still does not hold, move one point at a
@@ -129,7 +130,7 @@ def reinforce(
     for _ in range(max_passes):
         if cap[0] >= 1.0:
             break
-        idx, better = _swap_pass(idx, cap, score, allowed, conflict)
+        idx, better = _swap_pass(idx, cap, score, allowed, conflict, locked)
         if better <= cap:
             break
         cap = better
@@ -152,10 +153,11 @@ def _free(idx: list[int], allowed, conflict) -> list[int]:
     return [int(j) for j in np.flatnonzero(allowed) if j not in idx and not conflict[j, idx].any()]
 
 
-def _swap_pass(idx, cap, score, allowed, conflict):
-    """One pass of single-point moves, keeping every one that raises the capacity."""
+def _swap_pass(idx, cap, score, allowed, conflict, locked=0):
+    """One pass of single-point moves (the first ``locked`` points stay), keeping every one
+    that raises the capacity."""
     best = cap
-    for i in range(len(idx)):
+    for i in range(locked, len(idx)):
         others = idx[:i] + idx[i + 1 :]
         for j in _free(others, allowed, conflict):
             trial = others[:i] + [j] + others[i:]

@@ -91,6 +91,7 @@ def test_the_braced_capture_keeps_the_braces_robots_ahead_and_the_set_clear_of_t
     assert 2 <= braces.sum() <= brace.MAX_BRACES
     assert len(assignment) == len(new.points) == len(braces)
     assert len(set(assignment.tolist())) == len(assignment)  # one point per robot
+    assert new.hold_capacity >= 1.0  # the whole set holds, the braces force-limited too
     d = view.object_velocity[:2] / np.linalg.norm(view.object_velocity[:2])
     mid = geometry.transform(geometry.centroid(CRATE)[None], view.object_pose)[0]
     ahead = (view.poses[assignment[braces], :2] - mid) @ d
