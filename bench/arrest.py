@@ -141,7 +141,6 @@ def run_one(sc: ArrestScenario, out_dir: Path) -> dict:
 EDGE_SPEEDS = "0.25,0.30,0.35,0.40,0.45,0.50"
 EDGE_SEEDS = 10
 WALL_CLEAR_M = 0.05  # m: an arrest counts only if the object never came this near a wall
-BRACE_SPEED = 0.3  # m/s: the brace variant braces objects this fast (60 % of the robots' 0.5)
 HOLD_MARGIN_S = 12.0  # s of sim time after the object would reach a wall: hold, arrest, settle
 
 
@@ -197,8 +196,8 @@ def rules(sc: ArrestScenario, variant: str) -> ArrestScenario:
     slower than the robot, the goal's velocity ridden on at any distance)."""
     rule = "oncoming" if variant == "new" else "classic"
     approach = {**sc.patch.get("approach", {}), "intercept": rule}
-    if variant == "brace":  # the default rules with braces for objects at 0.3 m/s and faster
-        approach["brace_speed"] = BRACE_SPEED
+    if variant != "brace":  # the rules before braces (the default: approach.brace_share 0.6)
+        approach["brace_share"] = 0.0
     patch = {**sc.patch, "approach": approach}
     return dataclasses.replace(sc, patch=patch)
 

@@ -719,9 +719,9 @@ def arrest_edge(r: dict) -> str:
         rows.append(row)
     head = ["object speed"]
     label = {
-        "baseline": '`"classic"` (default)',
-        "new": '`"oncoming"`',
-        "brace": "braces (`brace_speed = 0.3`)",
+        "baseline": '`"classic"`, no braces',
+        "new": '`"oncoming"`, no braces',
+        "brace": "braces (the default)",
     }
     for name in variants:
         head += [f"{label.get(name, name)}: arrested (Wilson 95 %)", "median arrest (sim)"]

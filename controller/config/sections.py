@@ -329,11 +329,11 @@ class ApproachSection:
     # speed edge 0.30 -> 0.35 m/s, bench/arrest.py; not the default: with it the default job's
     # transport had two robots touch, 10 um, in pybullet)
     intercept: str = _rule("classic", choices=("classic", "oncoming"))
-    # m/s: an object this fast or faster is braced: 2-4 robots ahead of it wait on its path at
-    # contacts that stop it (the capture set planned again around them), hold their ground,
-    # and the rest close in on it at rest (controller/mission/brace.py); 0: never. About 60 %
-    # of the robots' max_speed (0.3 for robots of 0.5 m/s: bench/arrest.py, variant brace)
-    brace_speed: float = _rule(0.0, min=0, max=100)
+    # share of the slowest available robot's max_speed: an object this fast or faster is
+    # braced: 2-4 robots ahead of it wait on its path at contacts that stop it (the capture set
+    # planned again around them), hold their ground, and the rest close in on it at rest
+    # (controller/mission/brace.py); 0: never (the rules before; bench/arrest.py)
+    brace_share: float = _rule(0.6, min=0, max=10)
     prediction_horizon: float = _rule(0.5, min=0, max=10)
     safety_margin: float = _rule(0.05, min=0, max=1)
     max_accel: float = _rule(1.0, gt=0, max=100)

@@ -1,6 +1,6 @@
-"""Braces for a fast object (issue 34, item 10): an object moving at ``approach.brace_speed``
-or faster is one robots of the robots' speed cannot catch from behind. The robots ahead of it
-wait in its path instead, at contact points that stop it: the least-force set of
+"""Braces for a fast object (issue 34, item 10): an object moving at ``approach.brace_share``
+of the slowest robot's speed or faster is one the robots can hardly catch from behind. The
+robots ahead of it wait in its path instead, at contact points that stop it: the least-force set of
 frictionless contacts that resists a push along its motion with no turn
 (``planning.hold.least_force_set`` over the GA's candidate nodes; a single brace would let it
 slide past). They meet it together and, touching, stand still (commanded exactly zero: their
@@ -45,6 +45,14 @@ BRACE_PERIOD = 0.5
 #: rad either side of the object's motion the braces also resist (a brace set that only
 #: balances the push exactly lets an object that turns a little slide past)
 SPREAD = 0.3
+
+
+def brace_speed(cfg: FleetConfig, robots: np.ndarray) -> float:
+    """m/s from which an object is braced: ``approach.brace_share`` of the slowest of the
+    ``robots`` (N,) bool's max_speed (infinite: never, share 0 or no robot)."""
+    speeds = [rb.max_speed for rb, ok in zip(cfg.robots, robots, strict=True) if ok]
+    share = cfg.approach.brace_share
+    return share * min(speeds) if share > 0 and speeds else float("inf")
 
 
 def _clear_set(
@@ -121,7 +129,7 @@ def braced_capture(
     cfg: FleetConfig, capture: CaptureSet, view: FleetView, available: np.ndarray
 ) -> tuple[CaptureSet, np.ndarray, np.ndarray] | None:
     """The capture set with braces for the object of ``view`` when it moves at
-    ``approach.brace_speed`` or faster (None otherwise): the brace nodes
+    ``brace_speed(cfg, available)`` or faster (None otherwise): the brace nodes
     (``brace_nodes``) fixed in it, the GA's points clear of them kept, reinforced until it
     holds ``capture.hold_force`` with the ``available`` robots; each brace's robot the one
     ahead of the object that meets it soonest (waiting on its path), the other points assigned
@@ -130,7 +138,7 @@ def braced_capture(
     no brace set exists, no robot ahead meets one within the assignment's horizon, or the rest
     cannot hold the object even with the braces fixed."""
     ovel = np.zeros(2) if view.object_velocity is None else np.asarray(view.object_velocity)[:2]
-    if not 0 < cfg.approach.brace_speed <= float(np.hypot(*ovel)):
+    if float(np.hypot(*ovel)) < brace_speed(cfg, available):
         return None
     pose = np.asarray(view.object_pose, float)
     d = ovel / max(float(np.hypot(*ovel)), 1e-12)
@@ -286,7 +294,7 @@ class BraceWatch:
             if available[got.value[2]].all():  # no robot of it lost meanwhile
                 return got.value
         ovel = view.object_velocity
-        fast = ovel is not None and 0 < cfg.approach.brace_speed <= float(np.hypot(*ovel[:2]))
+        fast = ovel is not None and float(np.hypot(*ovel[:2])) >= brace_speed(cfg, available)
         if fast and not self.job.pending and view.t >= self.last_t + BRACE_PERIOD:
             self.last_t = view.t
             self.job.request(view.t, braced_capture, cfg, capture, view, available.copy())

@@ -39,7 +39,7 @@ import numpy as np
 from controller import geometry
 from controller.config import FleetConfig
 from controller.events import ArrestEvent
-from controller.mission.brace import Braces
+from controller.mission.brace import Braces, brace_speed
 from controller.mission.capture_phase import (
     CLOSED,
     CaptureSettings,
@@ -221,7 +221,7 @@ class CaptureMission:
             if b.any():  # a brace waits in the object's path, whatever the rule for the others
                 t = np.where(b, np.diag(interception_times(centers[a], tgt, vel, speed, h)), t)
             loose = b & (self.gaps(view) > 2 * self.s.creep_gap)  # stopped: braces aim again
-            loose &= 2 * float(np.hypot(*ovel[:2])) < self.cfg.approach.brace_speed
+            loose &= 2 * float(np.hypot(*ovel[:2])) < brace_speed(self.cfg, self.assigned)
             goal[a] = self.braces.meet(tgt, vel, t, loose)
             gvel[a[b]] = 0.0
         for i, wps in list(self.waypoints.items()):

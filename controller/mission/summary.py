@@ -79,7 +79,7 @@ class CapturePlanSummary(_Flat):
     robots_lost: list[str]
     outages: int
     loss_replans: int
-    braces: int = 0  # robots that braced a fast object (approach.brace_speed)
+    braces: int = 0  # robots that braced a fast object (approach.brace_share)
 
     @classmethod
     def of(cls, job) -> CapturePlanSummary:

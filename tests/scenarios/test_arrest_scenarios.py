@@ -107,12 +107,13 @@ def _run_edge(speed: float, seed: int, variant: str, out: Path) -> dict:
 def test_braces_arrest_an_object_at_045_m_s_in_open_space_where_the_default_rules_cannot(
     tmp_path,
 ):
-    """Issue 34 item 10: robots of 0.5 m/s against an object at 0.45 m/s. With the default
-    rules the robots cannot catch it from behind and it reaches the far wall; with braces
-    (``approach.brace_speed = 0.3``) robots ahead wait on its path, stop it, and the rest
-    arrest it in open space (no wall re-plan, never within 5 cm of a wall, by the truth)."""
+    """Issue 34 item 10: robots of 0.5 m/s against an object at 0.45 m/s. With the rules
+    before braces the robots cannot catch it from behind and it reaches the far wall; with
+    braces (the default, ``approach.brace_share = 0.6``: from 0.3 m/s) robots ahead wait on
+    its path, stop it, and the rest arrest it in open space (no wall re-plan, never within 5
+    cm of a wall, by the truth)."""
     base = _run_edge(0.45, 3, "baseline", tmp_path / "baseline.mcap")
-    assert base["object_min_clearance_m"] < 0.05  # the default rules: it reaches a wall
+    assert base["object_min_clearance_m"] < 0.05  # no braces: it reaches a wall
     res = _run_edge(0.45, 3, "brace", tmp_path / "brace.mcap")
     assert res["arrested"] and res["status"] == "ok", res.get("failure")
     assert judge(res) == [], res["verdict"]

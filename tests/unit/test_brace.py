@@ -2,7 +2,7 @@
 stops a push along the object's motion and either side of it, from the leading faces; its
 robots are ahead of the object and meet it together; the capture set is planned again with the
 braces fixed in it, clear of them; nothing changes for an object slower than
-``approach.brace_speed`` or with braces off."""
+``approach.brace_share`` of the robots' speed or with braces off."""
 
 from __future__ import annotations
 
@@ -62,12 +62,12 @@ def test_no_braces_where_one_contact_is_all_there_is():
     assert len(got) == 0  # a single frictionless brace lets the object slide past
 
 
-def _fast_case(speed: float = 0.45, brace_speed: float = 0.3):
+def _fast_case(speed: float = 0.45, share: float = 0.6):
     sc = ArrestScenario(
         "brace-unit", RECT, (5.0, 5.0, 0.0), {"kind": "line", "speed": speed, "heading": 0.3},
         kinds="oooooo", max_speed=0.5, seed=21, room=OPEN,
         robot_starts=tuple((*p, 0.0) for p in OPEN_STARTS),
-        patch={"approach": {"brace_speed": brace_speed}},
+        patch={"approach": {"brace_share": share}},
     )  # fmt: skip
     cfg = arrest_config(sc)
     capture = plan_capture_set(cfg, np.random.default_rng(cfg.capture.seed))
@@ -104,10 +104,10 @@ def test_the_braced_capture_keeps_the_braces_robots_ahead_and_the_set_clear_of_t
 
 
 def test_no_braces_for_a_slow_object_or_with_braces_off():
-    cfg, capture, view = _fast_case(brace_speed=0.5)  # the object at 0.45 is slower than that
+    cfg, capture, view = _fast_case(share=1.0)  # the object at 0.45 is slower than 0.5 m/s
     available = np.ones(len(cfg.robots), bool)
     assert braced_capture(cfg, capture, view, available) is None
-    cfg, capture, view = _fast_case(brace_speed=0.0)
+    cfg, capture, view = _fast_case(share=0.0)
     assert braced_capture(cfg, capture, view, available) is None
 
 
