@@ -1,11 +1,12 @@
 """Braces for a fast object (issue 34, item 10): an object moving at ``approach.brace_share``
 of the slowest robot's speed or faster is one the robots can hardly catch from behind. The
-robots ahead of it wait in its path instead, at contact points that stop it: the least-force set of
-frictionless contacts that resists a push along its motion with no turn
-(``planning.hold.least_force_set`` over the GA's candidate nodes; a single brace would let it
-slide past). They meet it together and, touching, stand still (commanded exactly zero: their
-barrier holds its ground). The object's drive cannot push robots that hold their ground, so it
-stops, and the rest of the fleet closes in on an object at rest.
+robots ahead of it wait in its path instead, at contact points that stop it: 2-4 of the GA's
+candidate nodes whose frictionless contacts resist a push along its motion and ``SPREAD``
+either side of it with no turn, with the least force (``brace_nodes``: a single brace, or a
+set that only balances the push exactly, lets it slide past). They meet it together and,
+touching, stand still (commanded exactly zero: their barrier holds its ground). The object's
+drive cannot push robots that hold their ground, so it stops, and the rest of the fleet
+closes in on an object at rest.
 
 The braces are capture points: the job plans the capture set again with the brace nodes fixed
 in it (``braced_capture``: the GA's points clear of them kept, reinforced until the set holds),
@@ -283,19 +284,21 @@ class BraceWatch:
     def __init__(self, planners: Planners) -> None:
         self.last_t = -np.inf
         self.job = PlanSlot(planners, "capture")
+        self.asked_for: CaptureSet | None = None  # the capture set the pending look started from
 
     def look(
         self, cfg: FleetConfig, capture: CaptureSet, view: FleetView, available: np.ndarray
     ) -> tuple[CaptureSet, np.ndarray, np.ndarray] | None:
-        """A ``braced_capture`` asked before, once it came and its robots are all still
-        ``available`` (N,); else None (and a new one asked when it is time)."""
+        """A ``braced_capture`` asked before, once it came, if the job's capture set is still
+        the one it started from and its robots are all still ``available`` (N,); else None
+        (and a new one asked when it is time)."""
         got = self.job.take(view.t)
-        if got is not None and got.ok and got.value is not None:
+        if got is not None and got.ok and got.value is not None and capture is self.asked_for:
             if available[got.value[2]].all():  # no robot of it lost meanwhile
                 return got.value
         ovel = view.object_velocity
         fast = ovel is not None and float(np.hypot(*ovel[:2])) >= brace_speed(cfg, available)
         if fast and not self.job.pending and view.t >= self.last_t + BRACE_PERIOD:
-            self.last_t = view.t
+            self.last_t, self.asked_for = view.t, capture
             self.job.request(view.t, braced_capture, cfg, capture, view, available.copy())
         return None
