@@ -725,15 +725,16 @@ def arrest_edge(r: dict) -> str:
     }
     for name in variants:
         head += [f"{label.get(name, name)}: arrested (Wilson 95 %)", "median arrest (sim)"]
-    edges = "; ".join(
-        f"{label.get(n, n)}: "
-        + (
-            f"every seed up to {e['variants'][n]['edge_m_s']:.2f} m/s"
-            if e["variants"][n]["edge_m_s"]
+
+    def full(n: str) -> str:
+        at = [x["speed"] for x in e["variants"][n]["speeds"] if x["arrested"] == x["runs"]]
+        return (
+            "every seed at " + ", ".join(f"{v:.2f}" for v in at) + " m/s"
+            if at
             else "no speed of this run on every seed"
         )
-        for n in variants
-    )
+
+    edges = "; ".join(f"{label.get(n, n)}: {full(n)}" for n in variants)
     paired = ""
     if "paired" in e:
         p, (a, b) = e["paired"], variants[:2]
