@@ -43,6 +43,9 @@ FORCE_CAP = 10.0
 #: s between the job's looks for braces (each an LP over the candidate nodes and a
 #: reinforcement)
 BRACE_PERIOD = 0.5
+#: s the object's estimate must stay that fast before the job looks (a filter's first
+#: estimates of a slow object can be fast for a tick or two)
+CONFIRM_S = 1.0
 #: rad either side of the object's motion the braces also resist (a brace set that only
 #: balances the push exactly lets an object that turns a little slide past)
 SPREAD = 0.3
@@ -144,12 +147,8 @@ def braced_capture(
     pose = np.asarray(view.object_pose, float)
     d = ovel / max(float(np.hypot(*ovel)), 1e-12)
     cand, nrm = capture.candidates, capture.candidate_normals
-    r = cfg.max_robot_radius
-    centres = cand + r * nrm
-    apart = 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)  # as the GA
-    conflict = np.linalg.norm(centres[:, None] - centres[None], axis=-1) < apart
-    np.fill_diagonal(conflict, False)
-    c = geometry.centroid(geometry.ensure_ccw(cfg.object_polygon()))
+    centres = cand + cfg.max_robot_radius * nrm
+    conflict, c = _conflict(cfg, capture)
     nodes = brace_nodes(cand, nrm, c, geometry.rot(float(pose[2])).T @ d, conflict)
     if len(nodes) == 0:
         return None
@@ -159,14 +158,54 @@ def braced_capture(
         return None
     rows, cols = robots
     new = _set_around(cfg, capture, nodes, conflict, c, int(available.sum()))
-    if new is None:
-        return None
-    chosen = new.chosen
-    braces = np.isin(chosen, nodes)
+    return None if new is None else _assigned(cfg, new, view, available, nodes[rows], cols)
+
+
+def rebraced_capture(
+    cfg: FleetConfig,
+    capture: CaptureSet,
+    view: FleetView,
+    braces: np.ndarray,
+    assignment: np.ndarray,
+    available: np.ndarray,
+    exclude: frozenset[int],
+) -> tuple[CaptureSet, np.ndarray, np.ndarray] | None:
+    """A braced capture (``braces`` (M,): its points that brace) planned again for a robot
+    stuck on its way: the candidate nodes around the point it could not reach (``exclude``)
+    left out, the braces and their robots kept, the rest around them as ``braced_capture``
+    does. None when no set holds without those nodes."""
+    nodes = np.asarray(capture.chosen, int)[braces]
+    conflict, c = _conflict(cfg, capture)
+    new = _set_around(cfg, capture, nodes, conflict, c, int(available.sum()), exclude)
+    return None if new is None else _assigned(cfg, new, view, available, nodes, assignment[braces])
+
+
+def _conflict(cfg: FleetConfig, capture: CaptureSet) -> tuple[np.ndarray, np.ndarray]:
+    """(K, K) candidate nodes whose robot discs would be too close (as the GA has it), and the
+    object's centroid."""
+    r = cfg.max_robot_radius
+    centres = capture.candidates + r * capture.candidate_normals
+    apart = 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)
+    conflict = np.linalg.norm(centres[:, None] - centres[None], axis=-1) < apart
+    np.fill_diagonal(conflict, False)
+    return conflict, geometry.centroid(geometry.ensure_ccw(cfg.object_polygon()))
+
+
+def _assigned(
+    cfg: FleetConfig,
+    new: CaptureSet,
+    view: FleetView,
+    available: np.ndarray,
+    nodes: np.ndarray,
+    robots: np.ndarray,
+) -> tuple[CaptureSet, np.ndarray, np.ndarray]:
+    """The set, which of its points brace (the ``nodes``), and its assignment: each brace node
+    to its robot (``robots``, in the same order), the other points as at the start."""
+    braces = np.isin(new.chosen, nodes)
     costs = interception_costs(cfg, new, view)
     big = 1e6 * (1.0 + costs.max(initial=0.0))
-    for k, j in zip(rows, cols, strict=True):  # the brace rows: their robot only
-        row = int(np.flatnonzero(chosen == nodes[k])[0])
+    for node, j in zip(nodes, robots, strict=True):  # the brace rows: their robot only
+        row = int(np.flatnonzero(new.chosen == node)[0])
         costs[row] = big
         costs[row, j] = 0.0
         costs[~braces, j] = big  # and that robot for no other point
@@ -180,15 +219,17 @@ def _set_around(
     conflict: np.ndarray,
     centroid: np.ndarray,
     robots: int,
+    exclude: frozenset[int] = frozenset(),
 ) -> CaptureSet | None:
     """The capture set of ``robots`` points with the brace ``nodes`` first: the rest planned
     around the braces with their contacts fixed in it (as walls are), then, the braces taken
     as the force-limited robots they are, the rest moved while that raises what the whole set
-    holds (its ``hold_capacity``). None when the rest cannot hold it even with the braces
-    fixed."""
+    holds (its ``hold_capacity``); never at the ``exclude`` nodes. None when the rest cannot
+    hold it even with the braces fixed."""
     cand, nrm = capture.candidates, capture.candidate_normals
     free = ~conflict[:, nodes].any(axis=1)
     free[nodes] = False
+    free[list(exclude)] = False  # nodes a robot could not get to
     rest = robots - len(nodes)
     keep = np.array([i for i in capture.chosen if free[i]], int)[: max(rest, 0)]
     fixed = contact_wrenches(cand[nodes], nrm[nodes], centroid)
@@ -279,26 +320,47 @@ class Braces:
 class BraceWatch:
     """The job's look for braces during the approach, off the tick (a job of kind ``capture``
     on the planner port: the brace set is a mixed-integer LP of tens of ms), at most every
-    ``BRACE_PERIOD`` s while the object is fast."""
+    ``BRACE_PERIOD`` s once the object has been fast for ``CONFIRM_S`` s without a break."""
 
     def __init__(self, planners: Planners) -> None:
         self.last_t = -np.inf
         self.job = PlanSlot(planners, "capture")
         self.asked_for: CaptureSet | None = None  # the capture set the pending look started from
+        self.fast_since: float | None = None  # s: the object fast since, without a break
+
+    def rebrace(self, cfg, capture, view, braces, assignment, available, exclude) -> None:
+        """Ask for ``rebraced_capture`` (a robot stuck on its way while others brace)."""
+        self.asked_for = capture
+        self.job.request(
+            view.t, rebraced_capture, cfg, capture, view, braces.copy(), assignment.copy(),
+            available.copy(), frozenset(exclude),
+        )  # fmt: skip
 
     def look(
-        self, cfg: FleetConfig, capture: CaptureSet, view: FleetView, available: np.ndarray
+        self,
+        cfg: FleetConfig,
+        capture: CaptureSet,
+        view: FleetView,
+        available: np.ndarray,
+        bracing: bool = False,
     ) -> tuple[CaptureSet, np.ndarray, np.ndarray] | None:
-        """A ``braced_capture`` asked before, once it came, if the job's capture set is still
-        the one it started from and its robots are all still ``available`` (N,); else None
-        (and a new one asked when it is time)."""
+        """A ``braced_capture`` (or ``rebraced_capture``) asked before, once it came, if the
+        job's capture set is still the one it started from and its robots are all still
+        ``available`` (N,); else None (and, unless robots brace already, a new one asked when
+        it is time)."""
         got = self.job.take(view.t)
         if got is not None and got.ok and got.value is not None and capture is self.asked_for:
             if available[got.value[2]].all():  # no robot of it lost meanwhile
                 return got.value
         ovel = view.object_velocity
         fast = ovel is not None and float(np.hypot(*ovel[:2])) >= brace_speed(cfg, available)
-        if fast and not self.job.pending and view.t >= self.last_t + BRACE_PERIOD:
+        if not fast or bracing:  # (robots that brace: only a re-plan for one stuck is asked)
+            self.fast_since = None
+            return None
+        if self.fast_since is None:
+            self.fast_since = view.t
+        confirmed = view.t - self.fast_since >= CONFIRM_S
+        if confirmed and not self.job.pending and view.t >= self.last_t + BRACE_PERIOD:
             self.last_t, self.asked_for = view.t, capture
             self.job.request(view.t, braced_capture, cfg, capture, view, available.copy())
         return None

@@ -24,14 +24,7 @@ from controller.mission.roster import Roster, parked
 from controller.mission.sequence import FINAL, Cue, Failure, Sequencer, SequenceSettings
 from controller.mission.summary import CapturePlanSummary, JobSummary, capture_event
 from controller.mission.transport import TransportMission, route_planner_for
-from controller.mission.types import (
-    FleetView,
-    Intent,
-    MissionError,
-    MissionOutput,
-    Phase,
-    Reason,
-)
+from controller.mission.types import FleetView, Intent, MissionError, MissionOutput, Phase, Reason
 from controller.planning.capture_set import (  # noqa: F401 - re-exported: the job's planning
     TOKEN_LOAD,
     WALL_TOLERANCE,
@@ -178,13 +171,19 @@ class CaptureJob:
             return self.transport.plan(view).after(intent.report.events)
         reach = self.reach
         bracing = self.inner.phase == Phase.APPROACH and self.inner.braces.any()
-        if not (self._replan_job.pending or bracing) and reach.blocked(
+        if not self._replan_job.pending and reach.blocked(
             view, self.inner.phase, self.capture, self.inner.last_distance, self.inner
         ):
             reach.restart()
-            pose = np.asarray(view.object_pose, float)
-            k = int(self.roster.available.sum())
-            self._ask_replan("pinned", view, replan_pinned, pose, frozenset(reach.unreachable), k)
+            k, a = self.roster.available, self.assignment
+            if bracing:  # a robot stuck while others brace: re-planned around the braces
+                self.brace_watch.rebrace(
+                    self.cfg, self.capture, view, self.inner.braces.on, a, k, reach.unreachable
+                )
+            else:
+                pose = np.asarray(view.object_pose, float)
+                args = (pose, frozenset(reach.unreachable), int(k.sum()))
+                self._ask_replan("pinned", view, replan_pinned, *args)
         if self._replan_job.pending:
             return self._await_pinned(view, intent)
         return intent
@@ -306,16 +305,16 @@ class CaptureJob:
     def _reassign(self, view: FleetView) -> list:
         """A better assignment during the approach (``mission.assign``): a new approach, with
         the same timeout."""
-        if self.inner.phase != Phase.APPROACH or self.inner.braces.any():  # braces stay
+        bracing = self.inner.braces.any()
+        if self.inner.phase != Phase.APPROACH:
             return []
-        braced, events = (
-            self.brace_watch.look(self.cfg, self.capture, view, self.roster.available),
-            [],
-        )
-        if braced is not None:
-            self.capture, braces, new = braced
+        got = self.brace_watch.look(self.cfg, self.capture, view, self.roster.available, bracing)
+        if got is None and bracing:  # braces stay
+            return []
+        braces, events = None, []
+        if got is not None:  # braces for a fast object, or a re-plan around them (brace.py)
+            self.capture, braces, new = got
         else:
-            braces = None
             new, events = self.reassigner.look(
                 self.cfg, self.capture, view, self.assignment, self.roster.available
             )

@@ -14,7 +14,7 @@ from scipy.optimize import linprog
 
 from controller import geometry
 from controller.mission import brace
-from controller.mission.brace import Braces, brace_nodes, braced_capture
+from controller.mission.brace import Braces, brace_nodes, braced_capture, rebraced_capture
 from controller.mission.types import FleetView
 from controller.planning.capture import candidate_nodes
 from controller.planning.capture_set import plan_capture_set
@@ -145,3 +145,21 @@ def test_masks_let_braces_touch_and_hold_still_only_those_touching():
     assert touch.tolist() == [False, False, True, False, True]
     assert still.tolist() == [False, False, False, False, True]
     assert Braces(2).masks(3, np.array([0, 1]), np.zeros(2), 0.06) == (None, None)
+
+
+def test_a_robot_stuck_while_others_brace_gets_a_set_around_the_braces_without_its_nodes():
+    cfg, capture, view = _fast_case()
+    available = np.ones(len(cfg.robots), bool)
+    new, braces, assignment = braced_capture(cfg, capture, view, available)
+    stuck = int(np.flatnonzero(~braces)[0])  # a point whose robot could not get there
+    node = int(new.chosen[stuck])
+    near = np.linalg.norm(new.candidates - new.candidates[node], axis=1) < 0.15
+    exclude = frozenset(int(i) for i in np.flatnonzero(near))
+    got = rebraced_capture(cfg, new, view, braces, assignment, available, exclude)
+    assert got is not None
+    again, braces2, assignment2 = got
+    assert not exclude & set(again.chosen.tolist())  # none of the nodes it could not reach
+    kept = {int(n): int(r) for n, r in zip(new.chosen[braces], assignment[braces], strict=True)}
+    now = {int(n): int(r) for n, r in zip(again.chosen[braces2], assignment2[braces2], strict=True)}
+    assert now == kept  # the braces and their robots stay as they are
+    assert len(set(assignment2.tolist())) == len(assignment2)
