@@ -43,8 +43,14 @@ def _run_held(name: str, out: Path) -> dict:
         "res = DryRun(cfg, build_mission(cfg), Path(sys.argv[2]), max_time=sc.max_time).run()\n"
         "print(json.dumps(res, default=str))\n"
     )
+    return _held(code, name, str(out))
+
+
+def _held(code: str, *args: str) -> dict:
+    """``code`` run with ``args`` in a process of its own with numpy held to AVX2: the result
+    it prints last (JSON)."""
     proc = subprocess.run(
-        [sys.executable, "-c", code, name, str(out)],
+        [sys.executable, "-c", code, *args],
         cwd=ROOT,
         env=dict(os.environ, NPY_DISABLE_CPU_FEATURES=SIMD_HELD, PYTHONPATH=str(ROOT)),
         capture_output=True,
@@ -91,16 +97,7 @@ def _run_edge(speed: float, seed: int, variant: str, out: Path) -> dict:
         "res = DryRun(cfg, build_mission(cfg), Path(sys.argv[4]), max_time=sc.max_time).run()\n"
         "print(json.dumps(res, default=str))\n"
     )
-    proc = subprocess.run(
-        [sys.executable, "-c", code, str(speed), str(seed), variant, str(out)],
-        cwd=ROOT,
-        env=dict(os.environ, NPY_DISABLE_CPU_FEATURES=SIMD_HELD, PYTHONPATH=str(ROOT)),
-        capture_output=True,
-        text=True,
-        timeout=900,
-    )
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return _held(code, str(speed), str(seed), variant, str(out))
 
 
 @pytest.mark.slow
