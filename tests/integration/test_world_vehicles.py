@@ -14,7 +14,6 @@ import dataclasses
 import math
 import sys
 import time
-import tomllib
 
 import pytest
 
@@ -30,11 +29,11 @@ from controller.runtime.world import (
 from controller.wire import Twist2D
 from drivers.mavlink.driver import MavlinkDriver
 from drivers.mavlink.link import LinkPool
-from tests.support.config import base_config_dict, free_port, write_toml
+from tests.support.config import free_port, write_toml
 from tests.support.lab import fleet, release, spawn, stop_all, tail
 from tests.support.mavlink_rig import free_udp_port, make_config, robot
 from tests.support.wait import wait_for
-from tests.support.world_lab import all_present, daemon_status, rehearsal_config
+from tests.support.world_lab import all_present, daemon_status, rehearsal_config, six_around
 
 pytestmark = pytest.mark.e2e
 
@@ -141,9 +140,6 @@ ROS2 = {  # r2 omni on Odometry + Twist; r4 differential on PoseStamped + TwistS
     "r4": {"namespace": "/r4", "domain_id": 3, "pose_type": "pose_stamped",
            "cmd_type": "twist_stamped"},
 }  # fmt: skip
-SIX = ((3.3, 1.6, 1.57), (4.7, 3.2, 3.14), (3.3, 4.6, -1.57), (1.7, 3.2, 0.0),
-       (4.6, 1.8, 2.36), (1.8, 4.5, -0.79))  # fmt: skip
-GOAL = [4.5, 3.0, 0.0]  # about 1.2 m east of where the crate is arrested (CI time is tight)
 JOB_S = 240.0  # s of wall time the job may take (the lockstep dry run: about 38 s of sim time)
 
 
@@ -153,12 +149,10 @@ def mixed_fleet(tmp_path, port: int):
     on one rmw_zenoh router endpoint (their own domains and namespaces, each odom frame at
     its start), r5 and r6 sim robots; the crate's goal a short way east (capture, route,
     re-arrangement and transport all in it)."""
-    path, _ = rehearsal_config(tmp_path, port)
-    data = tomllib.loads(path.read_text())
-    robots = base_config_dict()["robots"][:6]
+    data = six_around(tmp_path, port)
     router = f"tcp/127.0.0.1:{free_port()}"
-    for r, start in zip(robots, SIX, strict=True):
-        r["start"] = list(start)
+    for r in data["robots"]:
+        start = r["start"]
         if r["id"] in MAVLINK:
             profile, sysid = MAVLINK[r["id"]]
             r.update(driver="mavlink", profile=profile, system_id=sysid,
@@ -166,10 +160,7 @@ def mixed_fleet(tmp_path, port: int):
         elif r["id"] in ROS2:
             r.update(driver="ros2", ros2={**ROS2[r["id"]], "connect": [router],
                                           "odom_to_world": list(start)})  # fmt: skip
-    data["robots"] = robots
-    data["object"]["goal"] = GOAL
-    data["transport"]["start_after"] = 5.0
-    return write_toml(tmp_path / "mixed.toml", data), [r["id"] for r in robots]
+    return write_toml(tmp_path / "mixed.toml", data), [r["id"] for r in data["robots"]]
 
 
 def _text(path) -> str:

@@ -75,8 +75,14 @@ def stop_all(procs: list[subprocess.Popen]) -> list[int]:
 def release(cfg, *identity: str, timeout: float = 10.0) -> dict[str, Any]:
     """The operator's first ``fleet resume`` of a fresh lab: its processes start with the e-stop
     latch unknown, robots stopped, until an operator releases it. Returns its JSON."""
-    code, out = fleet_json("resume", "--config", str(cfg), "--timeout", str(timeout), *identity)
-    assert code == 0 and out["confirmed"] is True, out
+    proc = fleet("resume", "--config", str(cfg), "--timeout", str(timeout), *identity, "--json")
+    out = json.loads(proc.stdout) if proc.stdout.strip() else {}
+    # the exit status and stderr too: a resume can be confirmed and still exit non-zero
+    assert proc.returncode == 0 and out.get("confirmed") is True, (
+        proc.returncode,
+        out,
+        proc.stderr[-1500:],
+    )
     return out
 
 

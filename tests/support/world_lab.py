@@ -4,6 +4,8 @@ test_world_ros2.py and test_world_vehicles.py)."""
 
 from __future__ import annotations
 
+import tomllib
+
 from tests.support.config import base_config_dict, write_toml
 from tests.support.lab import fleet_json
 
@@ -32,6 +34,27 @@ def rehearsal_config(tmp_path, port: int):
     cfg["sim"].update(backend="ideal", world="process", timestep=1.0 / 60.0, seed=3)
     cfg["log"] = {"dir": str(tmp_path / "runs")}
     return write_toml(tmp_path / "rehearsal.toml", cfg), cfg["fleet"]
+
+
+SIX = ((3.3, 1.6, 1.57), (4.7, 3.2, 3.14), (3.3, 4.6, -1.57), (1.7, 3.2, 0.0),
+       (4.6, 1.8, 2.36), (1.8, 4.5, -0.79))  # fmt: skip
+GOAL = [4.5, 3.0, 0.0]  # about 1.2 m east of where the crate is arrested (CI time is tight)
+
+
+def six_around(tmp_path, port: int) -> dict:
+    """The rehearsal world with six robots around the crate (the first four the rehearsal's
+    kinds; ``SIX`` starts) and the crate's goal a short way east (capture, route,
+    re-arrangement and transport all in it), as data: the mixed fleet's world
+    (test_world_vehicles.py) and its dry-run twin (test_transport_scenarios.py)."""
+    path, _ = rehearsal_config(tmp_path, port)
+    data = tomllib.loads(path.read_text())
+    robots = base_config_dict()["robots"][:6]
+    for r, start in zip(robots, SIX, strict=True):
+        r["start"] = list(start)
+    data["robots"] = robots
+    data["object"]["goal"] = GOAL
+    data["transport"]["start_after"] = 5.0
+    return data
 
 
 def daemon_status(cfg) -> dict:
