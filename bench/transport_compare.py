@@ -246,7 +246,7 @@ def aggregate(rows: list[dict], strategies, rng: np.random.Generator) -> dict:
             ),
             "failures": sorted({str(r["reason"]) for r in mine if not r["success"]}),
         }
-        if any("push_contact_losses" in r for r in mine):  # rows from before lack them
+        if all("push_contact_losses" in r for r in mine):  # rows from before lack them
             losses = [r["push_contact_losses"] or 0 for r in mine]
             out[s].update(
                 collisions=sum("collision" in (r.get("verdict") or []) for r in mine),
