@@ -49,6 +49,13 @@ class Rearranger:
         """The object made progress: the re-arrangements since are no longer futile."""
         self.futile = 0
 
+    def doubted(self, new: Arrangement) -> bool:
+        """A set short of the wrench its (turning) segment needs, taken on the benefit of the
+        doubt, come again after a re-arrangement that brought no progress: the doubt is spent
+        (the transport plans a push-limited route again from where the object lies)."""
+        short = new.basis == "lp_capacity" and new.value * self.turn_margin < 1.0 - 1e-9
+        return short and new.feasible and self.futile > 1
+
     @property
     def pending(self) -> bool:
         return self._job.pending

@@ -240,7 +240,7 @@ class TransportMission:
             detail = f"the re-arrangement planner failed: {got.error}"
             return self._fail(Reason.STALLED, detail, view, events)
         replan = self.way.route.push_limited and self.route_replans < self.s.max_route_replans
-        if replan and (not got.value.feasible or self._doubted(got.value)):
+        if replan and (not got.value.feasible or self.rearranger.doubted(got.value)):
             self.route_replans += 1
             self._cue(Cue.UNPUSHABLE, view.t, events)
             return self._held(view, pose, events)
@@ -250,13 +250,6 @@ class TransportMission:
         self.grip.regrip(view, pose, got.value.points, got.value.normals)
         self.rearranger.arranged(view, got.value, direction, self.grip, events)
         return None
-
-    def _doubted(self, new) -> bool:
-        """A set short of the wrench its (turning) segment needs, taken on the benefit of the
-        doubt, after a re-arrangement that already brought no progress: the doubt is spent
-        (a push-limited route is planned again from where the object is)."""
-        short = new.basis == "lp_capacity" and new.value * self.s.turn_margin < 1.0 - 1e-9
-        return short and new.feasible and self.rearranger.futile > 1
 
     def _rearrange(self, view: FleetView, pose: np.ndarray, events: list[Event]) -> Intent | None:
         """Movers follow their path around the object; the others hold still. (The stall clock

@@ -243,3 +243,25 @@ def test_the_serpentine_counts_its_two_group_plans_and_switches():
     assert s["serpentine_switches"] == 2  # 0 → 1 and 1 → 0; not the one after forget()
     m_sa, _, _ = mission(Scenario("sa", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0)))
     assert m_sa.summary().to_json()["serpentine_plans"] is None
+
+
+def test_a_short_turning_set_gets_the_benefit_of_the_doubt_once():
+    """A set the LP finds short of its segment's wrench (capacity x margin < 1) is pushed the
+    first time; come again after a re-arrangement that brought no progress, it is doubted (the
+    transport plans a push-limited route again). Eq. 5's sets and sets that reach the wrench
+    are never doubted; progress resets the count."""
+    from controller.planning.arrangement import Arrangement
+
+    m, _, _ = mission(Scenario("crate", CRATE, (1.5, 2.5, 0.0), (4.5, 2.5, 0.0)))
+    pts, nrm = np.zeros((2, 2)), np.zeros((2, 2))
+    short = Arrangement(pts, nrm, 0.7, 2, "lp_capacity")
+    enough = Arrangement(pts, nrm, 1.0, 2, "lp_capacity")
+    eq5 = Arrangement(pts, nrm, 0.7, 2, "eq5")
+    r = m.rearranger
+    r.futile = 1  # the first re-arrangement since the object last moved
+    assert not r.doubted(short)
+    r.futile = 2  # the one before brought no progress
+    assert r.doubted(short)
+    assert not r.doubted(enough) and not r.doubted(eq5)
+    r.progressed()
+    assert not r.doubted(short)
