@@ -30,7 +30,7 @@ from controller.mission.assign import COST_HORIZON_FACTOR, assign, interception_
 from controller.mission.planners import Planners, PlanSlot
 from controller.mission.types import FleetView
 from controller.planning.approach import interception_times
-from controller.planning.capture_set import CaptureSet, reinforce_set
+from controller.planning.capture_set import CaptureSet, node_conflicts, reinforce_set
 from controller.planning.hold import contact_wrenches
 
 #: s before the object meets a brace: its meeting point stops following the prediction (a
@@ -183,11 +183,7 @@ def rebraced_capture(
 def _conflict(cfg: FleetConfig, capture: CaptureSet) -> tuple[np.ndarray, np.ndarray]:
     """(K, K) candidate nodes whose robot discs would be too close (as the GA has it), and the
     object's centroid."""
-    r = cfg.max_robot_radius
-    centres = capture.candidates + r * capture.candidate_normals
-    apart = 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)
-    conflict = np.linalg.norm(centres[:, None] - centres[None], axis=-1) < apart
-    np.fill_diagonal(conflict, False)
+    conflict = node_conflicts(cfg, capture.candidates, capture.candidate_normals)
     return conflict, geometry.centroid(geometry.ensure_ccw(cfg.object_polygon()))
 
 

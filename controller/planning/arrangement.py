@@ -202,16 +202,12 @@ def wrench_set(
     ``turn_margin``) over every candidate node, reinforced (``planning.hold``) until it can
     produce that wrench within ``weakest`` N per contact with at most ``robots`` contacts;
     the value is that capacity."""
+    from controller.planning.capture_set import node_conflicts
     from controller.planning.hold import least_force_set, reinforce
 
-    r = cfg.max_robot_radius
     err, com = errors_of(cfg)
     cand = candidates(cfg)
-    centres = cand.points + r * cand.normals
-    gap = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
-    spare = max(cfg.capture.clearance, cfg.approach.safety_margin) + 2.0 * err
-    conflict = gap < 2 * r + spare
-    np.fill_diagonal(conflict, False)
+    conflict = node_conflicts(cfg, cand.points, cand.normals, 2.0 * err)
     need = required_wrench(twist_v, model.mass, model.floor_friction, model.mean_radius)
     load = turn_margin * need
     # under the error model, every centre of mass it allows (the two torque extremes)

@@ -94,16 +94,26 @@ def reinforce_set(
     from controller.planning.hold import reinforce
 
     c, load, weakest = _hold_load(cfg)
-    r = cfg.max_robot_radius
-    centres = cand + r * nrm
-    d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
-    conflict = d < 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin)  # as the GA
-    np.fill_diagonal(conflict, False)
+    conflict = node_conflicts(cfg, cand, nrm)
     ok = np.ones(len(cand), bool) if allowed is None else allowed
     n = len(cfg.robots) if robots is None else robots
     return reinforce(
         cand, nrm, c, chosen, ok, conflict, weakest, load, n, fixed=fixed, locked=locked
     )
+
+
+def node_conflicts(
+    cfg: FleetConfig, cand: np.ndarray, nrm: np.ndarray, spare: float = 0.0
+) -> np.ndarray:
+    """(K, K) candidate nodes (object frame, outward normals) whose robots' discs would be
+    too close: nearer than two of the largest robot's radius plus the larger of
+    ``capture.clearance`` and ``approach.safety_margin`` (as the GA has it) and ``spare`` m."""
+    r = cfg.max_robot_radius
+    centres = cand + r * nrm
+    d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
+    conflict = d < 2 * r + max(cfg.capture.clearance, cfg.approach.safety_margin) + spare
+    np.fill_diagonal(conflict, False)
+    return conflict
 
 
 def _hold_load(cfg: FleetConfig) -> tuple[np.ndarray, np.ndarray, float]:
